@@ -42,3 +42,7 @@ class UnreachableError(InfeasibleError):
 
 class CancelledError(PlannerError):
     """The caller asked the planner to stop (raised from a progress callback)."""
+
+
+class InvalidWeightError(InvalidInputError):
+    """An edge weight is missing, non-numeric, negative or not finite."""
