@@ -46,3 +46,15 @@ class CancelledError(PlannerError):
 
 class InvalidWeightError(InvalidInputError):
     """An edge weight is missing, non-numeric, negative or not finite."""
+
+
+class NonRigidTransformError(InvalidInputError):
+    """A 4×4 transform is not a proper rigid motion (rotation + translation)."""
+
+
+class NoPlaneError(InfeasibleError):
+    """No planar surface was found in a point cloud (seed Eq. 3.2: P_cl = ∅)."""
+
+
+class MotionPlanningError(InfeasibleError):
+    """No collision-free joint path was found within the attempts allowed."""
