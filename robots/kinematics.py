@@ -88,8 +88,12 @@ def pose_error(T_target: np.ndarray, T: np.ndarray) -> np.ndarray:
         axis = M[:, int(np.argmax(np.diag(M)))]
         w = angle * axis / np.linalg.norm(axis)
     else:
-        w = angle / (2.0 * np.sin(angle)) * np.array(
-            [R_err[2, 1] - R_err[1, 2], R_err[0, 2] - R_err[2, 0], R_err[1, 0] - R_err[0, 1]]
+        w = (
+            angle
+            / (2.0 * np.sin(angle))
+            * np.array(
+                [R_err[2, 1] - R_err[1, 2], R_err[0, 2] - R_err[2, 0], R_err[1, 0] - R_err[0, 1]]
+            )
         )
     return np.concatenate([dp, w])
 

@@ -1,5 +1,287 @@
-"""Placeholder replaced by the foundation CLI."""
+"""The ``steelpath`` command: serve, token, plan, emulate.
+
+``serve`` and ``token`` work on the local data directory; ``plan`` talks to a
+running server over REST with a token from ``--token``, ``$STEELPATH_TOKEN``
+or the token file.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+DEFAULT_URL = "http://127.0.0.1:8000"
 
 
-def main() -> None:  # pragma: no cover
-    raise SystemExit("steelpath CLI not built yet")
+def _settings_from(args: argparse.Namespace) -> Any:
+    from server.settings import Settings
+
+    overrides: dict[str, Any] = {}
+    for attr, key in (
+        ("data", "data"),
+        ("host", "host"),
+        ("port", "port"),
+        ("scene_port", "scene_port"),
+    ):
+        val = getattr(args, attr, None)
+        if val is not None:
+            overrides[key] = val
+    if getattr(args, "no_emulators", False):
+        overrides["emulators"] = False
+    return Settings(**overrides)
+
+
+# ----------------------------------------------------------------------- serve
+def cmd_serve(args: argparse.Namespace) -> int:
+    import uvicorn
+
+    from server.app import create_app
+
+    settings = _settings_from(args)
+    app = create_app(settings)
+    print(
+        f"SteelPath console: http://{settings.host}:{settings.port}/   "
+        f"API docs: http://{settings.host}:{settings.port}/docs   data: {settings.data.resolve()}",
+        file=sys.stderr,
+        flush=True,
+    )
+    uvicorn.run(
+        app,
+        host=settings.host,
+        port=settings.port,
+        log_level=settings.log_level,
+        ws="websockets-sansio",
+    )
+    return 0
+
+
+# ----------------------------------------------------------------------- token
+def cmd_token(args: argparse.Namespace) -> int:
+    from server.auth import create_token
+    from server.store import NotFoundError, Store
+
+    settings = _settings_from(args)
+    store = Store(settings.data)
+    try:
+        if args.token_cmd == "create":
+            tid, secret = create_token(store, args.name or f"{args.role} token", args.role, "cli")
+            print(
+                f"created {args.role} token {tid} ({args.name or args.role + ' token'}) in {settings.data}"
+            )
+            print(secret)
+        elif args.token_cmd == "list":
+            for t in store.list_tokens():
+                state = f"revoked {t.revoked_at}" if t.revoked_at else "active"
+                print(f"{t.id}\t{t.role}\t{state}\t{t.name}")
+        elif args.token_cmd == "revoke":
+            try:
+                store.revoke_token(args.id, "cli")
+            except NotFoundError as exc:
+                print(f"error: {exc}", file=sys.stderr)
+                return 2
+            print(f"revoked {args.id}")
+    finally:
+        store.close()
+    return 0
+
+
+# ------------------------------------------------------------------------ plan
+def _client_token(args: argparse.Namespace) -> str:
+    token = args.token or os.environ.get("STEELPATH_TOKEN")
+    if not token:
+        tf = os.environ.get("STEELPATH_TOKEN_FILE")
+        if tf and Path(tf).is_file():
+            token = Path(tf).read_text().strip()
+    if not token:
+        raise SystemExit(
+            "error: no token: pass --token, set STEELPATH_TOKEN, or create one with "
+            "'steelpath token create --role operator'"
+        )
+    return token
+
+
+def _request(args: argparse.Namespace, method: str, path: str, **kw: Any) -> Any:
+    import httpx
+
+    url = (args.server or os.environ.get("STEELPATH_URL") or DEFAULT_URL).rstrip("/")
+    try:
+        r = httpx.request(
+            method,
+            f"{url}/api/v1{path}",
+            headers={"Authorization": f"Bearer {_client_token(args)}"},
+            timeout=30.0,
+            **kw,
+        )
+    except httpx.HTTPError as exc:
+        raise SystemExit(f"error: cannot reach SteelPath at {url}: {exc}") from None
+    if r.status_code >= 400:
+        try:
+            detail = r.json().get("detail")
+        except ValueError:
+            detail = r.text
+        raise SystemExit(
+            f"error: HTTP {r.status_code}: {json.dumps(detail) if not isinstance(detail, str) else detail}"
+        )
+    return r.json()
+
+
+def _bar(progress: float, stage: str, width: int = 30) -> str:
+    done = round(progress * width)
+    return f"\r[{'#' * done}{'.' * (width - done)}] {progress * 100:5.1f}% {stage[:40]:<40}"
+
+
+def _print_plan(plan: dict[str, Any]) -> None:
+    print(f"plan {plan['id']}  kind {plan['kind']}  state {plan['state']}")
+    if plan.get("error"):
+        print(f"  error: {plan['error']}")
+    for k, v in sorted((plan.get("metrics") or {}).items()):
+        print(f"  {k:32s} {v:.6g}")
+    for c in plan.get("checks") or []:
+        mark = "PASS" if c["passed"] else "FAIL"
+        print(f"  [{mark}] {c['name']}: {c.get('message', '')}")
+    if plan.get("allowed_actions"):
+        print(f"  allowed actions: {', '.join(plan['allowed_actions'])}")
+
+
+def cmd_plan(args: argparse.Namespace) -> int:
+    if args.plan_cmd == "submit":
+        params: dict[str, Any] = {}
+        if args.params:
+            text = sys.stdin.read() if args.params == "-" else Path(args.params).read_text()
+            try:
+                params = json.loads(text) if text.strip() else {}
+            except json.JSONDecodeError as exc:
+                raise SystemExit(f"error: {args.params} is not valid JSON: {exc}") from None
+        plan = _request(args, "POST", "/plans", json={"kind": args.kind, "params": params})
+        print(f"submitted plan {plan['id']} ({args.kind})", file=sys.stderr)
+        if args.no_wait:
+            print(plan["id"])
+            return 0
+        interactive = sys.stderr.isatty()
+        last = None
+        while plan["state"] in ("queued", "planning"):
+            time.sleep(0.3)
+            plan = _request(args, "GET", f"/plans/{plan['id']}")
+            line = _bar(plan["progress"], f"{plan['state']}: {plan['stage']}")
+            if interactive:
+                print(line, end="", file=sys.stderr, flush=True)
+            elif line != last:
+                print(line.strip(), file=sys.stderr, flush=True)
+            last = line
+        if interactive:
+            print(file=sys.stderr)
+        _print_plan(plan)
+        return 0 if plan["state"] == "planned" else 1
+    if args.plan_cmd == "show":
+        _print_plan(_request(args, "GET", f"/plans/{args.id}"))
+        return 0
+    if args.plan_cmd == "list":
+        for p in _request(args, "GET", "/plans", params={"limit": args.limit}):
+            print(
+                f"{p['id']}\t{p['kind']}\t{p['state']}\t{p['progress'] * 100:.0f}%\t{p['created_at']}"
+            )
+        return 0
+    return 2
+
+
+# --------------------------------------------------------------------- emulate
+def cmd_emulate(argv: list[str]) -> int:
+    try:
+        from robots.emulator import main as emulator_main
+    except ImportError as exc:
+        print(f"error: the robot emulator is not available: {exc}", file=sys.stderr)
+        return 2
+    return int(emulator_main(argv) or 0)
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(
+        prog="steelpath",
+        description="SteelPath: plan, review, approve and dispatch steel-bridge robot motions.",
+    )
+    sub = p.add_subparsers(dest="cmd", required=True)
+
+    s = sub.add_parser(
+        "serve",
+        help="run the API, console and 3D scene",
+        description="Start the HTTP API, the operator console and the viser scene.",
+    )
+    s.add_argument("--host", help="bind address (default 127.0.0.1, $STEELPATH_HOST)")
+    s.add_argument("--port", type=int, help="HTTP port (default 8000, $STEELPATH_PORT)")
+    s.add_argument(
+        "--scene-port", type=int, help="viser port on 127.0.0.1 (default 8081; 0 disables)"
+    )
+    s.add_argument("--data", type=Path, help="data directory (default ./var, $STEELPATH_DATA)")
+    s.add_argument(
+        "--no-emulators", action="store_true", help="do not start the built-in robot emulators"
+    )
+    s.set_defaults(func=cmd_serve)
+
+    t = sub.add_parser(
+        "token",
+        help="manage API tokens (local data directory)",
+        description="Create, list and revoke bearer tokens in the local database.",
+    )
+    tsub = t.add_subparsers(dest="token_cmd", required=True)
+    tc = tsub.add_parser("create", help="create a token and print it (last line)")
+    tc.add_argument("--role", choices=["viewer", "operator", "admin"], default="operator")
+    tc.add_argument("--name", help="who holds it")
+    tc.add_argument("--data", type=Path, help="data directory (default ./var)")
+    tl = tsub.add_parser("list", help="list tokens (never their secrets)")
+    tl.add_argument("--data", type=Path)
+    tr = tsub.add_parser("revoke", help="revoke a token by id")
+    tr.add_argument("id")
+    tr.add_argument("--data", type=Path)
+    t.set_defaults(func=cmd_token)
+
+    pl = sub.add_parser(
+        "plan",
+        help="submit and inspect plans on a running server",
+        description="Talk to a running server (--server, $STEELPATH_URL).",
+    )
+    psub = pl.add_subparsers(dest="plan_cmd", required=True)
+    for name, helptext in (
+        ("submit", "submit a plan and follow its progress"),
+        ("show", "show a plan's state, metrics and checks"),
+        ("list", "list recent plans"),
+    ):
+        sp = psub.add_parser(name, help=helptext, description=helptext)
+        sp.add_argument("--server", help=f"server URL (default {DEFAULT_URL})")
+        sp.add_argument("--token", help="bearer token (default $STEELPATH_TOKEN)")
+        if name == "submit":
+            sp.add_argument("kind", help="plan kind, e.g. demo.route")
+            sp.add_argument(
+                "params", nargs="?", help="params JSON file ('-' for stdin); defaults if omitted"
+            )
+            sp.add_argument("--no-wait", action="store_true", help="print the plan id and return")
+        elif name == "show":
+            sp.add_argument("id")
+        else:
+            sp.add_argument("--limit", type=int, default=20)
+    pl.set_defaults(func=cmd_plan)
+
+    e = sub.add_parser(
+        "emulate",
+        help="run a robot emulator speaking the SteelPath protocol",
+        description="Robot emulator; see 'steelpath emulate --help'.",
+        add_help=False,
+    )
+    e.set_defaults(func=None)
+    return p
+
+
+def main(argv: list[str] | None = None) -> int:
+    argv = list(sys.argv[1:] if argv is None else argv)
+    if argv and argv[0] == "emulate":
+        return cmd_emulate(argv[1:])
+    args = build_parser().parse_args(argv)
+    return int(args.func(args) or 0)
+
+
+if __name__ == "__main__":  # pragma: no cover
+    raise SystemExit(main())

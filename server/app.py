@@ -1,0 +1,192 @@
+"""The FastAPI application: routers by resource, services built in the lifespan."""
+
+from __future__ import annotations
+
+import logging
+import sys
+from collections.abc import AsyncIterator
+from contextlib import asynccontextmanager
+from pathlib import Path
+from typing import Any
+
+from fastapi import FastAPI, Request
+from fastapi.responses import FileResponse, JSONResponse, RedirectResponse
+from fastapi.staticfiles import StaticFiles
+from starlette.types import ASGIApp, Message, Receive, Scope, Send
+
+from planners.errors import PlannerError
+from server import __version__
+from server.auth import bootstrap_admin
+from server.events import EventBus
+from server.jobs import JobRunner
+from server.kinds import registry
+from server.lifecycle import IllegalTransitionError
+from server.routers import clouds, events, health, plans, safety, tokens
+from server.scene import proxy
+from server.services import Services
+from server.settings import Settings, get_settings
+from server.store import NotFoundError, Store
+
+log = logging.getLogger(__name__)
+
+STATIC_DIR = Path(__file__).resolve().parent.parent / "web_static"
+API = "/api/v1"
+
+
+class BodySizeLimit:
+    """413 for request bodies over the configured limit, checked while streaming
+    (``Content-Length`` can be absent or wrong)."""
+
+    def __init__(self, app: ASGIApp, limit_bytes: Any) -> None:
+        self.app = app
+        self.limit = limit_bytes
+
+    async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:
+        if scope["type"] != "http":
+            await self.app(scope, receive, send)
+            return
+        limit = int(self.limit())
+        declared = dict(scope.get("headers") or []).get(b"content-length")
+        if declared is not None and declared.isdigit() and int(declared) > limit:
+            await self._reject(send, limit)
+            return
+        seen = 0
+        too_big = False
+
+        async def limited() -> Message:
+            nonlocal seen, too_big
+            msg = await receive()
+            if msg["type"] == "http.request":
+                seen += len(msg.get("body", b""))
+                if seen > limit:
+                    too_big = True
+                    raise _TooLarge
+            return msg
+
+        try:
+            await self.app(scope, limited, send)
+        except _TooLarge:
+            await self._reject(send, limit)
+        except Exception:
+            if too_big:
+                await self._reject(send, limit)
+            else:
+                raise
+
+    @staticmethod
+    async def _reject(send: Send, limit: int) -> None:
+        body = (
+            '{"detail":"request body exceeds the upload limit of '
+            f'{limit} bytes (STEELPATH_MAX_UPLOAD_MB)"}}'
+        ).encode()
+        await send(
+            {
+                "type": "http.response.start",
+                "status": 413,
+                "headers": [
+                    (b"content-type", b"application/json"),
+                    (b"content-length", str(len(body)).encode()),
+                ],
+            }
+        )
+        await send({"type": "http.response.body", "body": body})
+
+
+class _TooLarge(Exception):
+    pass
+
+
+def create_app(settings: Settings | None = None, *, start_scene: bool | None = None) -> FastAPI:
+    """Build the app; services start in its lifespan (``TestClient`` as a context manager)."""
+    settings = settings or get_settings()
+    run_scene = settings.scene_port != 0 if start_scene is None else start_scene
+
+    @asynccontextmanager
+    async def lifespan(app: FastAPI) -> AsyncIterator[None]:
+        store = Store(settings.data)
+        bus = EventBus()
+        jobs = JobRunner(store, bus, mode=settings.job_mode, workers=settings.job_workers)
+        services = Services(settings=settings, store=store, events=bus, jobs=jobs)
+        app.state.services = services
+        secret = bootstrap_admin(store, settings.token_file)
+        if secret is not None:
+            where = f" (also written to {settings.token_file})" if settings.token_file else ""
+            print(
+                "\n=== SteelPath first start: admin token (shown once; store it safely)"
+                f"{where} ===\n{secret}\n",
+                file=sys.stderr,
+                flush=True,
+            )
+        registry()
+        if run_scene:
+            from server.scene.service import SceneService
+
+            def propose(plan_id: str, patch: dict[str, Any]) -> str:
+                parent = store.get_plan(plan_id)
+                new = plans.submit_plan(
+                    services, parent.kind, {**parent.params, **patch}, "scene", parent.id
+                )
+                return new.id
+
+            scene = SceneService(store, settings.scene_port, propose)
+            scene.start()
+            services.scene = scene
+            jobs.on_finished.append(scene.plan_finished)
+        jobs.start()
+        try:
+            yield
+        finally:
+            jobs.shutdown()
+            if services.dispatch is not None:
+                services.dispatch.shutdown()
+            if services.scene is not None:
+                services.scene.stop()
+            store.close()
+
+    app = FastAPI(
+        title="SteelPath",
+        version=__version__,
+        description="Planning server and operator console for steel-bridge robots.",
+        lifespan=lifespan,
+        docs_url="/docs",
+        openapi_url="/openapi.json",
+    )
+    app.add_middleware(BodySizeLimit, limit_bytes=lambda: settings.max_upload_bytes)
+
+    @app.exception_handler(NotFoundError)
+    async def _not_found(_: Request, exc: NotFoundError) -> JSONResponse:
+        return JSONResponse({"detail": str(exc)}, status_code=404)
+
+    @app.exception_handler(IllegalTransitionError)
+    async def _conflict(_: Request, exc: IllegalTransitionError) -> JSONResponse:
+        return JSONResponse(
+            {"detail": str(exc), "state": exc.state, "allowed_actions": exc.allowed},
+            status_code=409,
+        )
+
+    @app.exception_handler(PlannerError)
+    async def _planner(_: Request, exc: PlannerError) -> JSONResponse:
+        return JSONResponse({"detail": str(exc)}, status_code=422)
+
+    for r in (
+        health.router,
+        clouds.router,
+        plans.router,
+        events.router,
+        safety.router,
+        tokens.router,
+    ):
+        app.include_router(r, prefix=API)
+    app.include_router(proxy.api_router, prefix=API)
+    app.include_router(proxy.proxy_router)
+
+    @app.get("/", include_in_schema=False)
+    def console() -> FileResponse:
+        return FileResponse(STATIC_DIR / "index.html", headers={"Cache-Control": "no-store"})
+
+    @app.get("/api", include_in_schema=False)
+    def api_root() -> RedirectResponse:
+        return RedirectResponse("/docs")
+
+    app.mount("/static", StaticFiles(directory=STATIC_DIR), name="static")
+    return app

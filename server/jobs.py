@@ -1,0 +1,321 @@
+"""Planning jobs, off the event loop, with progress and cancellation.
+
+Jobs run in a pool of worker *processes* by default (``STEELPATH_JOB_MODE``):
+planners are CPU-bound Python/numpy and must not starve the HTTP server, and
+a planner that crashes its process takes only that job down.  Workers report
+``(plan_id, fraction, stage)`` through a manager queue that a listener thread
+turns into stored progress and events; cancellation is cooperative: the
+worker's ``progress`` call raises :class:`planners.errors.CancelledError`
+once the plan's flag is set, so planners stop at their next stage boundary.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import logging
+import multiprocessing as mp
+import queue as queue_mod
+import threading
+import time
+import traceback
+from concurrent.futures import Executor, Future, ProcessPoolExecutor, ThreadPoolExecutor
+from concurrent.futures.process import BrokenProcessPool
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from planners.errors import CancelledError, InvalidInputError
+from server.events import EventBus
+from server.lifecycle import IllegalTransitionError, PlanState
+from server.store import NotFoundError, Store
+
+log = logging.getLogger(__name__)
+
+_STOP = ("__stop__", 0.0, "")
+
+
+class WorkerContext:
+    """The :class:`server.kinds.base.JobContext` given to a kind's ``run``."""
+
+    def __init__(self, plan_id: str, clouds_dir: Path, progress_q: Any, cancel_flags: Any) -> None:
+        self.plan_id = plan_id
+        self._clouds_dir = clouds_dir
+        self._q = progress_q
+        self._cancel = cancel_flags
+
+    def cancelled(self) -> bool:
+        try:
+            return bool(self._cancel.get(self.plan_id, False))
+        except (OSError, EOFError, BrokenPipeError):  # manager gone: server is stopping
+            return True
+
+    def progress(self, fraction: float, stage: str) -> None:
+        if self.cancelled():
+            raise CancelledError(f"plan {self.plan_id} was cancelled during {stage!r}")
+        self._q.put((self.plan_id, float(min(max(fraction, 0.0), 1.0)), str(stage)))
+
+    def load_cloud(self, cloud_id: str) -> np.ndarray:
+        path = self._clouds_dir / f"{cloud_id}.npy"
+        if "/" in cloud_id or not path.is_file():
+            raise InvalidInputError(f"no stored cloud with id {cloud_id!r}")
+        return np.load(path, allow_pickle=False)
+
+
+def execute_job(
+    kind_name: str,
+    params: dict[str, Any],
+    plan_id: str,
+    clouds_dir: str,
+    progress_q: Any,
+    cancel_flags: Any,
+) -> tuple[dict[str, Any], dict[str, np.ndarray], list[dict[str, Any]], dict[str, float]]:
+    """Run one plan (in a worker).  Module-level so process pools can pickle it."""
+    from server.kinds import get_kind
+
+    kind = get_kind(kind_name)
+    ctx = WorkerContext(plan_id, Path(clouds_dir), progress_q, cancel_flags)
+    progress_q.put((plan_id, 0.0, "start"))
+    model = kind.params_model.model_validate(params)
+    t0 = time.perf_counter()
+    out = kind.run(model, ctx)
+    metrics = {k: float(v) for k, v in out.metrics.items()}
+    metrics.setdefault("job_time_s", time.perf_counter() - t0)
+    checks = [c.model_dump() for c in out.checks]
+    arrays = {k: np.asarray(v) for k, v in out.arrays.items()}
+    return out.result, arrays, checks, metrics
+
+
+class JobRunner:
+    """Owns the worker pool, the progress listener and the cancel flags."""
+
+    def __init__(
+        self, store: Store, events: EventBus, *, mode: str = "process", workers: int = 2
+    ) -> None:
+        self.store = store
+        self.events = events
+        self.mode = mode
+        self.workers = workers
+        self._lock = threading.RLock()
+        self._futures: dict[str, Future[Any]] = {}
+        self._last_progress: dict[str, float] = {}
+        self._executor: Executor | None = None
+        self._manager: Any = None
+        self._queue: Any = None
+        self._cancel: Any = None
+        self._listener: threading.Thread | None = None
+        #: Called with the plan id whenever a job ends (scene redraw, etc.).
+        self.on_finished: list[Any] = []
+
+    # ---------------------------------------------------------------- control
+    def start(self) -> None:
+        if self.mode == "process":
+            ctx = mp.get_context("spawn")
+            self._manager = ctx.Manager()
+            self._queue = self._manager.Queue()
+            self._cancel = self._manager.dict()
+        else:
+            self._queue = queue_mod.Queue()
+            self._cancel = {}
+        self._executor = self._new_executor()
+        self._listener = threading.Thread(target=self._listen, name="job-progress", daemon=True)
+        self._listener.start()
+        self._recover()
+
+    def _new_executor(self) -> Executor:
+        if self.mode == "process":
+            return ProcessPoolExecutor(self.workers, mp_context=mp.get_context("spawn"))
+        return ThreadPoolExecutor(self.workers, thread_name_prefix="planner")
+
+    def shutdown(self) -> None:
+        with self._lock:
+            for pid in list(self._futures):
+                self._cancel[pid] = True
+        if self._executor is not None:
+            self._executor.shutdown(wait=True, cancel_futures=True)
+        if self._queue is not None:
+            with contextlib.suppress(OSError, EOFError, BrokenPipeError):
+                self._queue.put(_STOP)
+        if self._listener is not None:
+            self._listener.join(timeout=5)
+        if self._manager is not None:
+            self._manager.shutdown()
+
+    def _recover(self) -> None:
+        """Re-queue plans a previous process left queued or planning."""
+        for plan in self.store.plans_in_states({PlanState.QUEUED, PlanState.PLANNING}):
+            if plan.state == PlanState.PLANNING:
+                self.store.transition_plan(
+                    plan.id, "requeue", "system", "server restarted while planning"
+                )
+            self.submit(plan.id)
+
+    # ------------------------------------------------------------------- jobs
+    def submit(self, plan_id: str) -> None:
+        plan = self.store.get_plan(plan_id)
+        assert self._executor is not None, "JobRunner.start() was not called"
+        with self._lock:
+            self._cancel[plan_id] = False
+            try:
+                fut = self._executor.submit(
+                    execute_job,
+                    plan.kind,
+                    plan.params,
+                    plan_id,
+                    str(self.store.arrays.path("clouds")),
+                    self._queue,
+                    self._cancel,
+                )
+            except BrokenProcessPool:
+                self._executor = self._new_executor()
+                fut = self._executor.submit(
+                    execute_job,
+                    plan.kind,
+                    plan.params,
+                    plan_id,
+                    str(self.store.arrays.path("clouds")),
+                    self._queue,
+                    self._cancel,
+                )
+            self._futures[plan_id] = fut
+        fut.add_done_callback(lambda f, pid=plan_id: self._finish(pid, f))
+
+    def cancel(self, plan_id: str, actor: str) -> str:
+        """Cancel a queued or running plan; returns what happened."""
+        plan = self.store.get_plan(plan_id)
+        if plan.state not in (PlanState.QUEUED, PlanState.PLANNING):
+            # Raises the 409 with the allowed actions.
+            self.store.transition_plan(plan_id, "cancel", actor)
+        with self._lock:
+            fut = self._futures.get(plan_id)
+            self._cancel[plan_id] = True
+            if fut is not None and fut.cancel():
+                self._futures.pop(plan_id, None)
+                self._transition(plan_id, "cancel", actor, "cancelled before it started")
+                return "cancelled"
+            if fut is None and plan.state == PlanState.QUEUED:
+                self._transition(plan_id, "cancel", actor, "cancelled")
+                return "cancelled"
+        self.store.audit(actor, "plan", plan_id, "cancel-request", "stop at next stage")
+        return "cancelling"
+
+    def running(self) -> list[str]:
+        with self._lock:
+            return list(self._futures)
+
+    # -------------------------------------------------------------- internals
+    def _transition(
+        self, plan_id: str, action: str, actor: str, reason: str = "", **kw: Any
+    ) -> None:
+        try:
+            plan = self.store.transition_plan(plan_id, action, actor, reason, **kw)
+        except (IllegalTransitionError, NotFoundError) as exc:
+            log.info("ignored %s of plan %s: %s", action, plan_id, exc)
+            return
+        self.events.publish("plan", _event_body(plan))
+
+    def _listen(self) -> None:
+        while True:
+            try:
+                msg = self._queue.get()
+            except (OSError, EOFError, BrokenPipeError):
+                return
+            if msg == _STOP:
+                return
+            plan_id, frac, stage = msg
+            try:
+                self._on_progress(plan_id, frac, stage)
+            except Exception:  # never let one bad message kill the listener
+                log.exception("progress update for %s failed", plan_id)
+
+    def _on_progress(self, plan_id: str, frac: float, stage: str) -> None:
+        with self._lock:
+            plan = self.store.get_plan(plan_id)
+            if plan.state == PlanState.QUEUED:
+                self._transition(plan_id, "start", "planner", "worker picked it up")
+            elif plan.state != PlanState.PLANNING:
+                return  # a late message for a plan that already finished
+            now = time.monotonic()
+            # Throttle writes: progress can arrive thousands of times a second.
+            if (
+                stage != plan.stage
+                or now - self._last_progress.get(plan_id, 0.0) > 0.1
+                or frac >= 1
+            ):
+                self._last_progress[plan_id] = now
+                self.store.set_progress(plan_id, frac, stage)
+                self.events.publish(
+                    "plan", {"id": plan_id, "state": "planning", "progress": frac, "stage": stage}
+                )
+
+    def _finish(self, plan_id: str, fut: Future[Any]) -> None:
+        try:
+            self._finish_locked(plan_id, fut)
+        finally:
+            for cb in list(self.on_finished):
+                try:
+                    cb(plan_id)
+                except Exception:
+                    log.exception("on_finished callback failed for %s", plan_id)
+
+    def _finish_locked(self, plan_id: str, fut: Future[Any]) -> None:
+        with self._lock:
+            self._futures.pop(plan_id, None)
+            self._last_progress.pop(plan_id, None)
+            with contextlib.suppress(OSError, EOFError, BrokenPipeError):
+                self._cancel.pop(plan_id, None)
+            try:
+                plan = self.store.get_plan(plan_id)
+            except NotFoundError:
+                return
+            if fut.cancelled():
+                return
+            if plan.state == PlanState.QUEUED:
+                self._transition(plan_id, "start", "planner")
+            exc = fut.exception()
+            if exc is None:
+                result, arrays, checks, metrics = fut.result()
+                try:
+                    rec = self.store.store_plan_result(
+                        plan_id, result=result, arrays=arrays, checks=checks, metrics=metrics
+                    )
+                except (ValueError, TypeError) as store_exc:  # e.g. NaN in result JSON
+                    self._transition(
+                        plan_id,
+                        "fail",
+                        "planner",
+                        f"result could not be stored: {store_exc}",
+                        error=f"result could not be stored: {store_exc}",
+                    )
+                    return
+                except IllegalTransitionError as ill:
+                    log.info("plan %s finished but is now %s", plan_id, ill.state)
+                    return
+                self.events.publish("plan", _event_body(rec))
+            elif isinstance(exc, CancelledError):
+                self._transition(plan_id, "cancel", "operator", str(exc))
+            else:
+                if isinstance(exc, BrokenProcessPool):
+                    msg = "the planning worker process crashed (out of memory or a native fault)"
+                    self._executor = self._new_executor()
+                elif isinstance(exc, ValueError):
+                    msg = f"{type(exc).__name__}: {exc}"  # planner input errors: no traceback
+                else:
+                    msg = f"{type(exc).__name__}: {exc}"
+                    log.error(
+                        "plan %s failed:\n%s",
+                        plan_id,
+                        "".join(traceback.format_exception(exc)),
+                    )
+                self._transition(plan_id, "fail", "planner", msg, error=msg)
+
+
+def _event_body(plan: Any) -> dict[str, Any]:
+    return {
+        "id": plan.id,
+        "kind": plan.kind,
+        "state": plan.state,
+        "progress": plan.progress,
+        "stage": plan.stage,
+        "error": plan.error,
+    }

@@ -1,0 +1,125 @@
+"""Types of the plan-kind registry.
+
+A plan kind couples a pydantic params model, a function that runs a pure
+planner, the checks it computes, sample clouds, a scene drawer and a compiler
+to robot commands.  Adding a kind touches one new module plus one line in
+:data:`server.kinds.KIND_MODULES` (DESIGN §5, §6).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Any, Protocol
+
+import numpy as np
+from pydantic import BaseModel, Field
+
+if TYPE_CHECKING:
+    from server.scene.context import DrawContext
+
+
+class Check(BaseModel):
+    """One safety or quality check of a plan (DESIGN §4)."""
+
+    name: str
+    passed: bool
+    value: float | str | bool | None = None
+    limit: float | str | bool | None = None
+    message: str = ""
+
+
+def check_le(name: str, value: float, limit: float, what: str, unit: str = "") -> Check:
+    """``value <= limit`` as a :class:`Check` with a readable message."""
+    ok = bool(np.isfinite(value) and value <= limit)
+    rel = "≤" if ok else ">"
+    return Check(
+        name=name,
+        passed=ok,
+        value=float(value),
+        limit=float(limit),
+        message=f"{what} {value:.6g}{unit} {rel} {limit:.6g}{unit}",
+    )
+
+
+def check_ge(name: str, value: float, limit: float, what: str, unit: str = "") -> Check:
+    """``value >= limit`` as a :class:`Check` with a readable message."""
+    ok = bool(np.isfinite(value) and value >= limit)
+    rel = "≥" if ok else "<"
+    return Check(
+        name=name,
+        passed=ok,
+        value=float(value),
+        limit=float(limit),
+        message=f"{what} {value:.6g}{unit} {rel} {limit:.6g}{unit}",
+    )
+
+
+@dataclass
+class KindOutput:
+    """What a kind's ``run`` returns; stored with the plan.
+
+    ``result`` must be JSON-serialisable (numbers, strings, lists, dicts) and
+    small; big arrays go in ``arrays`` and are written as ``.npy`` files.
+    ``metrics`` is flat, with units in the names (``route_length_m``).
+    """
+
+    result: dict[str, Any] = field(default_factory=dict)
+    arrays: dict[str, np.ndarray] = field(default_factory=dict)
+    checks: list[Check] = field(default_factory=list)
+    metrics: dict[str, float] = field(default_factory=dict)
+
+
+class JobContext(Protocol):
+    """What a running planning job may use besides its params."""
+
+    def progress(self, fraction: float, stage: str) -> None:
+        """Report progress 0–1 and a stage name; raises
+        :class:`planners.errors.CancelledError` once the plan was cancelled."""
+
+    def load_cloud(self, cloud_id: str) -> np.ndarray:
+        """An (N,3) float64 array of a stored cloud; ``KeyError``-free: raises
+        :class:`planners.errors.InvalidInputError` for an unknown id."""
+
+
+class PlanView(Protocol):
+    """A stored plan as drawers and compilers see it (read-only)."""
+
+    id: str
+    kind: str
+    state: str
+    params: dict[str, Any]
+    result: dict[str, Any]
+    metrics: dict[str, float]
+    checks: list[dict[str, Any]]
+
+    def array(self, name: str) -> np.ndarray:
+        """Load one of the plan's stored arrays."""
+
+
+SampleFn = Callable[[int], np.ndarray]
+
+
+@dataclass(frozen=True)
+class PlanKind:
+    """One registered plan kind."""
+
+    name: str
+    title: str
+    params_model: type[BaseModel]
+    run: Callable[[Any, JobContext], KindOutput]
+    description: str = ""
+    robot: str | None = None
+    samples: Mapping[str, SampleFn] = field(default_factory=dict)
+    draw: Callable[[DrawContext, PlanView], None] | None = None
+    compile: Callable[[PlanView], list[dict[str, Any]]] | None = None
+    #: Cheap semantic checks run synchronously at submission; raise a
+    #: ``planners.errors.PlannerError`` to refuse the request with HTTP 422.
+    validate: Callable[[Any], None] | None = None
+
+
+class CloudRef(BaseModel):
+    """Convenience params fragment: a stored cloud id or a sample name."""
+
+    cloud_id: str | None = Field(None, description="id of a stored cloud (POST /clouds)")
+    sample: str | None = Field(None, description="name of a sample scene when no cloud_id is given")

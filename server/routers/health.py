@@ -1,0 +1,50 @@
+"""``GET /api/v1/health`` (public) and ``GET /api/v1/kinds``."""
+
+from __future__ import annotations
+
+from typing import Annotated, Any
+
+from fastapi import APIRouter, Depends
+
+from server import __version__
+from server.auth import Viewer
+from server.kinds import import_errors, registry
+from server.services import Services, get_services
+from server.store.migrations import SCHEMA_VERSION
+
+router = APIRouter(tags=["health"])
+
+
+@router.get("/health")
+def health(services: Annotated[Services, Depends(get_services)]) -> dict[str, Any]:
+    """Liveness and what this server can do; needs no token."""
+    scene = services.scene
+    return {
+        "status": "ok",
+        "version": __version__,
+        "schema_version": SCHEMA_VERSION,
+        "kinds": sorted(registry()),
+        "kind_errors": import_errors(),
+        "scene": {"running": bool(scene and scene.running), "path": "/scene/"},
+        "jobs": {"mode": services.jobs.mode, "running": len(services.jobs.running())},
+    }
+
+
+@router.get("/kinds")
+def kinds(_: Viewer) -> list[dict[str, Any]]:
+    """Every plan kind with its params JSON schema and defaults."""
+    out = []
+    for kind in registry().values():
+        out.append(
+            {
+                "name": kind.name,
+                "title": kind.title,
+                "description": kind.description.strip(),
+                "robot": kind.robot,
+                "samples": sorted(kind.samples),
+                "params_schema": kind.params_model.model_json_schema(),
+                "defaults": kind.params_model().model_dump(mode="json"),
+                "compiles": kind.compile is not None,
+            }
+        )
+    return out

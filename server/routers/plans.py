@@ -1,0 +1,203 @@
+"""``/api/v1/plans``: submit, list, get, revise, cancel, approve, delete, arrays."""
+
+from __future__ import annotations
+
+import io
+from typing import Annotated, Any
+
+import numpy as np
+from fastapi import APIRouter, Depends, HTTPException, Query, Response, status
+from pydantic import BaseModel, Field, ValidationError
+
+from planners.errors import PlannerError
+from server.auth import Operator, Viewer
+from server.kinds import get_kind
+from server.kinds.base import PlanKind
+from server.lifecycle import PlanState
+from server.services import Services, get_services
+from server.store import NotFoundError, PlanRecord
+from server.store.database import utcnow
+
+router = APIRouter(prefix="/plans", tags=["plans"])
+
+Svc = Annotated[Services, Depends(get_services)]
+
+
+class PlanRequest(BaseModel):
+    kind: str = Field(..., description="plan kind (GET /kinds)", examples=["demo.route"])
+    params: dict[str, Any] = Field(default_factory=dict, description="the kind's params")
+    parent_id: str | None = Field(None, description="plan this one revises")
+
+
+class ReviseRequest(BaseModel):
+    params: dict[str, Any] = Field(
+        default_factory=dict, description="params to change; the rest are the parent's"
+    )
+
+
+class ApproveRequest(BaseModel):
+    comment: str = Field("", max_length=2000, description="why it is safe to run")
+
+
+def validate_params(services: Services, kind: PlanKind, params: dict[str, Any]) -> dict[str, Any]:
+    """Validate ``params`` for ``kind``; 422 with a message naming what is wrong."""
+    try:
+        model = kind.params_model.model_validate(params)
+    except ValidationError as exc:
+        raise HTTPException(
+            422, detail=exc.errors(include_url=False, include_context=False)
+        ) from None
+    cloud_id = getattr(model, "cloud_id", None)
+    if cloud_id is not None:
+        try:
+            services.store.get_cloud(cloud_id)
+        except NotFoundError:
+            raise HTTPException(
+                422, detail=f"params.cloud_id: no stored cloud {cloud_id!r}"
+            ) from None
+    if kind.validate is not None:
+        try:
+            kind.validate(model)
+        except PlannerError as exc:
+            raise HTTPException(422, detail=str(exc)) from None
+    return model.model_dump(mode="json")
+
+
+def submit_plan(
+    services: Services,
+    kind_name: str,
+    params: dict[str, Any],
+    actor: str,
+    parent_id: str | None = None,
+) -> PlanRecord:
+    """The one path every new plan takes: REST, console, CLI and scene proposals."""
+    try:
+        kind = get_kind(kind_name)
+    except KeyError as exc:
+        raise HTTPException(422, detail=str(exc)) from None
+    clean = validate_params(services, kind, params)
+    plan = services.store.create_plan(kind.name, clean, actor, parent_id=parent_id)
+    services.jobs.submit(plan.id)
+    services.events.publish("plan", {"id": plan.id, "kind": plan.kind, "state": plan.state})
+    return plan
+
+
+@router.post("", status_code=status.HTTP_202_ACCEPTED)
+def create_plan(
+    req: PlanRequest, services: Svc, who: Operator, response: Response
+) -> dict[str, Any]:
+    """Queue a plan; poll ``GET /plans/{id}`` or watch ``/events`` for progress."""
+    if req.parent_id is not None:
+        services.store.get_plan(req.parent_id)
+    plan = submit_plan(services, req.kind, req.params, who.actor, req.parent_id)
+    response.headers["Location"] = f"/api/v1/plans/{plan.id}"
+    return plan.public()
+
+
+@router.get("")
+def list_plans(
+    services: Svc,
+    _: Viewer,
+    kind: str | None = None,
+    state: str | None = None,
+    parent_id: str | None = None,
+    limit: Annotated[int, Query(ge=1, le=500)] = 50,
+    offset: Annotated[int, Query(ge=0)] = 0,
+) -> list[dict[str, Any]]:
+    """Plans, newest first, without their (possibly large) results."""
+    if state is not None and state not in {s.value for s in PlanState}:
+        raise HTTPException(
+            422, detail=f"unknown state {state!r}; states: {', '.join(s.value for s in PlanState)}"
+        )
+    plans = services.store.list_plans(
+        kind=kind, state=state, parent_id=parent_id, limit=limit, offset=offset
+    )
+    return [p.public(include_result=False) for p in plans]
+
+
+@router.get("/{plan_id}")
+def get_plan(plan_id: str, services: Svc, _: Viewer) -> dict[str, Any]:
+    plan = services.store.get_plan(plan_id)
+    out = plan.public()
+    out["audit"] = [e.public() for e in services.store.list_audit("plan", plan_id)]
+    out["revisions"] = [p.id for p in services.store.list_plans(parent_id=plan_id, limit=500)]
+    return out
+
+
+@router.post("/{plan_id}/revise", status_code=status.HTTP_202_ACCEPTED)
+def revise_plan(
+    plan_id: str, services: Svc, who: Operator, req: ReviseRequest | None = None
+) -> dict[str, Any]:
+    """A new plan with the parent's params updated by ``params``; the parent is unchanged."""
+    parent = services.store.get_plan(plan_id)
+    patch = req.params if req else {}
+    plan = submit_plan(services, parent.kind, {**parent.params, **patch}, who.actor, plan_id)
+    return plan.public()
+
+
+@router.post("/{plan_id}/cancel")
+def cancel_plan(plan_id: str, services: Svc, who: Operator) -> dict[str, Any]:
+    outcome = services.jobs.cancel(plan_id, who.actor)
+    plan = services.store.get_plan(plan_id)
+    return {"outcome": outcome, **plan.public(include_result=False)}
+
+
+@router.post("/{plan_id}/approve")
+def approve_plan(
+    plan_id: str, services: Svc, who: Operator, req: ApproveRequest | None = None
+) -> dict[str, Any]:
+    """Approve a planned plan whose checks all passed (409 otherwise)."""
+    plan = services.store.get_plan(plan_id)
+    failed = plan.failed_checks
+    if failed:
+        names = ", ".join(f"{c['name']} ({c.get('message', '')})" for c in failed)
+        raise HTTPException(
+            409,
+            detail={
+                "message": f"plan {plan_id} cannot be approved: failed checks: {names}",
+                "state": plan.state,
+                "failed_checks": [c["name"] for c in failed],
+                "allowed_actions": ["revise", "delete"],
+            },
+        )
+    comment = req.comment if req else ""
+    plan = services.store.transition_plan(
+        plan_id,
+        "approve",
+        who.actor,
+        comment or "approved",
+        expect=PlanState.PLANNED,
+        approved_by=who.actor,
+        approved_at=utcnow(),
+    )
+    services.events.publish("plan", {"id": plan.id, "kind": plan.kind, "state": plan.state})
+    return plan.public()
+
+
+@router.delete("/{plan_id}", status_code=204)
+def delete_plan(plan_id: str, services: Svc, who: Operator) -> Response:
+    services.store.delete_plan(plan_id, who.actor)
+    services.events.publish("plan", {"id": plan_id, "state": "deleted"})
+    return Response(status_code=204)
+
+
+@router.get("/{plan_id}/arrays/{name}")
+def get_array(plan_id: str, name: str, services: Svc, _: Viewer, format: str = "npy") -> Response:
+    """A stored result array as ``.npy`` (default) or JSON (``?format=json``)."""
+    plan = services.store.get_plan(plan_id)
+    try:
+        arr = plan.array(name)
+    except KeyError as exc:
+        raise NotFoundError(str(exc.args[0])) from None
+    if format == "json":
+        if arr.size > 2_000_000:
+            raise HTTPException(413, detail=f"array {name} has {arr.size} values; fetch it as npy")
+        import json
+
+        body = json.dumps({"shape": list(arr.shape), "dtype": str(arr.dtype), "data": arr.tolist()})
+        return Response(body, media_type="application/json")
+    if format != "npy":
+        raise HTTPException(422, detail="format must be 'npy' or 'json'")
+    buf = io.BytesIO()
+    np.save(buf, arr, allow_pickle=False)
+    return Response(buf.getvalue(), media_type="application/octet-stream")

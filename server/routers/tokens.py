@@ -1,0 +1,74 @@
+"""``/api/v1/tokens`` (admin) and ``/api/v1/session`` (the console's cookie login)."""
+
+from __future__ import annotations
+
+from typing import Annotated, Any, Literal
+
+from fastapi import APIRouter, Depends, HTTPException, Request, Response
+from pydantic import BaseModel, Field
+
+from server.auth import COOKIE, Admin, Viewer, authenticate, create_token
+from server.services import Services, get_services
+
+router = APIRouter(tags=["auth"])
+
+Svc = Annotated[Services, Depends(get_services)]
+
+
+class TokenRequest(BaseModel):
+    name: str = Field(..., min_length=1, max_length=100, description="who or what holds it")
+    role: Literal["viewer", "operator", "admin"] = "operator"
+
+
+@router.get("/tokens")
+def list_tokens(services: Svc, _: Admin) -> list[dict[str, Any]]:
+    return [t.public() for t in services.store.list_tokens()]
+
+
+@router.post("/tokens", status_code=201)
+def new_token(req: TokenRequest, services: Svc, who: Admin) -> dict[str, Any]:
+    """Create a token; the secret is in this response only."""
+    tid, secret = create_token(services.store, req.name, req.role, who.actor)
+    return {**services.store.get_token(tid).public(), "token": secret}
+
+
+@router.delete("/tokens/{token_id}")
+def revoke_token(token_id: str, services: Svc, who: Admin) -> dict[str, Any]:
+    if token_id == who.token_id:
+        raise HTTPException(409, detail="refusing to revoke the token making this request")
+    return services.store.revoke_token(token_id, who.actor).public()
+
+
+class SessionRequest(BaseModel):
+    token: str = Field(..., min_length=8)
+
+
+@router.post("/session")
+def login(
+    req: SessionRequest, request: Request, services: Svc, response: Response
+) -> dict[str, Any]:
+    """Exchange a token for an HttpOnly session cookie (console, scene, events)."""
+    principal = authenticate(services, req.token)
+    if principal is None:
+        raise HTTPException(401, detail="invalid or revoked token")
+    response.set_cookie(
+        COOKIE,
+        req.token,
+        httponly=True,
+        samesite="strict",
+        secure=request.url.scheme == "https",
+        path="/",
+    )
+    return {"name": principal.name, "role": principal.role}
+
+
+@router.get("/session")
+def whoami(who: Viewer) -> dict[str, Any]:
+    return {"name": who.name, "role": who.role, "token_id": who.token_id}
+
+
+@router.delete("/session", status_code=204)
+def logout(response: Response) -> Response:
+    response.delete_cookie(COOKIE, path="/")
+    response.status_code = 204
+    return response

@@ -1,0 +1,72 @@
+"""What a plan kind's scene drawer receives.
+
+Drawers (``server/scene/<kind>.py``) draw a *stored* plan into the viser scene
+under ``ctx.root``; they never compute plans (DESIGN §3).  Interaction that
+changes a plan goes through ``ctx.propose``, which creates a new plan revision
+through the same service REST uses.
+"""
+
+from __future__ import annotations
+
+import threading
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+
+@dataclass
+class Animation:
+    """A looping animation: ``update(t)`` for ``t`` in ``[0, duration_s]``."""
+
+    duration_s: float
+    update: Callable[[float], None]
+
+
+@dataclass
+class DrawContext:
+    """Handles a drawer may use.
+
+    - ``scene``: the viser ``SceneApi`` (``server.scene``); name every node
+      under ``root`` (e.g. ``f"{ctx.root}/route"``) so a redraw clears it.
+    - ``gui``: the viser ``GuiApi`` for small per-plan controls (toggles).
+    - ``propose(patch)``: submit a new plan whose params are this plan's params
+      updated with ``patch`` (e.g. ``{"start": 3}``); returns the new plan id.
+    - ``add_urdf(robot, name)``: a ``viser.extras.ViserUrdf`` of a robot
+      description under ``root``; call ``update_cfg(q)`` on it.
+    - ``animate(duration_s, update)``: register a looping animation callback.
+    """
+
+    scene: Any
+    gui: Any
+    root: str
+    propose: Callable[[dict[str, Any]], str]
+    lock: threading.RLock = field(default_factory=threading.RLock)
+    animations: list[Animation] = field(default_factory=list)
+    gui_handles: list[Any] = field(default_factory=list)
+
+    def add_urdf(self, robot: str, name: str, root_pose: np.ndarray | None = None) -> Any:
+        from viser.extras import ViserUrdf
+
+        from robots import load_robot
+
+        model = load_robot(robot)
+        frame = self.scene.add_frame(f"{self.root}/{name}", show_axes=False)
+        if root_pose is not None:
+            set_frame_pose(frame, root_pose)
+        return ViserUrdf(self.scene, Path(model.urdf_path), root_node_name=f"{self.root}/{name}")
+
+    def animate(self, duration_s: float, update: Callable[[float], None]) -> None:
+        self.animations.append(Animation(max(float(duration_s), 1e-3), update))
+
+
+def set_frame_pose(handle: Any, T: np.ndarray) -> None:
+    """Set a viser node's position and wxyz quaternion from a 4×4 transform."""
+    from scipy.spatial.transform import Rotation
+
+    T = np.asarray(T, dtype=float)
+    x, y, z, w = Rotation.from_matrix(T[:3, :3]).as_quat()
+    handle.position = tuple(T[:3, 3])
+    handle.wxyz = (w, x, y, z)

@@ -1,0 +1,175 @@
+"""The in-process viser server and what it shows.
+
+viser runs in its own daemon thread bound to 127.0.0.1 (it has no
+authentication); operators reach it only through the authenticated proxy in
+:mod:`server.scene.proxy`.  The scene is drawn from stored plans only, so a
+restart redraws the same picture.  Drawers and viser callbacks run on
+different threads, so every redraw holds ``self._lock``.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import logging
+import threading
+import time
+from collections.abc import Callable
+from typing import Any
+
+import numpy as np
+
+from server.kinds import registry
+from server.lifecycle import PlanState
+from server.scene.context import Animation, DrawContext
+from server.store import PlanRecord, Store
+
+log = logging.getLogger(__name__)
+
+MAX_CLOUD_POINTS = 300_000
+
+ProposeFn = Callable[[str, dict[str, Any]], str]
+
+
+class SceneService:
+    def __init__(self, store: Store, port: int, propose: ProposeFn) -> None:
+        self.store = store
+        self.requested_port = port
+        self.port: int | None = None
+        self._propose = propose
+        self._lock = threading.RLock()
+        self._server: Any = None
+        self._animations: list[Animation] = []
+        self._gui_handles: list[Any] = []
+        self._follow: str | None = None
+        self._stop = threading.Event()
+        self._anim_thread: threading.Thread | None = None
+        self.current: dict[str, Any] = {}
+        self.proposals: list[dict[str, Any]] = []
+
+    # -------------------------------------------------------------- lifecycle
+    @property
+    def running(self) -> bool:
+        return self._server is not None
+
+    @property
+    def server(self) -> Any:
+        return self._server
+
+    def start(self) -> None:
+        import viser
+
+        self._server = viser.ViserServer(host="127.0.0.1", port=self.requested_port, verbose=False)
+        # viser silently moves to the next free port: read back what it got.
+        self.port = int(self._server.get_port())
+        self._server.scene.set_up_direction("+z")
+        self._server.scene.add_grid("/grid", width=10.0, height=10.0, cell_size=0.25, plane="xy")
+        self._anim_thread = threading.Thread(target=self._animate, name="scene-anim", daemon=True)
+        self._anim_thread.start()
+        log.info("viser scene on 127.0.0.1:%s", self.port)
+
+    def stop(self) -> None:
+        self._stop.set()
+        if self._anim_thread is not None:
+            self._anim_thread.join(timeout=2)
+        if self._server is not None:
+            self._server.stop()
+            self._server = None
+
+    # ---------------------------------------------------------------- drawing
+    def _clear(self) -> None:
+        scene = self._server.scene
+        for name in ("/plan", "/cloud"):
+            scene.remove_by_name(name)
+        for h in self._gui_handles:
+            with contextlib.suppress(Exception):  # already gone with its client
+                h.remove()
+        self._gui_handles = []
+        self._animations = []
+
+    def show_plan(self, plan_id: str) -> dict[str, Any]:
+        """Draw a stored plan (its kind's drawer); follow it if still planning."""
+        plan = self.store.get_plan(plan_id)
+        if not self.running:
+            return {"shown": None, "reason": "scene is not running"}
+        if plan.state in (PlanState.QUEUED, PlanState.PLANNING):
+            self._follow = plan.id
+        with self._lock:
+            self._clear()
+            self.current = {"plan_id": plan.id, "kind": plan.kind, "state": plan.state}
+            if plan.result or plan.arrays:
+                self._draw(plan)
+        return {"shown": plan.id, "state": plan.state, "following": self._follow == plan.id}
+
+    def _draw(self, plan: PlanRecord) -> None:
+        kind = registry().get(plan.kind)
+        if kind is None or kind.draw is None:
+            return
+        ctx = DrawContext(
+            scene=self._server.scene,
+            gui=self._server.gui,
+            root="/plan",
+            propose=lambda patch: self._on_propose(plan.id, patch),
+            lock=self._lock,
+        )
+        try:
+            kind.draw(ctx, plan)
+        except Exception:
+            log.exception("drawing plan %s failed", plan.id)
+            self._server.scene.add_label(
+                "/plan/error", text=f"could not draw {plan.id}", position=(0, 0, 0.3)
+            )
+        self._animations = list(ctx.animations)
+        self._gui_handles = list(ctx.gui_handles)
+
+    def show_cloud(self, cloud_id: str) -> dict[str, Any]:
+        rec = self.store.get_cloud(cloud_id)
+        if not self.running:
+            return {"shown": None, "reason": "scene is not running"}
+        pts = self.store.cloud_points(cloud_id)
+        if len(pts) > MAX_CLOUD_POINTS:
+            # Deterministic thinning keeps the browser responsive on big scans.
+            pts = pts[:: int(np.ceil(len(pts) / MAX_CLOUD_POINTS))]
+        z = pts[:, 2]
+        t = (z - z.min()) / max(float(np.ptp(z)), 1e-9)
+        colors = np.stack([60 + 180 * t, 120 + 60 * t, 220 - 160 * t], axis=1).astype(np.uint8)
+        with self._lock:
+            self._clear()
+            self.current = {"cloud_id": rec.id}
+            center = pts.mean(axis=0)
+            # float32 relative to the centre keeps precision far from the origin.
+            self._server.scene.add_point_cloud(
+                "/cloud",
+                points=(pts - center).astype(np.float32),
+                colors=colors,
+                point_size=0.01,
+                precision="float32",
+                position=tuple(center),
+            )
+        return {"shown": rec.id, "points_drawn": len(pts)}
+
+    def plan_finished(self, plan_id: str) -> None:
+        """Called when a plan leaves planning; redraw if it is the one followed."""
+        if self.running and self._follow == plan_id:
+            self._follow = None
+            self.show_plan(plan_id)
+
+    def _on_propose(self, plan_id: str, patch: dict[str, Any]) -> str:
+        new_id = self._propose(plan_id, patch)
+        self.proposals.append(
+            {"from": plan_id, "patch": patch, "plan_id": new_id, "ts": time.time()}
+        )
+        self._follow = new_id
+        return new_id
+
+    # -------------------------------------------------------------- animation
+    def _animate(self) -> None:
+        t0 = time.monotonic()
+        while not self._stop.wait(0.05):
+            with self._lock:
+                anims = list(self._animations)
+                for a in anims:
+                    try:
+                        a.update((time.monotonic() - t0) % a.duration_s)
+                    except Exception:
+                        log.exception("scene animation failed; dropping it")
+                        self._animations.remove(a)

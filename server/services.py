@@ -1,0 +1,29 @@
+"""The service objects one running app holds, shared by routers via a dependency."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Any
+
+from fastapi import Request
+
+from server.events import EventBus
+from server.jobs import JobRunner
+from server.settings import Settings
+from server.store import Store
+
+
+@dataclass
+class Services:
+    settings: Settings
+    store: Store
+    events: EventBus
+    jobs: JobRunner
+    scene: Any = None  # server.scene.service.SceneService when the scene runs
+    dispatch: Any = None  # the dispatch engine once robots are wired
+    estop_handlers: list[Callable[[str | None, str], None]] = field(default_factory=list)
+
+
+def get_services(request: Request) -> Services:
+    return request.app.state.services

@@ -1,0 +1,55 @@
+"""Service settings from ``STEELPATH_*`` environment variables (pydantic-settings)."""
+
+from __future__ import annotations
+
+from functools import lru_cache
+from pathlib import Path
+from typing import Literal
+
+from pydantic import Field
+from pydantic_settings import BaseSettings, SettingsConfigDict
+
+
+class Settings(BaseSettings):
+    """Every knob of a running SteelPath service.
+
+    Each field reads ``STEELPATH_<NAME>`` (e.g. ``STEELPATH_DATA=/srv/steelpath``);
+    the defaults are the embedded lab set-up of DESIGN §9.
+    """
+
+    model_config = SettingsConfigDict(env_prefix="STEELPATH_", extra="ignore")
+
+    data: Path = Field(Path("./var"), description="data directory: SQLite database and .npy arrays")
+    host: str = Field("127.0.0.1", description="HTTP bind address of the API and console")
+    port: int = Field(8000, ge=0, le=65535, description="HTTP port of the API and console")
+    scene_port: int = Field(
+        8081,
+        ge=0,
+        le=65535,
+        description="port of the in-process viser scene (bound to 127.0.0.1; 0 disables it)",
+    )
+    max_upload_mb: float = Field(256.0, gt=0, description="largest accepted cloud upload (MiB)")
+    token_file: Path | None = Field(
+        None,
+        description="where the first-start admin token is also written (mode 0600); "
+        "the CLI reads its token from here when STEELPATH_TOKEN is unset",
+    )
+    job_mode: Literal["process", "thread"] = Field(
+        "process", description="run planning jobs in worker processes or threads"
+    )
+    job_workers: int = Field(2, ge=1, le=64, description="concurrent planning jobs")
+    emulators: bool = Field(True, description="start one robot emulator per robot on serve")
+    log_level: str = Field("info", description="uvicorn log level")
+
+    @property
+    def max_upload_bytes(self) -> int:
+        return int(self.max_upload_mb * 1024 * 1024)
+
+    @property
+    def db_path(self) -> Path:
+        return self.data / "steelpath.sqlite3"
+
+
+@lru_cache(maxsize=1)
+def get_settings() -> Settings:
+    return Settings()

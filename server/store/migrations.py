@@ -1,0 +1,125 @@
+"""Forward-only schema migrations, tracked by SQLite's ``PRAGMA user_version``.
+
+Append a new script to :data:`MIGRATIONS` to change the schema; never edit a
+released one.  Each script runs in its own transaction with the version bump,
+so a crash mid-migration leaves the previous version intact.
+"""
+
+from __future__ import annotations
+
+import sqlite3
+
+MIGRATIONS: list[str] = [
+    # 1: core tables
+    """
+    CREATE TABLE clouds (
+        id TEXT PRIMARY KEY,
+        name TEXT NOT NULL,
+        source TEXT NOT NULL,
+        n_points INTEGER NOT NULL,
+        bounds TEXT NOT NULL,
+        dropped INTEGER NOT NULL DEFAULT 0,
+        array_file TEXT NOT NULL,
+        created_at TEXT NOT NULL,
+        created_by TEXT NOT NULL
+    );
+    CREATE TABLE plans (
+        id TEXT PRIMARY KEY,
+        kind TEXT NOT NULL,
+        state TEXT NOT NULL,
+        params TEXT NOT NULL,
+        parent_id TEXT REFERENCES plans(id) ON DELETE SET NULL,
+        progress REAL NOT NULL DEFAULT 0,
+        stage TEXT NOT NULL DEFAULT '',
+        result TEXT,
+        metrics TEXT,
+        checks TEXT,
+        arrays TEXT,
+        error TEXT,
+        created_at TEXT NOT NULL,
+        updated_at TEXT NOT NULL,
+        created_by TEXT NOT NULL,
+        approved_by TEXT,
+        approved_at TEXT
+    );
+    CREATE TABLE executions (
+        id TEXT PRIMARY KEY,
+        plan_id TEXT NOT NULL REFERENCES plans(id),
+        robot TEXT NOT NULL,
+        state TEXT NOT NULL,
+        acked INTEGER NOT NULL DEFAULT 0,
+        total INTEGER NOT NULL DEFAULT 0,
+        error TEXT,
+        created_at TEXT NOT NULL,
+        updated_at TEXT NOT NULL,
+        created_by TEXT NOT NULL
+    );
+    CREATE TABLE audit_events (
+        id INTEGER PRIMARY KEY AUTOINCREMENT,
+        ts TEXT NOT NULL,
+        actor TEXT NOT NULL,
+        entity TEXT NOT NULL,
+        entity_id TEXT NOT NULL,
+        action TEXT NOT NULL,
+        from_state TEXT,
+        to_state TEXT,
+        reason TEXT NOT NULL DEFAULT ''
+    );
+    CREATE TABLE tokens (
+        id TEXT PRIMARY KEY,
+        name TEXT NOT NULL,
+        role TEXT NOT NULL,
+        hash TEXT NOT NULL UNIQUE,
+        created_at TEXT NOT NULL,
+        revoked_at TEXT
+    );
+    CREATE TABLE robots (
+        name TEXT PRIMARY KEY,
+        url TEXT NOT NULL,
+        updated_at TEXT NOT NULL,
+        updated_by TEXT NOT NULL
+    );
+    """,
+    # 2: indexes for the list filters and the audit trail
+    """
+    CREATE INDEX plans_state ON plans(state);
+    CREATE INDEX plans_kind ON plans(kind);
+    CREATE INDEX plans_parent ON plans(parent_id);
+    CREATE INDEX audit_entity ON audit_events(entity, entity_id);
+    CREATE INDEX executions_plan ON executions(plan_id);
+    """,
+]
+
+SCHEMA_VERSION = len(MIGRATIONS)
+
+
+class SchemaTooNewError(RuntimeError):
+    """The database was written by a newer SteelPath than this one."""
+
+
+def current_version(conn: sqlite3.Connection) -> int:
+    return int(conn.execute("PRAGMA user_version").fetchone()[0])
+
+
+def migrate(conn: sqlite3.Connection, target: int = SCHEMA_VERSION) -> int:
+    """Apply migrations up to ``target``; return the version reached."""
+    version = current_version(conn)
+    if version > SCHEMA_VERSION:
+        raise SchemaTooNewError(
+            f"database schema version {version} is newer than this SteelPath "
+            f"understands ({SCHEMA_VERSION}); upgrade SteelPath or use another data directory"
+        )
+    while version < target:
+        script = MIGRATIONS[version]
+        statements = [s.strip() for s in script.split(";") if s.strip()]
+        conn.execute("BEGIN IMMEDIATE")
+        try:
+            for stmt in statements:
+                conn.execute(stmt)
+            conn.execute(f"PRAGMA user_version = {version + 1}")
+            conn.execute("COMMIT")
+        except BaseException:
+            conn.execute("ROLLBACK")
+            raise
+        version += 1
+    return version

@@ -1,0 +1,183 @@
+"""Typed rows of the store."""
+
+from __future__ import annotations
+
+import json
+import sqlite3
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+
+def _loads(text: str | None, default: Any) -> Any:
+    return default if text is None else json.loads(text)
+
+
+@dataclass
+class CloudRecord:
+    id: str
+    name: str
+    source: str
+    n_points: int
+    bounds: dict[str, list[float]]
+    dropped: int
+    array_file: str
+    created_at: str
+    created_by: str
+
+    @classmethod
+    def from_row(cls, row: sqlite3.Row) -> CloudRecord:
+        d = dict(row)
+        d["bounds"] = json.loads(d["bounds"])
+        return cls(**d)
+
+    def public(self) -> dict[str, Any]:
+        return {
+            "id": self.id,
+            "name": self.name,
+            "source": self.source,
+            "n_points": self.n_points,
+            "bounds": self.bounds,
+            "dropped_nonfinite": self.dropped,
+            "created_at": self.created_at,
+            "created_by": self.created_by,
+        }
+
+
+@dataclass
+class PlanRecord:
+    """A stored plan; ``array(name)`` loads one of its stored arrays."""
+
+    id: str
+    kind: str
+    state: str
+    params: dict[str, Any]
+    parent_id: str | None
+    progress: float
+    stage: str
+    result: dict[str, Any]
+    metrics: dict[str, float]
+    checks: list[dict[str, Any]]
+    arrays: dict[str, str]
+    error: str | None
+    created_at: str
+    updated_at: str
+    created_by: str
+    approved_by: str | None
+    approved_at: str | None
+    _loader: Any = field(default=None, repr=False, compare=False)
+
+    @classmethod
+    def from_row(cls, row: sqlite3.Row, loader: Any = None) -> PlanRecord:
+        d = dict(row)
+        d["params"] = json.loads(d["params"])
+        d["result"] = _loads(d["result"], {})
+        d["metrics"] = _loads(d["metrics"], {})
+        d["checks"] = _loads(d["checks"], [])
+        d["arrays"] = _loads(d["arrays"], {})
+        return cls(**d, _loader=loader)
+
+    def array(self, name: str) -> np.ndarray:
+        if name not in self.arrays:
+            raise KeyError(f"plan {self.id} has no array {name!r}; it has {sorted(self.arrays)}")
+        return self._loader(self.arrays[name])
+
+    @property
+    def failed_checks(self) -> list[dict[str, Any]]:
+        return [c for c in self.checks if not c.get("passed")]
+
+    def public(self, *, include_result: bool = True) -> dict[str, Any]:
+        from server.lifecycle import allowed_actions
+
+        out: dict[str, Any] = {
+            "id": self.id,
+            "kind": self.kind,
+            "state": self.state,
+            "progress": self.progress,
+            "stage": self.stage,
+            "params": self.params,
+            "parent_id": self.parent_id,
+            "metrics": self.metrics,
+            "checks": self.checks,
+            "error": self.error,
+            "created_at": self.created_at,
+            "updated_at": self.updated_at,
+            "created_by": self.created_by,
+            "approved_by": self.approved_by,
+            "approved_at": self.approved_at,
+            "allowed_actions": allowed_actions(self.state),
+            "arrays": {k: f"/api/v1/plans/{self.id}/arrays/{k}" for k in sorted(self.arrays)},
+        }
+        if include_result:
+            out["result"] = self.result
+        return out
+
+
+@dataclass
+class ExecutionRecord:
+    id: str
+    plan_id: str
+    robot: str
+    state: str
+    acked: int
+    total: int
+    error: str | None
+    created_at: str
+    updated_at: str
+    created_by: str
+
+    @classmethod
+    def from_row(cls, row: sqlite3.Row) -> ExecutionRecord:
+        return cls(**dict(row))
+
+    def public(self) -> dict[str, Any]:
+        from server.lifecycle import execution_allowed_actions
+
+        d = {k: getattr(self, k) for k in self.__dataclass_fields__}
+        d["progress"] = (self.acked / self.total) if self.total else 0.0
+        d["allowed_actions"] = execution_allowed_actions(self.state)
+        return d
+
+
+@dataclass
+class AuditEvent:
+    id: int
+    ts: str
+    actor: str
+    entity: str
+    entity_id: str
+    action: str
+    from_state: str | None
+    to_state: str | None
+    reason: str
+
+    @classmethod
+    def from_row(cls, row: sqlite3.Row) -> AuditEvent:
+        return cls(**dict(row))
+
+    def public(self) -> dict[str, Any]:
+        return {k: getattr(self, k) for k in self.__dataclass_fields__}
+
+
+@dataclass
+class TokenRecord:
+    id: str
+    name: str
+    role: str
+    hash: str
+    created_at: str
+    revoked_at: str | None
+
+    @classmethod
+    def from_row(cls, row: sqlite3.Row) -> TokenRecord:
+        return cls(**dict(row))
+
+    def public(self) -> dict[str, Any]:
+        return {
+            "id": self.id,
+            "name": self.name,
+            "role": self.role,
+            "created_at": self.created_at,
+            "revoked_at": self.revoked_at,
+        }

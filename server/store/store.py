@@ -1,0 +1,414 @@
+"""The service's persistent state: plans, clouds, executions, audit, tokens, robots.
+
+Rows live in SQLite (:class:`server.store.database.Database`), large arrays in
+``.npy`` files (:class:`server.store.arrays.ArrayStore`).  Arrays are written
+*before* the row that references them is committed, so a crash at any point
+leaves the previously committed state readable (an orphan file at worst).
+Every state change and its audit event commit in one transaction.
+"""
+
+from __future__ import annotations
+
+import json
+import secrets
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from server.lifecycle import (
+    ACTIVE_EXECUTION,
+    DELETABLE,
+    IllegalTransitionError,
+    PlanState,
+    allowed_actions,
+    next_execution_state,
+    next_state,
+)
+from server.store.arrays import ArrayStore
+from server.store.database import Database, utcnow
+from server.store.records import (
+    AuditEvent,
+    CloudRecord,
+    ExecutionRecord,
+    PlanRecord,
+    TokenRecord,
+)
+
+
+class NotFoundError(KeyError):
+    """No row with that id; the message names the resource and the id."""
+
+    def __str__(self) -> str:  # KeyError quotes its message; we want it plain
+        return str(self.args[0]) if self.args else "not found"
+
+
+def new_id(prefix: str) -> str:
+    return f"{prefix}_{secrets.token_hex(6)}"
+
+
+def _json(value: Any) -> str:
+    return json.dumps(value, allow_nan=False, separators=(",", ":"))
+
+
+class Store:
+    """All persistent state under one data directory."""
+
+    def __init__(self, data_dir: Path, *, migrate_to: int | None = None) -> None:
+        self.data_dir = Path(data_dir)
+        self.data_dir.mkdir(parents=True, exist_ok=True)
+        self.db = Database(self.data_dir / "steelpath.sqlite3", migrate_to=migrate_to)
+        self.arrays = ArrayStore(self.data_dir / "arrays")
+
+    def close(self) -> None:
+        self.db.close()
+
+    # ------------------------------------------------------------------ audit
+    def _audit(
+        self,
+        conn: Any,
+        actor: str,
+        entity: str,
+        entity_id: str,
+        action: str,
+        from_state: str | None = None,
+        to_state: str | None = None,
+        reason: str = "",
+    ) -> None:
+        conn.execute(
+            "INSERT INTO audit_events (ts, actor, entity, entity_id, action, from_state, "
+            "to_state, reason) VALUES (?,?,?,?,?,?,?,?)",
+            (utcnow(), actor, entity, entity_id, action, from_state, to_state, reason),
+        )
+
+    def audit(self, actor: str, entity: str, entity_id: str, action: str, reason: str = "") -> None:
+        """Record an event that is not a state transition (E-stop, token use…)."""
+        with self.db.transaction() as conn:
+            self._audit(conn, actor, entity, entity_id, action, reason=reason)
+
+    def list_audit(
+        self, entity: str | None = None, entity_id: str | None = None, limit: int = 200
+    ) -> list[AuditEvent]:
+        sql, args = "SELECT * FROM audit_events WHERE 1=1", []
+        if entity:
+            sql += " AND entity = ?"
+            args.append(entity)
+        if entity_id:
+            sql += " AND entity_id = ?"
+            args.append(entity_id)
+        sql += " ORDER BY id DESC LIMIT ?"
+        args.append(limit)
+        return [AuditEvent.from_row(r) for r in self.db.query(sql, args)]
+
+    # ----------------------------------------------------------------- clouds
+    def add_cloud(
+        self, name: str, source: str, points: np.ndarray, dropped: int, actor: str
+    ) -> CloudRecord:
+        cid = new_id("cl")
+        relname = self.arrays.save(f"clouds/{cid}.npy", np.ascontiguousarray(points, np.float64))
+        lo, hi = points.min(axis=0), points.max(axis=0)
+        bounds = {"min": [float(v) for v in lo], "max": [float(v) for v in hi]}
+        with self.db.transaction() as conn:
+            conn.execute(
+                "INSERT INTO clouds VALUES (?,?,?,?,?,?,?,?,?)",
+                (cid, name, source, len(points), _json(bounds), dropped, relname, utcnow(), actor),
+            )
+            self._audit(
+                conn, actor, "cloud", cid, "upload", reason=f"{name} ({len(points)} points)"
+            )
+        return self.get_cloud(cid)
+
+    def get_cloud(self, cloud_id: str) -> CloudRecord:
+        row = self.db.query_one("SELECT * FROM clouds WHERE id = ?", (cloud_id,))
+        if row is None:
+            raise NotFoundError(f"no cloud with id {cloud_id!r}")
+        return CloudRecord.from_row(row)
+
+    def list_clouds(self, limit: int = 100, offset: int = 0) -> list[CloudRecord]:
+        rows = self.db.query(
+            "SELECT * FROM clouds ORDER BY created_at DESC, id LIMIT ? OFFSET ?", (limit, offset)
+        )
+        return [CloudRecord.from_row(r) for r in rows]
+
+    def cloud_points(self, cloud_id: str) -> np.ndarray:
+        return self.arrays.load(self.get_cloud(cloud_id).array_file)
+
+    def cloud_path(self, cloud_id: str) -> Path:
+        return self.arrays.path(self.get_cloud(cloud_id).array_file)
+
+    def delete_cloud(self, cloud_id: str, actor: str) -> None:
+        rec = self.get_cloud(cloud_id)
+        with self.db.transaction() as conn:
+            conn.execute("DELETE FROM clouds WHERE id = ?", (cloud_id,))
+            self._audit(conn, actor, "cloud", cloud_id, "delete")
+        self.arrays.delete(rec.array_file)
+
+    # ------------------------------------------------------------------ plans
+    def create_plan(
+        self,
+        kind: str,
+        params: Mapping[str, Any],
+        actor: str,
+        parent_id: str | None = None,
+        reason: str = "",
+    ) -> PlanRecord:
+        pid = new_id("pl")
+        now = utcnow()
+        with self.db.transaction() as conn:
+            if parent_id is not None:
+                self.get_plan(parent_id)
+            conn.execute(
+                "INSERT INTO plans (id, kind, state, params, parent_id, created_at, updated_at, "
+                "created_by) VALUES (?,?,?,?,?,?,?,?)",
+                (pid, kind, PlanState.QUEUED, _json(dict(params)), parent_id, now, now, actor),
+            )
+            why = reason or (f"revision of {parent_id}" if parent_id else "submitted")
+            self._audit(conn, actor, "plan", pid, "submit", None, PlanState.QUEUED, why)
+        return self.get_plan(pid)
+
+    def get_plan(self, plan_id: str) -> PlanRecord:
+        row = self.db.query_one("SELECT * FROM plans WHERE id = ?", (plan_id,))
+        if row is None:
+            raise NotFoundError(f"no plan with id {plan_id!r}")
+        return PlanRecord.from_row(row, loader=self.arrays.load)
+
+    def list_plans(
+        self,
+        *,
+        kind: str | None = None,
+        state: str | None = None,
+        parent_id: str | None = None,
+        limit: int = 50,
+        offset: int = 0,
+    ) -> list[PlanRecord]:
+        sql, args = "SELECT * FROM plans WHERE 1=1", []
+        for col, val in (("kind", kind), ("state", state), ("parent_id", parent_id)):
+            if val is not None:
+                sql += f" AND {col} = ?"
+                args.append(val)
+        sql += " ORDER BY created_at DESC, id DESC LIMIT ? OFFSET ?"
+        args += [limit, offset]
+        return [PlanRecord.from_row(r, loader=self.arrays.load) for r in self.db.query(sql, args)]
+
+    def transition_plan(
+        self,
+        plan_id: str,
+        action: str,
+        actor: str,
+        reason: str = "",
+        *,
+        expect: str | None = None,
+        **fields: Any,
+    ) -> PlanRecord:
+        """Apply ``action`` atomically with its audit event.
+
+        ``fields`` are extra columns to set (JSON-encoded when not scalars).
+        ``expect`` guards against a race: the transition only applies if the
+        plan is still in that state.
+        """
+        with self.db.transaction() as conn:
+            plan = self.get_plan(plan_id)
+            if expect is not None and plan.state != expect:
+                raise IllegalTransitionError(
+                    "plan", plan_id, plan.state, action, allowed_actions(plan.state)
+                )
+            new = next_state(plan_id, plan.state, action)
+            sets = {"state": str(new), "updated_at": utcnow()}
+            for k, v in fields.items():
+                sets[k] = _json(v) if isinstance(v, dict | list) else v
+            cols = ", ".join(f"{k} = ?" for k in sets)
+            conn.execute(f"UPDATE plans SET {cols} WHERE id = ?", (*sets.values(), plan_id))
+            self._audit(conn, actor, "plan", plan_id, action, plan.state, str(new), reason)
+        return self.get_plan(plan_id)
+
+    def set_progress(self, plan_id: str, progress: float, stage: str) -> None:
+        with self.db.transaction() as conn:
+            conn.execute(
+                "UPDATE plans SET progress = ?, stage = ?, updated_at = ? WHERE id = ? "
+                "AND state = ?",
+                (float(progress), stage, utcnow(), plan_id, PlanState.PLANNING),
+            )
+
+    def store_plan_result(
+        self,
+        plan_id: str,
+        *,
+        result: dict[str, Any],
+        arrays: Mapping[str, np.ndarray],
+        checks: list[dict[str, Any]],
+        metrics: dict[str, float],
+        actor: str = "planner",
+    ) -> PlanRecord:
+        """Persist a finished plan: ``planned`` if every check passed, else ``rejected``."""
+        refs = {
+            name: self.arrays.save(f"plans/{plan_id}/{name}.npy", arr)
+            for name, arr in arrays.items()
+        }
+        failed = [c for c in checks if not c.get("passed")]
+        action = "reject" if failed else "finish"
+        reason = (
+            "checks failed: " + "; ".join(f"{c['name']}: {c.get('message', '')}" for c in failed)
+            if failed
+            else f"{len(checks)} checks passed"
+        )
+        return self.transition_plan(
+            plan_id,
+            action,
+            actor,
+            reason,
+            expect=PlanState.PLANNING,
+            result=result,
+            arrays=refs,
+            checks=checks,
+            metrics=metrics,
+            progress=1.0,
+            stage="done",
+        )
+
+    def delete_plan(self, plan_id: str, actor: str) -> None:
+        plan = self.get_plan(plan_id)
+        if plan.state not in DELETABLE:
+            raise IllegalTransitionError(
+                "plan", plan_id, plan.state, "delete", allowed_actions(plan.state)
+            )
+        with self.db.transaction() as conn:
+            conn.execute("UPDATE plans SET parent_id = NULL WHERE parent_id = ?", (plan_id,))
+            conn.execute("DELETE FROM executions WHERE plan_id = ?", (plan_id,))
+            conn.execute("DELETE FROM plans WHERE id = ?", (plan_id,))
+            self._audit(conn, actor, "plan", plan_id, "delete", plan.state, None)
+        self.arrays.delete_tree(f"plans/{plan_id}")
+
+    def plans_in_states(self, states: set[str] | frozenset[str]) -> list[PlanRecord]:
+        marks = ",".join("?" * len(states))
+        rows = self.db.query(
+            f"SELECT * FROM plans WHERE state IN ({marks}) ORDER BY created_at", list(states)
+        )
+        return [PlanRecord.from_row(r, loader=self.arrays.load) for r in rows]
+
+    # ------------------------------------------------------------- executions
+    def create_execution(self, plan_id: str, robot: str, total: int, actor: str) -> ExecutionRecord:
+        """Create an execution and move its plan to ``executing`` atomically."""
+        eid = new_id("ex")
+        now = utcnow()
+        with self.db.transaction() as conn:
+            self.transition_plan(plan_id, "dispatch", actor, f"to robot {robot} as {eid}")
+            conn.execute(
+                "INSERT INTO executions VALUES (?,?,?,?,?,?,?,?,?,?)",
+                (eid, plan_id, robot, "pending", 0, total, None, now, now, actor),
+            )
+            self._audit(conn, actor, "execution", eid, "create", None, "pending", f"plan {plan_id}")
+        return self.get_execution(eid)
+
+    def get_execution(self, execution_id: str) -> ExecutionRecord:
+        row = self.db.query_one("SELECT * FROM executions WHERE id = ?", (execution_id,))
+        if row is None:
+            raise NotFoundError(f"no execution with id {execution_id!r}")
+        return ExecutionRecord.from_row(row)
+
+    def list_executions(
+        self, plan_id: str | None = None, state: str | None = None, limit: int = 100
+    ) -> list[ExecutionRecord]:
+        sql, args = "SELECT * FROM executions WHERE 1=1", []
+        if plan_id:
+            sql += " AND plan_id = ?"
+            args.append(plan_id)
+        if state:
+            sql += " AND state = ?"
+            args.append(state)
+        sql += " ORDER BY created_at DESC LIMIT ?"
+        args.append(limit)
+        return [ExecutionRecord.from_row(r) for r in self.db.query(sql, args)]
+
+    def transition_execution(
+        self,
+        execution_id: str,
+        action: str,
+        actor: str,
+        reason: str = "",
+        *,
+        plan_action: str | None = None,
+        **fields: Any,
+    ) -> ExecutionRecord:
+        """Move an execution (and, with ``plan_action``, its plan) in one transaction."""
+        with self.db.transaction() as conn:
+            ex = self.get_execution(execution_id)
+            new = next_execution_state(execution_id, ex.state, action)
+            sets = {"state": str(new), "updated_at": utcnow(), **fields}
+            cols = ", ".join(f"{k} = ?" for k in sets)
+            conn.execute(
+                f"UPDATE executions SET {cols} WHERE id = ?", (*sets.values(), execution_id)
+            )
+            self._audit(conn, actor, "execution", execution_id, action, ex.state, str(new), reason)
+            if plan_action is not None:
+                self.transition_plan(ex.plan_id, plan_action, actor, reason)
+        return self.get_execution(execution_id)
+
+    def set_execution_acked(self, execution_id: str, acked: int) -> None:
+        with self.db.transaction() as conn:
+            conn.execute(
+                "UPDATE executions SET acked = ?, updated_at = ? WHERE id = ?",
+                (int(acked), utcnow(), execution_id),
+            )
+
+    def active_executions(self) -> list[ExecutionRecord]:
+        rows = self.db.query(
+            "SELECT e.* FROM executions e JOIN plans p ON p.id = e.plan_id WHERE p.state IN "
+            f"({','.join('?' * len(ACTIVE_EXECUTION))})",
+            [str(s) for s in ACTIVE_EXECUTION],
+        )
+        return [ExecutionRecord.from_row(r) for r in rows]
+
+    # ----------------------------------------------------------------- tokens
+    def add_token(self, name: str, role: str, token_hash: str, actor: str) -> TokenRecord:
+        tid = new_id("tk")
+        with self.db.transaction() as conn:
+            conn.execute(
+                "INSERT INTO tokens VALUES (?,?,?,?,?,?)",
+                (tid, name, role, token_hash, utcnow(), None),
+            )
+            self._audit(conn, actor, "token", tid, "create", reason=f"{name} ({role})")
+        return self.get_token(tid)
+
+    def get_token(self, token_id: str) -> TokenRecord:
+        row = self.db.query_one("SELECT * FROM tokens WHERE id = ?", (token_id,))
+        if row is None:
+            raise NotFoundError(f"no token with id {token_id!r}")
+        return TokenRecord.from_row(row)
+
+    def find_token(self, token_hash: str) -> TokenRecord | None:
+        row = self.db.query_one(
+            "SELECT * FROM tokens WHERE hash = ? AND revoked_at IS NULL", (token_hash,)
+        )
+        return None if row is None else TokenRecord.from_row(row)
+
+    def list_tokens(self) -> list[TokenRecord]:
+        return [
+            TokenRecord.from_row(r)
+            for r in self.db.query("SELECT * FROM tokens ORDER BY created_at")
+        ]
+
+    def count_active_tokens(self) -> int:
+        row = self.db.query_one("SELECT COUNT(*) FROM tokens WHERE revoked_at IS NULL")
+        return int(row[0]) if row else 0
+
+    def revoke_token(self, token_id: str, actor: str) -> TokenRecord:
+        self.get_token(token_id)
+        with self.db.transaction() as conn:
+            conn.execute("UPDATE tokens SET revoked_at = ? WHERE id = ?", (utcnow(), token_id))
+            self._audit(conn, actor, "token", token_id, "revoke")
+        return self.get_token(token_id)
+
+    # ----------------------------------------------------------------- robots
+    def set_robot_url(self, name: str, url: str, actor: str) -> None:
+        with self.db.transaction() as conn:
+            conn.execute(
+                "INSERT INTO robots VALUES (?,?,?,?) ON CONFLICT(name) DO UPDATE SET "
+                "url = excluded.url, updated_at = excluded.updated_at, "
+                "updated_by = excluded.updated_by",
+                (name, url, utcnow(), actor),
+            )
+            self._audit(conn, actor, "robot", name, "connect", reason=url)
+
+    def robot_urls(self) -> dict[str, str]:
+        return {r["name"]: r["url"] for r in self.db.query("SELECT name, url FROM robots")}

@@ -1,0 +1,116 @@
+"""The in-process viser scene: drawing, clicks → proposals, and the authenticated proxy."""
+
+from __future__ import annotations
+
+import socket
+import time
+import types
+
+import pytest
+from starlette.websockets import WebSocketDisconnect
+
+
+def free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+@pytest.fixture
+def sapi(make_api):
+    return make_api(scene_port=free_port())
+
+
+def non_loopback_ip() -> str | None:
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+        try:
+            s.connect(("10.255.255.255", 1))
+            ip = s.getsockname()[0]
+        except OSError:
+            return None
+    return None if ip.startswith("127.") else ip
+
+
+def test_scene_runs_on_loopback_and_reports_its_port(sapi) -> None:
+    scene = sapi.services.scene
+    assert scene.running and scene.port > 0
+    assert scene.server.get_host() == "127.0.0.1"
+    health = sapi.client.get("/api/v1/health").json()
+    assert health["scene"]["running"] is True
+    ip = non_loopback_ip()
+    if ip is not None:  # the raw viser port must not answer on a public address
+        with socket.socket() as s:
+            s.settimeout(1)
+            assert s.connect_ex((ip, scene.port)) != 0
+
+
+def test_show_plan_draws_from_store(sapi) -> None:
+    pid = sapi.wait(sapi.submit("demo.route")["id"])["id"]
+    r = sapi.post("/api/v1/scene/show", json={"plan_id": pid})
+    assert r.status_code == 200 and r.json()["shown"] == pid
+    scene = sapi.services.scene.server.scene
+    for name in ("/plan/edges", "/plan/vertices", "/plan/route", "/plan/robot", "/plan/labels/a0"):
+        assert scene.get_handle_by_name(name) is not None, name
+    assert sapi.get("/api/v1/scene", "viewer").json()["current"]["plan_id"] == pid
+    # The robot marker animates along the stored route.
+    robot = scene.get_handle_by_name("/plan/robot")
+    p0 = tuple(robot.position)
+    time.sleep(0.4)
+    assert tuple(robot.position) != p0
+    cid = sapi.post("/api/v1/clouds", json={"sample": "demo_plane"}).json()["id"]
+    r = sapi.post("/api/v1/scene/show", json={"cloud_id": cid})
+    assert r.json()["points_drawn"] == 5000
+    assert scene.get_handle_by_name("/cloud") is not None
+    assert scene.get_handle_by_name("/plan/route") is None
+    assert sapi.post("/api/v1/scene/show", json={}).status_code == 422
+    assert sapi.post("/api/v1/scene/show", json={"plan_id": "pl_x"}).status_code == 404
+
+
+def test_vertex_clicks_propose_a_new_plan(sapi) -> None:
+    parent = sapi.wait(sapi.submit("demo.route")["id"])
+    sapi.post("/api/v1/scene/show", json={"plan_id": parent["id"]})
+    handle = sapi.services.scene.server.scene.get_handle_by_name("/plan/vertices")
+    names = list(parent["result"]["nodes"])
+    for name in ("b1", "c0"):
+        event = types.SimpleNamespace(instance_index=names.index(name))
+        for entry in handle._impl.click_cb:
+            entry.callback(event)
+    child = sapi.get(f"/api/v1/plans?parent_id={parent['id']}").json()
+    assert len(child) == 1
+    plan = sapi.wait(child[0]["id"])
+    assert (plan["params"]["start"], plan["params"]["end"]) == ("b1", "c0")
+    assert plan["created_by"] == "scene"
+    # The scene follows the proposed plan once it is planned.
+    deadline = time.monotonic() + 10
+    while sapi.services.scene.current.get("plan_id") != plan["id"] and time.monotonic() < deadline:
+        time.sleep(0.05)
+    assert sapi.services.scene.current["plan_id"] == plan["id"]
+
+
+def test_proxy_requires_operator_token(sapi) -> None:
+    c = sapi.client
+    assert c.get("/scene/").status_code == 401
+    assert sapi.get("/scene/", "viewer").status_code == 403
+    page = sapi.get("/scene/", "operator")
+    assert page.status_code == 200 and "<html" in page.text.lower()
+    with (
+        pytest.raises(WebSocketDisconnect) as ei,
+        c.websocket_connect("/scene", subprotocols=["viser-v1"]),
+    ):
+        pass
+    assert ei.value.code == 1008
+    c.cookies.set("steelpath_token", sapi.tokens["viewer"])
+    with pytest.raises(WebSocketDisconnect), c.websocket_connect("/scene"):
+        pass
+
+
+def test_proxy_websocket_carries_the_scene(sapi) -> None:
+    c = sapi.client
+    c.post("/api/v1/session", json={"token": sapi.tokens["operator"]})
+    import viser
+
+    proto = f"viser-v{viser.__version__}"
+    with c.websocket_connect("/scene", subprotocols=[proto]) as ws:
+        assert ws.accepted_subprotocol == proto
+        first = ws.receive_bytes()
+        assert len(first) > 0

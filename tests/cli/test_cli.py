@@ -1,0 +1,87 @@
+"""The ``steelpath`` command line."""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from server.auth import hash_token
+from server.store import Store
+from tests.conftest import make_settings
+from tests.support.live import free_port, live_server
+
+
+def steelpath(
+    *args: str, env: dict[str, str] | None = None, cwd: Path | None = None
+) -> subprocess.CompletedProcess[str]:
+    return subprocess.run(
+        [sys.executable, "-m", "server.cli", *args],
+        capture_output=True,
+        text=True,
+        timeout=120,
+        env={**os.environ, **(env or {})},
+        cwd=cwd,
+    )
+
+
+@pytest.mark.parametrize(
+    "args",
+    [[], ["serve"], ["token"], ["token", "create"], ["plan"], ["plan", "submit"], ["plan", "show"]],
+)
+def test_help_everywhere(args: list[str]) -> None:
+    r = steelpath(*args, "--help")
+    assert r.returncode == 0, r.stderr
+    assert "usage: steelpath" in r.stdout
+
+
+def test_console_script_installed() -> None:
+    exe = Path(sys.executable).parent / "steelpath"
+    assert exe.exists()
+    assert subprocess.run([str(exe), "--help"], capture_output=True, timeout=60).returncode == 0
+
+
+def test_token_create_prints_token_last(tmp_path: Path) -> None:
+    r = steelpath("token", "create", "--role", "viewer", "--name", "dash", "--data", str(tmp_path))
+    assert r.returncode == 0, r.stderr
+    token = r.stdout.strip().splitlines()[-1]
+    assert token.startswith("sp_") and " " not in token
+    store = Store(tmp_path)
+    rec = store.find_token(hash_token(token))
+    assert rec is not None and rec.role == "viewer" and rec.name == "dash"
+    listed = steelpath("token", "list", "--data", str(tmp_path)).stdout
+    assert rec.id in listed and token not in listed
+    assert steelpath("token", "revoke", rec.id, "--data", str(tmp_path)).returncode == 0
+    assert store.find_token(hash_token(token)) is None
+    assert steelpath("token", "create", "--role", "root", "--data", str(tmp_path)).returncode == 2
+
+
+def test_plan_submit_and_show_against_a_running_server(tmp_path: Path) -> None:
+    settings = make_settings(tmp_path / "var", port=free_port())
+    with live_server(settings) as (url, tokens, _):
+        params = tmp_path / "p.json"
+        params.write_text(json.dumps({"end": "b2", "step_delay_s": 0.2}))
+        env = {"STEELPATH_TOKEN": tokens["operator"]}
+        r = steelpath("plan", "submit", "demo.route", str(params), "--server", url, env=env)
+        assert r.returncode == 0, r.stderr
+        assert "state planned" in r.stdout
+        assert "route_length_m" in r.stdout and "[PASS] route_found" in r.stdout
+        assert "%" in r.stderr and "step" in r.stderr  # the progress bar
+        pid = r.stdout.split()[1]
+        shown = steelpath("plan", "show", pid, "--server", url, env=env)
+        assert shown.returncode == 0 and pid in shown.stdout and "allowed actions" in shown.stdout
+        assert pid in steelpath("plan", "list", "--server", url, env=env).stdout
+        bad = steelpath("plan", "submit", "demo.route", "-", "--server", url, env=env)
+        assert bad.returncode == 0  # empty stdin → defaults
+        r = steelpath("plan", "show", "pl_missing", "--server", url, env=env)
+        assert r.returncode != 0 and "HTTP 404" in r.stderr
+        r = steelpath("plan", "show", pid, "--server", url, env={"STEELPATH_TOKEN": "sp_bogus"})
+        assert r.returncode != 0 and "HTTP 401" in r.stderr
+        bad_json = tmp_path / "bad.json"
+        bad_json.write_text("{nope")
+        r = steelpath("plan", "submit", "demo.route", str(bad_json), "--server", url, env=env)
+        assert r.returncode != 0 and "not valid JSON" in r.stderr

@@ -1,0 +1,157 @@
+"""SQLite + npy storage: WAL, migrations, atomic writes, restart persistence."""
+
+from __future__ import annotations
+
+import sqlite3
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from server.lifecycle import IllegalTransitionError
+from server.store import NotFoundError, Store
+from server.store.migrations import SCHEMA_VERSION, SchemaTooNewError
+
+
+def _planned(store: Store) -> str:
+    p = store.create_plan("demo.route", {"start": "a0"}, "alice")
+    store.transition_plan(p.id, "start", "planner")
+    store.store_plan_result(
+        p.id,
+        result={"path": ["a0", "b0"]},
+        arrays={"traj": np.arange(12.0).reshape(4, 3)},
+        checks=[{"name": "ok", "passed": True, "message": ""}],
+        metrics={"route_length_m": 1.0},
+    )
+    return p.id
+
+
+def test_wal_and_schema_version(tmp_path: Path) -> None:
+    store = Store(tmp_path)
+    assert store.db.journal_mode == "wal"
+    conn = sqlite3.connect(tmp_path / "steelpath.sqlite3")
+    assert conn.execute("PRAGMA user_version").fetchone()[0] == SCHEMA_VERSION
+    conn.close()
+    store.close()
+
+
+def test_forward_migration_keeps_data(tmp_path: Path) -> None:
+    old = Store(tmp_path, migrate_to=1)
+    pid = _planned(old)
+    old.close()
+    conn = sqlite3.connect(tmp_path / "steelpath.sqlite3")
+    assert conn.execute("PRAGMA user_version").fetchone()[0] == 1
+    conn.close()
+    new = Store(tmp_path)
+    plan = new.get_plan(pid)
+    assert plan.state == "planned" and plan.metrics == {"route_length_m": 1.0}
+    idx = {r[0] for r in new.db.query("SELECT name FROM sqlite_master WHERE type='index'")}
+    assert "plans_state" in idx
+    new.close()
+
+
+def test_newer_schema_is_refused(tmp_path: Path) -> None:
+    Store(tmp_path).close()
+    conn = sqlite3.connect(tmp_path / "steelpath.sqlite3")
+    conn.execute(f"PRAGMA user_version = {SCHEMA_VERSION + 5}")
+    conn.commit()
+    conn.close()
+    with pytest.raises(SchemaTooNewError, match="newer"):
+        Store(tmp_path)
+
+
+def test_restart_finds_everything(tmp_path: Path) -> None:
+    store = Store(tmp_path)
+    cloud = store.add_cloud(
+        "scan", "upload:scan.ply", np.random.default_rng(0).random((50, 3)), 2, "bob"
+    )
+    pid = _planned(store)
+    store.transition_plan(pid, "approve", "carol", approved_by="carol")
+    ex = store.create_execution(pid, "ara", 10, "carol")
+    store.set_execution_acked(ex.id, 4)
+    audit_before = [(e.id, e.action) for e in store.list_audit()]
+    store.close()
+
+    again = Store(tmp_path)
+    assert again.get_cloud(cloud.id).n_points == 50
+    assert np.array_equal(again.cloud_points(cloud.id), store.arrays.load(cloud.array_file))
+    plan = again.get_plan(pid)
+    assert plan.state == "executing" and plan.approved_by == "carol"
+    assert np.array_equal(plan.array("traj"), np.arange(12.0).reshape(4, 3))
+    assert again.get_execution(ex.id).acked == 4
+    assert [(e.id, e.action) for e in again.list_audit()] == audit_before
+    again.close()
+
+
+def test_crash_mid_array_write_keeps_previous_state(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    store = Store(tmp_path)
+    pts = np.ones((10, 3))
+    cloud = store.add_cloud("a", "upload", pts, 0, "x")
+
+    real_save = np.save
+
+    def dying_save(fh, arr, allow_pickle=False):
+        real_save(fh, arr[: len(arr) // 2], allow_pickle=allow_pickle)  # a partial write…
+        raise OSError("disk pulled mid-write")  # …then the crash
+
+    monkeypatch.setattr(np, "save", dying_save)
+    # Overwrite the same file name: the previous content must survive.
+    with pytest.raises(OSError):
+        store.arrays.save(cloud.array_file, np.zeros((1000, 3)))
+    with pytest.raises(OSError):
+        store.add_cloud("b", "upload", np.zeros((7, 3)), 0, "x")
+    monkeypatch.undo()
+    assert np.array_equal(store.cloud_points(cloud.id), pts)
+    assert [c.id for c in store.list_clouds()] == [cloud.id]
+    assert not list((tmp_path / "arrays" / "clouds").glob(".tmp-*"))
+    store.close()
+
+
+def test_failed_transaction_rolls_back(tmp_path: Path) -> None:
+    store = Store(tmp_path)
+    p = store.create_plan("demo.route", {}, "x")
+    n_audit = len(store.list_audit())
+    with pytest.raises(IllegalTransitionError):
+        store.transition_plan(p.id, "approve", "x")
+    assert store.get_plan(p.id).state == "queued"
+    assert len(store.list_audit()) == n_audit
+    # A result that cannot be serialised (NaN) leaves the plan untouched.
+    store.transition_plan(p.id, "start", "x")
+    with pytest.raises(ValueError):
+        store.store_plan_result(p.id, result={"x": float("nan")}, arrays={}, checks=[], metrics={})
+    assert store.get_plan(p.id).state == "planning"
+    store.close()
+
+
+def test_rejected_when_a_check_fails(tmp_path: Path) -> None:
+    store = Store(tmp_path)
+    p = store.create_plan("demo.route", {}, "x")
+    store.transition_plan(p.id, "start", "x")
+    rec = store.store_plan_result(
+        p.id,
+        result={},
+        arrays={},
+        checks=[{"name": "clearance", "passed": False, "message": "0.01 m < 0.02 m"}],
+        metrics={},
+    )
+    assert rec.state == "rejected"
+    assert "clearance" in store.list_audit("plan", p.id)[0].reason
+
+
+def test_not_found_and_delete_rules(tmp_path: Path) -> None:
+    store = Store(tmp_path)
+    with pytest.raises(NotFoundError, match="no plan"):
+        store.get_plan("pl_nope")
+    pid = _planned(store)
+    child = store.create_plan("demo.route", {}, "x", parent_id=pid)
+    store.transition_plan(pid, "approve", "x")
+    store.create_execution(pid, "ara", 3, "x")
+    with pytest.raises(IllegalTransitionError, match="executing"):
+        store.delete_plan(pid, "x")
+    store.transition_plan(pid, "abort", "x")
+    store.delete_plan(pid, "x")
+    assert store.get_plan(child.id).parent_id is None
+    assert not (tmp_path / "arrays" / "plans" / pid).exists()
+    assert store.list_audit("plan", pid)[0].action == "delete"

@@ -1,0 +1,59 @@
+"""What can be validated of the Docker set-up without a Docker daemon."""
+
+from __future__ import annotations
+
+import re
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def _tool(name: str) -> str:
+    path = shutil.which(name) or str(Path(sys.executable).parent / name)
+    if not Path(path).exists():
+        pytest.fail(f"{name} is not installed; 'make test' installs it")
+    return path
+
+
+def test_compose_file_validates() -> None:
+    r = subprocess.run(
+        [_tool("docker-compose"), "-f", str(ROOT / "docker" / "compose.yml"), "config"],
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
+    assert r.returncode == 0, r.stderr
+    assert "steelpath-data" in r.stdout and "8000" in r.stdout and "/data" in r.stdout
+
+
+def test_dockerfile_passes_hadolint() -> None:
+    r = subprocess.run(
+        [_tool("hadolint"), str(ROOT / "docker" / "Dockerfile")],
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
+    assert r.returncode == 0, r.stdout + r.stderr
+
+
+def test_dockerfile_installs_like_the_readme() -> None:
+    dockerfile = (ROOT / "docker" / "Dockerfile").read_text()
+    makefile = (ROOT / "Makefile").read_text()
+    # The README's first command is `make serve` → the `install` target.
+    block = re.search(
+        r"^\$\(BIN\)/python:\n((?:\t.*\n)+)\ninstall: .*\n((?:\t.*\n)+)", makefile, re.M
+    )
+    assert block, "Makefile install recipe not found"
+    for line in (block.group(1) + block.group(2)).splitlines():
+        cmd = line.strip().replace("$(PYTHON)", "python3").replace("$(VENV)", "/app/.venv")
+        cmd = cmd.replace("$(BIN)", "/app/.venv/bin")
+        assert cmd in dockerfile, f"Dockerfile lacks README install step {cmd!r}"
+    readme = (ROOT / "README.md").read_text()
+    assert "make serve" in readme
+    assert re.search(r"^USER 10001", dockerfile, re.M), "image must not run as root"
+    assert "/api/v1/health" in dockerfile

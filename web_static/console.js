@@ -1,0 +1,362 @@
+// SteelPath operator console: plain JS over the REST API and the event stream.
+"use strict";
+
+const API = "/api/v1";
+const $ = (sel) => document.querySelector(sel);
+const state = { kinds: {}, plans: new Map(), selected: null, revising: null, me: null, events: null };
+
+async function api(method, path, body, isForm) {
+  const opts = { method, credentials: "same-origin", headers: {} };
+  if (body !== undefined) {
+    if (isForm) opts.body = body;
+    else { opts.headers["Content-Type"] = "application/json"; opts.body = JSON.stringify(body); }
+  }
+  const r = await fetch(API + path, opts);
+  if (r.status === 401) { showLogin(); throw new Error("not signed in"); }
+  const text = await r.text();
+  let data = null;
+  try { data = text ? JSON.parse(text) : null; } catch { data = text; }
+  if (!r.ok) {
+    let d = data && data.detail !== undefined ? data.detail : data;
+    if (d && typeof d === "object" && d.message) d = d.message;
+    if (Array.isArray(d)) d = d.map((e) => `${(e.loc || []).join(".")}: ${e.msg}`).join("\n");
+    throw new Error(`HTTP ${r.status}: ${typeof d === "string" ? d : JSON.stringify(d)}`);
+  }
+  return data;
+}
+
+function el(tag, attrs = {}, ...children) {
+  const e = document.createElement(tag);
+  for (const [k, v] of Object.entries(attrs)) {
+    if (k === "class") e.className = v; else if (k.startsWith("on")) e.addEventListener(k.slice(2), v);
+    else e.setAttribute(k, v);
+  }
+  for (const c of children) e.append(c instanceof Node ? c : document.createTextNode(String(c)));
+  return e;
+}
+
+function fmt(v) {
+  if (typeof v === "number") return Math.abs(v) >= 1e4 || (Math.abs(v) < 1e-3 && v !== 0) ? v.toExponential(3) : (+v.toFixed(4)).toString();
+  if (v === null || v === undefined) return "–";
+  return String(v);
+}
+
+// ---------------------------------------------------------------- sign in
+function showLogin() { $("#login").hidden = false; $("#login-token").focus(); }
+
+$("#login-form").addEventListener("submit", async (ev) => {
+  ev.preventDefault();
+  $("#login-error").textContent = "";
+  try {
+    const r = await fetch(API + "/session", {
+      method: "POST", credentials: "same-origin",
+      headers: { "Content-Type": "application/json" },
+      body: JSON.stringify({ token: $("#login-token").value.trim() }),
+    });
+    if (!r.ok) throw new Error((await r.json()).detail || r.statusText);
+    $("#login").hidden = true;
+    $("#login-token").value = "";
+    await start();
+  } catch (e) { $("#login-error").textContent = e.message; }
+});
+
+$("#logout").addEventListener("click", async () => {
+  await fetch(API + "/session", { method: "DELETE", credentials: "same-origin" });
+  location.reload();
+});
+
+// ------------------------------------------------------------------ E-stop
+$("#estop").addEventListener("click", async () => {
+  try {
+    const r = await api("POST", "/estop", { reason: "console E-stop button" });
+    flash(`E-STOP sent to ${r.robot}` + (r.errors.length ? ` (errors: ${r.errors.join("; ")})` : ""));
+  } catch (e) { flash("E-STOP FAILED: " + e.message, true); }
+});
+
+function flash(msg, bad) {
+  const m = $("#action-msg");
+  m.textContent = msg; m.className = bad ? "error" : "muted small";
+  $("#scene-msg").textContent = msg;
+}
+
+// ------------------------------------------------------------------- kinds
+async function loadKinds() {
+  const kinds = await api("GET", "/kinds");
+  const sel = $("#kind");
+  sel.innerHTML = "";
+  for (const k of kinds) {
+    state.kinds[k.name] = k;
+    sel.append(el("option", { value: k.name }, `${k.name} — ${k.title}`));
+  }
+  sel.addEventListener("change", () => { state.revising = null; showKind(); });
+  showKind();
+}
+
+function showKind() {
+  const k = state.kinds[$("#kind").value];
+  $("#kind-desc").textContent = k ? k.description.split("\n")[0].replaceAll("``", "") : "";
+  $("#submit-plan").textContent = state.revising ? `Revise ${state.revising}` : "Plan";
+}
+
+$("#defaults").addEventListener("click", () => {
+  const k = state.kinds[$("#kind").value];
+  if (k) $("#params").value = JSON.stringify(k.defaults, null, 2);
+});
+
+$("#submit-plan").addEventListener("click", async () => {
+  $("#submit-error").textContent = "";
+  let params = {};
+  const text = $("#params").value.trim();
+  if (text) {
+    try { params = JSON.parse(text); } catch (e) { $("#submit-error").textContent = "params: " + e.message; return; }
+  }
+  try {
+    const plan = state.revising
+      ? await api("POST", `/plans/${state.revising}/revise`, { params })
+      : await api("POST", "/plans", { kind: $("#kind").value, params });
+    state.revising = null; showKind();
+    upsertPlan(plan);
+    await select(plan.id);
+    showInScene(plan.id);
+  } catch (e) { $("#submit-error").textContent = e.message; }
+});
+
+// ------------------------------------------------------------------ clouds
+async function loadSamples() {
+  const samples = await api("GET", "/clouds/samples");
+  const sel = $("#sample");
+  sel.innerHTML = "";
+  for (const [name, kind] of Object.entries(samples)) sel.append(el("option", { value: name }, `${name} (${kind})`));
+}
+
+async function loadClouds() {
+  const clouds = await api("GET", "/clouds?limit=20");
+  const ul = $("#clouds");
+  ul.innerHTML = "";
+  for (const c of clouds) {
+    ul.append(el("li", { title: "show in scene", onclick: () => showCloud(c.id) },
+      `${c.id} · ${c.name} · ${c.n_points} pts` + (c.dropped_nonfinite ? ` (${c.dropped_nonfinite} dropped)` : "")));
+  }
+}
+
+$("#load-sample").addEventListener("click", async () => {
+  try {
+    const c = await api("POST", "/clouds", { sample: $("#sample").value });
+    $("#cloud-msg").textContent = `stored ${c.id}: ${c.n_points} points`;
+    await loadClouds();
+    showCloud(c.id);
+  } catch (e) { $("#cloud-msg").textContent = e.message; }
+});
+
+$("#upload-cloud").addEventListener("click", async () => {
+  const f = $("#cloud-file").files[0];
+  if (!f) { $("#cloud-msg").textContent = "choose a file first"; return; }
+  const fd = new FormData();
+  fd.append("file", f);
+  try {
+    const c = await api("POST", "/clouds", fd, true);
+    $("#cloud-msg").textContent = `stored ${c.id}: ${c.n_points} points, ${c.dropped_nonfinite} non-finite rows dropped`;
+    await loadClouds();
+  } catch (e) { $("#cloud-msg").textContent = e.message; }
+});
+
+async function showCloud(id) {
+  try { await api("POST", "/scene/show", { cloud_id: id }); } catch (e) { flash(e.message, true); }
+}
+
+// ------------------------------------------------------------------- plans
+async function loadPlans() {
+  const plans = await api("GET", "/plans?limit=100");
+  state.plans.clear();
+  for (const p of plans.reverse()) state.plans.set(p.id, p);
+  renderPlans();
+}
+
+function upsertPlan(p) {
+  const old = state.plans.get(p.id) || {};
+  state.plans.set(p.id, { ...old, ...p });
+  renderPlans();
+}
+
+function renderPlans() {
+  const tb = $("#plans tbody");
+  tb.innerHTML = "";
+  const rows = [...state.plans.values()].sort((a, b) => (b.created_at || "").localeCompare(a.created_at || ""));
+  for (const p of rows) {
+    const tr = el("tr", { "data-id": p.id, "data-state": p.state, onclick: () => select(p.id) },
+      el("td", {}, p.id), el("td", {}, p.kind || ""), el("td", {}, el("span", { class: `state ${p.state}` }, p.state)),
+      el("td", {}, `${Math.round((p.progress || 0) * 100)}%`));
+    if (p.id === state.selected) tr.classList.add("sel");
+    tb.append(tr);
+  }
+}
+
+async function select(id) {
+  state.selected = id;
+  renderPlans();
+  const p = await api("GET", `/plans/${id}`);
+  upsertPlan(p);
+  renderDetail(p);
+}
+
+function renderDetail(p) {
+  $("#detail").hidden = false;
+  $("#d-title").textContent = `${p.id} · ${p.kind}` + (p.parent_id ? ` (revision of ${p.parent_id})` : "");
+  const st = $("#d-state");
+  st.textContent = p.state; st.className = `state ${p.state}`;
+  $("#d-progress div").style.width = `${(p.progress || 0) * 100}%`;
+  $("#d-progress span").textContent = `${Math.round((p.progress || 0) * 100)}% ${p.stage || ""}`;
+  $("#d-error").textContent = p.error || "";
+  const allowed = new Set(p.allowed_actions || []);
+  $("#approve").disabled = !allowed.has("approve");
+  $("#cancel").disabled = !allowed.has("cancel");
+  $("#revise").disabled = !allowed.has("revise");
+  $("#delete").disabled = !allowed.has("delete");
+  const ct = $("#d-checks tbody");
+  ct.innerHTML = "";
+  for (const c of p.checks || []) {
+    ct.append(el("tr", { "data-check": c.name },
+      el("td", { class: c.passed ? "pass" : "fail" }, c.passed ? "PASS" : "FAIL"),
+      el("td", {}, c.name), el("td", {}, c.message || `${fmt(c.value)} / ${fmt(c.limit)}`)));
+  }
+  const mt = $("#d-metrics tbody");
+  mt.innerHTML = "";
+  for (const [k, v] of Object.entries(p.metrics || {}).sort()) mt.append(el("tr", {}, el("td", {}, k), el("td", {}, fmt(v))));
+  $("#d-params").textContent = JSON.stringify(p.params, null, 2);
+  const at = $("#d-audit tbody");
+  at.innerHTML = "";
+  for (const a of p.audit || []) {
+    at.append(el("tr", {}, el("td", {}, a.ts.replace("T", " ").slice(0, 19)), el("td", {}, a.actor),
+      el("td", {}, a.action), el("td", {}, `${a.from_state || ""} → ${a.to_state || ""}`), el("td", {}, a.reason || "")));
+  }
+  renderPlots((p.result && p.result.plots) || []);
+}
+
+function renderPlots(plots) {
+  const box = $("#d-plots");
+  box.innerHTML = "";
+  for (const pl of plots) {
+    const xs = pl.x || [];
+    const names = Object.keys(pl.series || {});
+    if (!xs.length || !names.length) continue;
+    const all = names.flatMap((n) => pl.series[n]).filter(Number.isFinite);
+    let ymin = Math.min(...all), ymax = Math.max(...all);
+    if (ymin === ymax) { ymin -= 1; ymax += 1; }
+    const xmin = Math.min(...xs), xmax = Math.max(...xs) === xmin ? xmin + 1 : Math.max(...xs);
+    const W = 600, H = 180, L = 50, B = 20;
+    const sx = (x) => L + ((x - xmin) / (xmax - xmin)) * (W - L - 5);
+    const sy = (y) => 5 + (1 - (y - ymin) / (ymax - ymin)) * (H - B - 10);
+    const colors = ["#1f77b4", "#ff7f0e", "#2ca02c", "#d62728", "#9467bd", "#8c564b"];
+    let svg = `<svg viewBox="0 0 ${W} ${H}" preserveAspectRatio="none">`;
+    svg += `<text x="2" y="12" font-size="10">${fmt(ymax)}</text><text x="2" y="${H - B}" font-size="10">${fmt(ymin)}</text>`;
+    svg += `<text x="${L}" y="${H - 4}" font-size="10">${fmt(xmin)}</text><text x="${W - 60}" y="${H - 4}" font-size="10">${fmt(xmax)} ${pl.x_label || ""}</text>`;
+    names.forEach((n, i) => {
+      const ys = pl.series[n];
+      const pts = xs.map((x, j) => (Number.isFinite(ys[j]) ? `${sx(x).toFixed(1)},${sy(ys[j]).toFixed(1)}` : "")).filter(Boolean).join(" ");
+      svg += `<polyline fill="none" stroke="${colors[i % colors.length]}" stroke-width="1.5" points="${pts}"/>`;
+    });
+    svg += "</svg>";
+    const legend = names.map((n, i) => `<span style="color:${colors[i % colors.length]}">■ ${n}</span>`).join("");
+    const div = el("div", { class: "plot" });
+    div.innerHTML = `<h4>${pl.title || ""} <span class="muted small">${pl.y_label || ""}</span></h4>${svg}<div class="legend">${legend}</div>`;
+    box.append(div);
+  }
+}
+
+async function act(path, body) {
+  try {
+    const r = await api("POST", path, body);
+    flash(`${path.split("/").pop()}: ${r.state || r.outcome || "ok"}`);
+    await select(state.selected);
+  } catch (e) { flash(e.message, true); }
+}
+
+$("#approve").addEventListener("click", () => act(`/plans/${state.selected}/approve`, { comment: "approved in console" }));
+$("#cancel").addEventListener("click", () => act(`/plans/${state.selected}/cancel`));
+$("#show").addEventListener("click", () => showInScene(state.selected));
+$("#revise").addEventListener("click", () => {
+  const p = state.plans.get(state.selected);
+  if (!p) return;
+  state.revising = p.id;
+  $("#kind").value = p.kind;
+  $("#params").value = JSON.stringify(p.params, null, 2);
+  showKind();
+  $("#params").focus();
+});
+$("#delete").addEventListener("click", async () => {
+  if (!confirm(`Delete plan ${state.selected}?`)) return;
+  try {
+    await api("DELETE", `/plans/${state.selected}`);
+    state.plans.delete(state.selected);
+    state.selected = null;
+    $("#detail").hidden = true;
+    renderPlans();
+  } catch (e) { flash(e.message, true); }
+});
+
+async function showInScene(id) {
+  if (!id) return;
+  try {
+    const r = await api("POST", "/scene/show", { plan_id: id });
+    $("#scene-msg").textContent = r.shown ? `showing ${r.shown}` : r.reason || "";
+  } catch (e) { $("#scene-msg").textContent = e.message; }
+}
+
+// ------------------------------------------------------------------- audit
+async function loadAudit() {
+  const events = await api("GET", "/audit?limit=30");
+  const tb = $("#audit tbody");
+  tb.innerHTML = "";
+  for (const a of events) {
+    tb.append(el("tr", {}, el("td", {}, a.ts.replace("T", " ").slice(0, 19)), el("td", {}, a.actor),
+      el("td", {}, `${a.entity} ${a.entity_id}`), el("td", {}, a.action),
+      el("td", {}, a.to_state ? `${a.from_state || ""} → ${a.to_state}` : ""), el("td", {}, a.reason || "")));
+  }
+}
+
+// ------------------------------------------------------------------ events
+function openEvents() {
+  if (state.events) state.events.close();
+  const es = new EventSource(API + "/events");
+  state.events = es;
+  es.onopen = () => $("#conn").classList.add("live");
+  es.onerror = () => $("#conn").classList.remove("live");
+  let auditTimer = null;
+  const refreshAudit = () => { clearTimeout(auditTimer); auditTimer = setTimeout(loadAudit, 300); };
+  es.addEventListener("plan", (m) => {
+    const d = JSON.parse(m.data);
+    if (d.state === "deleted") { state.plans.delete(d.id); renderPlans(); return; }
+    const before = (state.plans.get(d.id) || {}).state;
+    upsertPlan(d);
+    if (d.id === state.selected) {
+      $("#d-progress div").style.width = `${(d.progress || 0) * 100}%`;
+      $("#d-progress span").textContent = `${Math.round((d.progress || 0) * 100)}% ${d.stage || ""}`;
+      if (before !== d.state) select(d.id);
+    }
+    if (!["planning"].includes(d.state)) refreshAudit();
+  });
+  for (const t of ["estop", "cloud", "execution", "robot"]) {
+    es.addEventListener(t, (m) => {
+      const d = JSON.parse(m.data);
+      if (t === "estop") flash(`E-STOP (${d.robot}) by ${d.by}`, true);
+      if (t === "cloud") loadClouds();
+      refreshAudit();
+      document.dispatchEvent(new CustomEvent("steelpath:" + t, { detail: d }));
+    });
+  }
+}
+
+// ------------------------------------------------------------------- start
+async function start() {
+  const me = await api("GET", "/session");
+  state.me = me;
+  $("#whoami").textContent = `${me.name} (${me.role})`;
+  $("#logout").hidden = false;
+  const health = await fetch(API + "/health").then((r) => r.json());
+  await Promise.all([loadKinds(), loadSamples(), loadClouds(), loadPlans(), loadAudit()]);
+  openEvents();
+  if (health.scene.running && me.role !== "viewer") $("#scene").src = "/scene/";
+  else $("#scene-msg").textContent = health.scene.running ? "the scene needs the operator role" : "scene not running";
+}
+
+start().catch((e) => { if (e.message !== "not signed in") console.error(e); });
