@@ -1,0 +1,85 @@
+"""The SteelPath robot protocol v1 (docs/protocol.md): frames, messages, commands, programs.
+
+- :mod:`~robots.protocol.framing` — COBS framing, CRC-16/CCITT-FALSE, :class:`FrameDecoder`.
+- :mod:`~robots.protocol.messages` — every wire message as a dataclass of integers.
+- :mod:`~robots.protocol.commands` — program commands in SI units (what plans compile to).
+- :mod:`~robots.protocol.program` — :class:`Program`, an immutable list of commands.
+"""
+
+from robots.protocol.commands import (
+    COMMAND_TYPES,
+    Command,
+    CommandError,
+    JointMove,
+    LiftArm,
+    LimitingPlate,
+    Nozzle,
+    SetMagnet,
+    Stop,
+    WheelSpeeds,
+    command_from_dict,
+    command_from_message,
+)
+from robots.protocol.framing import (
+    MAX_PAYLOAD,
+    PROTOCOL_MAJOR,
+    PROTOCOL_MINOR,
+    Frame,
+    FrameDecoder,
+    FrameError,
+    ProtocolError,
+    crc16,
+    decode_frame,
+    encode_frame,
+)
+from robots.protocol.messages import (
+    LINK_FAULTS,
+    MESSAGE_CLASSES,
+    FaultFlag,
+    Message,
+    MessageError,
+    Mode,
+    MsgType,
+    NakReason,
+    State,
+    decode_message,
+    encode_message,
+)
+from robots.protocol.program import Program
+
+__all__ = [
+    "COMMAND_TYPES",
+    "LINK_FAULTS",
+    "MAX_PAYLOAD",
+    "MESSAGE_CLASSES",
+    "PROTOCOL_MAJOR",
+    "PROTOCOL_MINOR",
+    "Command",
+    "CommandError",
+    "FaultFlag",
+    "Frame",
+    "FrameDecoder",
+    "FrameError",
+    "JointMove",
+    "LiftArm",
+    "LimitingPlate",
+    "Message",
+    "MessageError",
+    "Mode",
+    "MsgType",
+    "NakReason",
+    "Nozzle",
+    "Program",
+    "ProtocolError",
+    "SetMagnet",
+    "State",
+    "Stop",
+    "WheelSpeeds",
+    "command_from_dict",
+    "command_from_message",
+    "crc16",
+    "decode_frame",
+    "decode_message",
+    "encode_frame",
+    "encode_message",
+]
