@@ -1,0 +1,27 @@
+"""Robot emulator speaking the SteelPath protocol over TCP and a pty (DESIGN §7).
+
+- :class:`Emulator` — transport + :class:`SimRobot`, with link fault injection.
+- :class:`SimRobot` — protocol state machine and simulation, no I/O.
+- :class:`FaultConfig` — what to inject; :func:`resolve_profile` — the robot's hardware.
+- :func:`check_exactly_once` — assert nothing lost or duplicated from the execution log.
+- :func:`main` — ``steelpath emulate`` entry point.
+"""
+
+from robots.emulator.cli import main
+from robots.emulator.faults import FaultConfig
+from robots.emulator.profiles import FALLBACK_PROFILES, RobotProfile, resolve_profile
+from robots.emulator.robot import ExecutionRecord, SimRobot, StopEvent, check_exactly_once
+from robots.emulator.server import Emulator
+
+__all__ = [
+    "FALLBACK_PROFILES",
+    "Emulator",
+    "ExecutionRecord",
+    "FaultConfig",
+    "RobotProfile",
+    "SimRobot",
+    "StopEvent",
+    "check_exactly_once",
+    "main",
+    "resolve_profile",
+]

@@ -1,0 +1,146 @@
+"""``steelpath emulate``: run one robot emulator until interrupted.
+
+    steelpath emulate --robot denso_vm6083 --listen tcp://127.0.0.1:5000 [--pty]
+        [--time-scale 1] [--drop-after N] [--corrupt-rate R] [--delay S]
+        [--nak-index I] [--fault-at-index I] ...
+
+Prints the endpoints it serves (``socket://…`` and the pty path), one per line,
+then runs until SIGINT/SIGTERM.  ``python -m robots.emulator`` is the same.
+"""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import signal
+import sys
+import threading
+
+from robots.emulator.faults import FaultConfig
+from robots.emulator.server import Emulator, parse_listen
+
+
+def build_parser(prog: str = "steelpath emulate") -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(
+        prog=prog, description="Robot emulator speaking the SteelPath protocol (docs/protocol.md)."
+    )
+    p.add_argument(
+        "--robot", default="generic", help="robot name (ara, cmbot, denso_vm6083, sbg_climber)"
+    )
+    p.add_argument(
+        "--listen",
+        default=None,
+        help="TCP endpoint tcp://HOST:PORT (port 0: any free port); default tcp://127.0.0.1:0 "
+        "unless --pty is given alone",
+    )
+    p.add_argument(
+        "--pty", action="store_true", help="also serve a pseudo-terminal (serial device)"
+    )
+    p.add_argument(
+        "--time-scale", type=float, default=1.0, help="simulated seconds per wall second"
+    )
+    p.add_argument("--state-period", type=float, default=0.1, help="state report period, s")
+    p.add_argument("--buffer", type=int, default=16, help="command buffer capacity")
+    p.add_argument("--log-jsonl", default=None, help="append every executed command to this file")
+    f = p.add_argument_group("fault injection")
+    f.add_argument(
+        "--drop-after",
+        type=int,
+        default=None,
+        metavar="N",
+        help="drop the link after N frames received on a connection",
+    )
+    f.add_argument("--drop-times", type=int, default=1, help="how many connections to drop")
+    f.add_argument("--drop-mode", choices=("auto", "close", "silence"), default="auto")
+    f.add_argument("--drop-for", type=float, default=1.0, metavar="S", help="silence length, s")
+    f.add_argument(
+        "--corrupt-rate",
+        type=float,
+        default=0.0,
+        metavar="R",
+        help="probability each byte is corrupted",
+    )
+    f.add_argument("--corrupt-direction", choices=("rx", "tx", "both"), default="both")
+    f.add_argument("--delay", type=float, default=0.0, metavar="S", help="delay every frame by S s")
+    f.add_argument("--delay-direction", choices=("rx", "tx", "both"), default="both")
+    f.add_argument("--nak-index", type=int, default=None, metavar="I", help="NAK command index I")
+    f.add_argument("--nak-times", type=int, default=1)
+    f.add_argument("--nak-permanent", action="store_true", help="refuse (INVALID) instead of BUSY")
+    f.add_argument(
+        "--fault-at-index",
+        type=int,
+        default=None,
+        metavar="I",
+        help="raise a robot fault halfway through command I",
+    )
+    f.add_argument("--fault-code", type=int, default=1)
+    f.add_argument("--seed", type=int, default=0, help="seed of the corruption RNG")
+    return p
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Entry point of ``steelpath emulate``; returns the exit status."""
+    args = build_parser().parse_args(argv)
+    listen = args.listen
+    if listen is None and not args.pty:
+        listen = "tcp://127.0.0.1:0"
+    try:
+        if listen is not None:
+            parse_listen(listen)
+        faults = FaultConfig(
+            drop_after_frames=args.drop_after,
+            drop_times=args.drop_times,
+            drop_mode=args.drop_mode,
+            drop_for_s=args.drop_for,
+            corrupt_rate=args.corrupt_rate,
+            corrupt_direction=args.corrupt_direction,
+            delay_s=args.delay,
+            delay_direction=args.delay_direction,
+            nak_index=args.nak_index,
+            nak_times=args.nak_times,
+            nak_permanent=args.nak_permanent,
+            fault_at_index=args.fault_at_index,
+            fault_code=args.fault_code,
+            seed=args.seed,
+        )
+        emu = Emulator(
+            args.robot,
+            faults=faults,
+            listen=listen,
+            pty=args.pty,
+            time_scale=args.time_scale,
+            state_period_s=args.state_period,
+            buffer_capacity=args.buffer,
+            log_path=args.log_jsonl,
+        )
+    except ValueError as exc:
+        print(f"steelpath emulate: {exc}", file=sys.stderr)
+        return 2
+    logging.basicConfig(level=logging.INFO, format="%(asctime)s %(name)s %(message)s")
+    stop = threading.Event()
+    previous = {}
+    if threading.current_thread() is threading.main_thread():
+        for sig in (signal.SIGINT, signal.SIGTERM):
+            previous[sig] = signal.signal(sig, lambda *_: stop.set())
+    try:
+        emu.start()
+    except OSError as exc:
+        print(f"steelpath emulate: cannot listen on {listen}: {exc}", file=sys.stderr)
+        return 1
+    try:
+        p = emu.profile
+        print(f"robot {p.name}: {p.n_joints} joints (limits from {p.source})", flush=True)
+        if listen is not None:
+            print(f"listening on {emu.url}", flush=True)
+        if args.pty:
+            print(f"pty {emu.pty_path}", flush=True)
+        stop.wait()
+    finally:
+        emu.close()
+        for sig, handler in previous.items():
+            signal.signal(sig, handler)
+    return 0
+
+
+if __name__ == "__main__":  # pragma: no cover
+    raise SystemExit(main())

@@ -1,0 +1,546 @@
+"""The robot side of the protocol and a kinematic simulation, without any I/O.
+
+:class:`SimRobot` is what firmware on an Arduino or an IPC would implement
+(docs/protocol.md §7): session handling, in-order acceptance with remembered
+replies, the command buffer, the watchdog, E-stop, latched faults — plus a
+simulation that executes commands in simulated time
+(``sim seconds = wall seconds × time_scale``).  The caller (the transport in
+:mod:`robots.emulator.server`) feeds it decoded messages and the current
+monotonic time and sends what it returns; keeping I/O out makes it testable
+without sockets.
+
+Every command it starts is recorded in :attr:`SimRobot.log` with its run id and
+index, ending ``done`` or ``interrupted`` — the evidence tests use to assert
+that nothing was lost or executed twice (:func:`check_exactly_once`).
+"""
+
+from __future__ import annotations
+
+import collections
+import time
+from collections import Counter
+from collections.abc import Callable, Iterable
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from robots.emulator.faults import FaultConfig
+from robots.emulator.profiles import RobotProfile
+from robots.protocol.framing import PROTOCOL_MAJOR
+from robots.protocol.messages import (
+    Abort,
+    Ack,
+    AckStatus,
+    Clear,
+    CommandMessage,
+    Estop,
+    FaultFlag,
+    Feature,
+    Heartbeat,
+    Hello,
+    HelloAck,
+    HelloStatus,
+    JointsCmd,
+    LiftCmd,
+    MagnetCmd,
+    Message,
+    Mode,
+    MsgType,
+    Nak,
+    NakReason,
+    NozzleCmd,
+    Pause,
+    PlateCmd,
+    Resume,
+    State,
+    StopCmd,
+    WheelsCmd,
+    is_sequenced,
+)
+
+REPLY_MEMORY = 64  # replies remembered per session for repeated (retransmitted) seqs
+LIMIT_TOL_URAD = 1  # one quantum of slack at the joint limits
+
+
+@dataclass(frozen=True)
+class ExecutionRecord:
+    """One command execution: started, then ``done`` or ``interrupted`` (why)."""
+
+    run_id: int
+    index: int
+    op: str
+    outcome: str  # "done" | "interrupted"
+    reason: str
+    sim_start_s: float
+    sim_end_s: float
+    wall_start: float  # time.monotonic()
+    wall_end: float
+
+
+@dataclass(frozen=True)
+class StopEvent:
+    """The robot stopped moving (or was told to while idle): when and why."""
+
+    t: float  # time.monotonic() at the moment motion stopped
+    reason: str  # "estop" | "watchdog" | "link_lost" | "link_reset" | "abort" | "fault"
+    moving: bool  # a command was executing
+    index: int  # the command interrupted, −1 when none
+
+
+def check_exactly_once(
+    log: Iterable[ExecutionRecord], run_id: int, n: int, start: int = 0
+) -> list[str]:
+    """Problems (empty when none) with run ``run_id`` having executed commands
+    ``start … n−1`` each exactly once, in order.
+
+    A command interrupted mid-motion (watchdog, link loss, fault, E-stop) and
+    executed again to completion after a resume is fine — way-points are
+    absolute targets — but a command completed twice, completed out of order,
+    never completed, or started again after completing is a problem.
+    """
+    problems: list[str] = []
+    done: list[int] = []
+    completed: set[int] = set()
+    for r in log:
+        if r.run_id != run_id:
+            continue
+        if r.index in completed:
+            problems.append(f"command {r.index} started again after completing ({r.outcome})")
+        if r.outcome == "done":
+            done.append(r.index)
+            completed.add(r.index)
+    expected = list(range(start, n))
+    if done != expected:
+        counts = Counter(done)
+        dup = sorted(i for i, c in counts.items() if c > 1)
+        missing = sorted(set(expected) - set(done))
+        extra = sorted(set(done) - set(expected))
+        if dup:
+            problems.append(f"completed more than once: {dup}")
+        if missing:
+            problems.append(f"never completed: {missing[:20]}{'…' if len(missing) > 20 else ''}")
+        if extra:
+            problems.append(f"completed but not expected: {extra[:20]}")
+        if not (dup or missing or extra):
+            problems.append("completed out of order")
+    return problems
+
+
+@dataclass
+class _Segment:
+    msg: CommandMessage
+    duration: float  # sim seconds
+    elapsed: float = 0.0
+    q_from: np.ndarray | None = None
+    lift_from: float = 0.0
+    fault_at: float | None = None  # sim seconds into the segment
+    sim_start: float = 0.0
+    wall_start: float = 0.0
+
+
+@dataclass
+class SimRobot:
+    """Protocol state machine and kinematic simulation of one robot."""
+
+    profile: RobotProfile
+    buffer_capacity: int = 16
+    time_scale: float = 1.0
+    state_period_s: float = 0.1
+    max_watchdog_s: float = 2.0
+    faults_injected: FaultConfig = field(default_factory=FaultConfig)
+    clock: Callable[[], float] = time.monotonic
+    on_record: Callable[[ExecutionRecord], None] | None = None
+
+    def __post_init__(self) -> None:
+        lim = self.profile.joint_limits
+        self.q = np.clip(np.zeros(self.profile.n_joints), lim[:, 0], lim[:, 1])
+        self.lift = self.profile.lift_limits[0] if self.profile.lift_limits else 0.0
+        self.wheel_speeds = np.zeros(self.profile.n_wheels)
+        self.odometry = np.zeros(self.profile.n_wheels)  # metres
+        self.magnets = 0
+        self.plates = 0
+        self.nozzle = False
+        self.faults = 0
+        self.fault_code = 0
+        self.paused = False
+        self.run_id = 0
+        self.last_done = -1
+        self.last_queued = -1
+        self.buffer: collections.deque[CommandMessage] = collections.deque()
+        self.current: _Segment | None = None
+        self.session = False
+        self.expected_seq = 1
+        self.replies: collections.OrderedDict[int, Message] = collections.OrderedDict()
+        self.watchdog_s = 0.5
+        self.last_host_rx = self.clock()
+        self.sim_t = 0.0
+        self._wall_t = self.clock()
+        self.log: list[ExecutionRecord] = []
+        self.stops: list[StopEvent] = []
+        self.changed = False  # a state report should go out now
+        # Evidence for tests: retransmissions seen, gaps, commands answered ALREADY_DONE.
+        self.counters: collections.Counter[str] = collections.Counter()
+        self._nak_left = self.faults_injected.nak_times
+        self._fault_left = self.faults_injected.fault_times
+
+    # --- derived ---------------------------------------------------------------------
+
+    @property
+    def busy(self) -> bool:
+        """Executing or holding queued commands (what the watchdog protects)."""
+        return self.current is not None or bool(self.buffer)
+
+    @property
+    def mode(self) -> Mode:
+        if self.faults & FaultFlag.ESTOP:
+            return Mode.ESTOP
+        if self.faults:
+            return Mode.FAULT
+        if self.paused:
+            return Mode.PAUSED
+        if self.current is not None:
+            return Mode.MOVING
+        return Mode.IDLE
+
+    def report(self) -> State:
+        lim32 = 2**31
+        odo = [int((round(v * 1e6) + lim32) % 2**32 - lim32) for v in self.odometry]
+        return State(
+            mode=self.mode,
+            faults=self.faults,
+            fault_code=self.fault_code,
+            run_id=self.run_id,
+            last_done=self.last_done,
+            executing=self.current.msg.index if self.current else -1,
+            buffer_level=len(self.buffer) + (1 if self.current else 0),
+            t_ms=int(self.sim_t * 1000) & 0xFFFFFFFF,
+            magnets=self.magnets,
+            plates=self.plates,
+            nozzle=self.nozzle,
+            lift_urad=round(self.lift * 1e6),
+            q_urad=tuple(round(v * 1e6) for v in self.q),
+            odometry_um=tuple(odo),
+        )
+
+    def hello_ack(self, status: int = HelloStatus.OK) -> HelloAck:
+        p = self.profile
+        return HelloAck(
+            status=status,
+            watchdog_ms=round(self.watchdog_s * 1000),
+            state_period_ms=round(self.state_period_s * 1000),
+            buffer_capacity=self.buffer_capacity,
+            n_joints=p.n_joints,
+            n_wheels=p.n_wheels,
+            n_magnets=p.n_magnets,
+            n_plates=p.n_plates,
+            features=(Feature.LIFT_ARM if p.lift_limits else 0)
+            | (Feature.NOZZLE if p.nozzle else 0),
+            run_id=self.run_id,
+            last_done=self.last_done,
+            name=p.name[:32],
+        )
+
+    # --- time --------------------------------------------------------------------------
+
+    def next_deadline(self) -> float | None:
+        """Monotonic time of the next internal event (segment end, fault, watchdog)."""
+        deadlines = []
+        if self.current is not None and not self.paused and not self.faults:
+            seg = self.current
+            end = seg.duration if seg.fault_at is None else min(seg.duration, seg.fault_at)
+            deadlines.append(self._wall_t + max(0.0, end - seg.elapsed) / self.time_scale)
+        if self.busy and self.session:
+            deadlines.append(self.last_host_rx + self.watchdog_s)
+        return min(deadlines) if deadlines else None
+
+    def advance(self, now: float | None = None) -> None:
+        """Run the simulation up to ``now`` and check the watchdog."""
+        now = self.clock() if now is None else now
+        dt = max(0.0, now - self._wall_t) * self.time_scale
+        self._wall_t = now
+        late = now - self.last_host_rx - self.watchdog_s
+        if self.busy and self.session and late > 0:
+            # The watchdog stops motion at its deadline, not at this (late) call.
+            before = max(0.0, dt - late * self.time_scale)
+            self._run(before, now)
+            if self.busy:
+                self._halt("watchdog", now, latch=FaultFlag.WATCHDOG)
+            self.sim_t += dt - before
+            return
+        self._run(dt, now)
+
+    def _run(self, dt: float, now: float) -> None:
+        remaining = dt
+        while True:
+            if self.faults or self.paused:
+                break
+            if self.current is None:
+                if not self.buffer:
+                    break
+                self._start(self.buffer.popleft(), now)
+                continue
+            seg = self.current
+            stop_at = seg.duration if seg.fault_at is None else min(seg.duration, seg.fault_at)
+            step = min(max(0.0, stop_at - seg.elapsed), remaining)
+            self._move(seg, step)
+            seg.elapsed += step
+            remaining -= step
+            self.sim_t += step
+            if seg.fault_at is not None and seg.elapsed >= seg.fault_at - 1e-12:
+                self._halt(
+                    "fault", now, latch=FaultFlag.DRIVE, code=self.faults_injected.fault_code
+                )
+                break
+            if seg.elapsed >= seg.duration - 1e-12:
+                self._complete(seg, now)
+                continue
+            break
+        self.sim_t += max(0.0, remaining)
+
+    def _start(self, msg: CommandMessage, now: float) -> None:
+        duration = getattr(msg, "duration_ms", 0) / 1000.0
+        seg = _Segment(msg, duration, sim_start=self.sim_t, wall_start=now)
+        seg.q_from = self.q.copy()
+        seg.lift_from = self.lift
+        inj = self.faults_injected
+        if (
+            inj.fault_at_index is not None
+            and msg.index == inj.fault_at_index
+            and self._fault_left > 0
+        ):
+            self._fault_left -= 1
+            seg.fault_at = duration / 2
+        if isinstance(msg, WheelsCmd):
+            self.wheel_speeds = np.asarray(msg.speeds_um_s, dtype=float) / 1e6
+        else:
+            # Commands run one at a time: wheels turn only during a wheels command.
+            self.wheel_speeds[:] = 0.0
+        self.current = seg
+        self.changed = True
+
+    def _move(self, seg: _Segment, step: float) -> None:
+        msg = seg.msg
+        frac = 1.0 if seg.duration <= 0 else min(1.0, (seg.elapsed + step) / seg.duration)
+        if isinstance(msg, JointsCmd) and seg.q_from is not None:
+            target = np.asarray(msg.q_urad, dtype=float) / 1e6
+            self.q = seg.q_from + (target - seg.q_from) * frac
+        elif isinstance(msg, LiftCmd):
+            self.lift = seg.lift_from + (msg.angle_urad / 1e6 - seg.lift_from) * frac
+        elif isinstance(msg, WheelsCmd):
+            self.odometry += self.wheel_speeds * step
+
+    def _complete(self, seg: _Segment, now: float) -> None:
+        msg = seg.msg
+        if isinstance(msg, MagnetCmd):
+            self.magnets = _set_bit(self.magnets, msg.magnet, msg.touched)
+        elif isinstance(msg, PlateCmd):
+            self.plates = _set_bit(self.plates, msg.plate, msg.engaged)
+        elif isinstance(msg, NozzleCmd):
+            self.nozzle = msg.on
+        elif isinstance(msg, StopCmd | WheelsCmd):
+            self.wheel_speeds[:] = 0.0
+        self.current = None
+        self.last_done = msg.index
+        self._record(seg, "done", "", now)
+        self.changed = True
+
+    def _record(self, seg: _Segment, outcome: str, reason: str, now: float) -> None:
+        rec = ExecutionRecord(
+            run_id=seg.msg.run_id,
+            index=seg.msg.index,
+            op=MsgType(seg.msg.TYPE).name.removeprefix("CMD_").lower(),
+            outcome=outcome,
+            reason=reason,
+            sim_start_s=seg.sim_start,
+            sim_end_s=self.sim_t,
+            wall_start=seg.wall_start,
+            wall_end=now,
+        )
+        self.log.append(rec)
+        if self.on_record is not None:
+            self.on_record(rec)
+
+    def _halt(self, reason: str, now: float, latch: int = 0, code: int = 0) -> None:
+        """Stop all motion now and drop the queue; latch ``latch`` fault bits."""
+        moving = self.current is not None
+        index = self.current.msg.index if self.current else -1
+        if self.current is not None:
+            self._record(self.current, "interrupted", reason, now)
+            self.current = None
+        self.buffer.clear()
+        self.last_queued = self.last_done
+        self.wheel_speeds[:] = 0.0
+        self.paused = False
+        self.faults |= latch
+        if code:
+            self.fault_code = code
+        self.stops.append(StopEvent(now, reason, moving, index))
+        self.changed = True
+
+    # --- messages ----------------------------------------------------------------------
+
+    def link_lost(self, now: float | None = None) -> None:
+        """The transport knows the connection dropped (TCP): stop at once if busy."""
+        now = self.clock() if now is None else now
+        self.advance(now)
+        if self.busy or self.paused:
+            self._halt("link_lost", now, latch=FaultFlag.LINK_RESET)
+        self.session = False
+
+    def receive(self, msg: Message, seq: int, now: float | None = None) -> list[Message]:
+        """Handle one message from the host; returns the replies to send, in order."""
+        now = self.clock() if now is None else now
+        self.advance(now)
+        self.last_host_rx = now  # any valid frame feeds the watchdog
+        if isinstance(msg, Estop):
+            if not self.faults & FaultFlag.ESTOP or self.busy:
+                self._halt("estop", now, latch=FaultFlag.ESTOP)
+            return [Ack(ref_type=MsgType.ESTOP, ref_seq=seq, buffer_free=self._free())]
+        if isinstance(msg, Hello):
+            return self._hello(msg, seq, now)
+        if isinstance(msg, Heartbeat) or not is_sequenced(msg.TYPE):
+            return []
+        if not self.session:
+            return [Nak(ref_type=msg.TYPE, ref_seq=seq, reason=NakReason.NOT_READY)]
+        diff = (seq - self.expected_seq) & 0xFFFF
+        if diff >= 0x8000:
+            self.counters["duplicates"] += 1
+            old = self.replies.get(seq)  # a retransmission: repeat the first answer
+            return [old] if old is not None else []
+        if diff != 0:
+            self.counters["gaps"] += 1
+            return [
+                Nak(
+                    ref_type=msg.TYPE,
+                    ref_seq=seq,
+                    reason=NakReason.SEQ_GAP,
+                    expected_seq=self.expected_seq,
+                )
+            ]
+        reply = self._apply(msg, seq, now)
+        if isinstance(reply, Nak) and reply.transient:
+            return [reply]  # not consumed: the host sends this seq again
+        self.expected_seq = (self.expected_seq + 1) & 0xFFFF
+        self.replies[seq] = reply
+        while len(self.replies) > REPLY_MEMORY:
+            self.replies.popitem(last=False)
+        return [reply]
+
+    def _hello(self, msg: Hello, seq: int, now: float) -> list[Message]:
+        if msg.major != PROTOCOL_MAJOR:
+            self.session = False
+            return [self.hello_ack(HelloStatus.VERSION_UNSUPPORTED)]
+        # A new session means the host lost track of us: whatever was running stops.
+        if self.busy or self.paused:
+            self._halt("link_reset", now, latch=FaultFlag.LINK_RESET)
+        self.session = True
+        self.expected_seq = (seq + 1) & 0xFFFF
+        self.replies.clear()
+        self.watchdog_s = min(max(msg.watchdog_ms / 1000.0, 0.1), self.max_watchdog_s)
+        self.changed = True
+        return [self.hello_ack(), self.report()]
+
+    def _free(self) -> int:
+        return max(0, self.buffer_capacity - len(self.buffer) - (1 if self.current else 0))
+
+    def _ack(self, msg: Message, seq: int, status: int = AckStatus.OK) -> Ack:
+        return Ack(ref_type=msg.TYPE, ref_seq=seq, status=status, buffer_free=self._free())
+
+    def _nak(self, msg: Message, seq: int, reason: int, detail: int = 0) -> Nak:
+        return Nak(
+            ref_type=msg.TYPE,
+            ref_seq=seq,
+            reason=reason,
+            expected_seq=self.expected_seq,
+            detail=max(-32768, min(32767, detail)),
+        )
+
+    def _apply(self, msg: Message, seq: int, now: float) -> Message:
+        if isinstance(msg, Pause):
+            self.paused = True
+        elif isinstance(msg, Resume):
+            self.paused = False
+        elif isinstance(msg, Abort):
+            if self.busy or self.paused:
+                self._halt("abort", now)
+        elif isinstance(msg, Clear):
+            self.faults &= ~msg.faults
+            if msg.faults & FaultFlag.DRIVE:
+                self.fault_code = 0
+        elif isinstance(msg, CommandMessage):
+            return self._accept(msg, seq)
+        self.changed = True
+        return self._ack(msg, seq)
+
+    def _accept(self, msg: CommandMessage, seq: int) -> Message:
+        inj = self.faults_injected
+        if inj.nak_index is not None and msg.index == inj.nak_index and self._nak_left > 0:
+            self._nak_left -= 1
+            self.counters["injected_naks"] += 1
+            return self._nak(
+                msg, seq, NakReason.INVALID if inj.nak_permanent else NakReason.BUSY, 0
+            )
+        if self.faults:
+            return self._nak(msg, seq, NakReason.FAULTED, self.faults)
+        problem = self._validate(msg)
+        if problem is not None:
+            return self._nak(msg, seq, *problem)
+        if msg.run_id != self.run_id:
+            if self.busy:
+                return self._nak(msg, seq, NakReason.RUN_ACTIVE)
+            self.run_id = msg.run_id
+            self.last_done = self.last_queued = msg.index - 1
+        if msg.index <= self.last_done:
+            self.counters["already_done"] += 1
+            return self._ack(msg, seq, AckStatus.ALREADY_DONE)
+        if msg.index <= self.last_queued:
+            return self._ack(msg, seq)  # already queued in this session
+        if msg.index != self.last_queued + 1:
+            return self._nak(msg, seq, NakReason.INDEX, (self.last_queued + 1) & 0x7FFF)
+        if self._free() == 0:
+            return self._nak(msg, seq, NakReason.BUSY)
+        self.buffer.append(msg)
+        self.last_queued = msg.index
+        self.changed = True
+        return self._ack(msg, seq)
+
+    def _validate(self, msg: CommandMessage) -> tuple[int, int] | None:
+        """``(reason, detail)`` when the robot cannot execute ``msg``."""
+        p = self.profile
+        if isinstance(msg, JointsCmd):
+            if len(msg.q_urad) != p.n_joints:
+                return NakReason.INVALID, len(msg.q_urad)
+            lim = np.round(p.joint_limits * 1e6)
+            for j, v in enumerate(msg.q_urad):
+                if not lim[j, 0] - LIMIT_TOL_URAD <= v <= lim[j, 1] + LIMIT_TOL_URAD:
+                    return NakReason.LIMIT, j
+        elif isinstance(msg, WheelsCmd):
+            if len(msg.speeds_um_s) != p.n_wheels:
+                return NakReason.INVALID, len(msg.speeds_um_s)
+        elif isinstance(msg, MagnetCmd):
+            if msg.magnet >= p.n_magnets:
+                return NakReason.INVALID, msg.magnet
+        elif isinstance(msg, PlateCmd):
+            if msg.plate >= p.n_plates:
+                return NakReason.INVALID, msg.plate
+        elif isinstance(msg, LiftCmd):
+            if p.lift_limits is None:
+                return NakReason.INVALID, 0
+            lo, hi = (round(v * 1e6) for v in p.lift_limits)
+            if not lo - LIMIT_TOL_URAD <= msg.angle_urad <= hi + LIMIT_TOL_URAD:
+                return NakReason.LIMIT, 0
+        elif isinstance(msg, NozzleCmd) and not p.nozzle:
+            return NakReason.INVALID, 0
+        return None
+
+
+def _set_bit(mask: int, bit: int, on: bool) -> int:
+    return mask | (1 << bit) if on else mask & ~(1 << bit)
+
+
+__all__ = [
+    "ExecutionRecord",
+    "SimRobot",
+    "StopEvent",
+    "check_exactly_once",
+]

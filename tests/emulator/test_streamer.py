@@ -1,0 +1,177 @@
+"""Streamer: completion callbacks, pause/resume/abort, resume points, refusals."""
+
+from __future__ import annotations
+
+import threading
+
+from robots.adapters import ExecState, FaultKind, Outcome, RobotLink, Streamer
+from robots.emulator import Emulator, check_exactly_once
+from robots.protocol import JointMove, Mode, Nozzle, Program
+
+from .helpers import STOPPED, generic_program
+
+
+def moves(n: int, step_s: float = 0.1) -> Program:
+    return Program(tuple(JointMove((0.01 * (k + 1),) * 6, step_s) for k in range(n)))
+
+
+def test_completes_with_one_ack_per_command_in_order() -> None:
+    prog = generic_program()
+    acks: list[int] = []
+    states: list = []
+    done: list[Outcome] = []
+    with Emulator("generic", time_scale=20) as emu, RobotLink(emu.url) as link:
+        s = Streamer(
+            prog, link, run_id=11, on_ack=acks.append, on_state=states.append, on_done=done.append
+        )
+        with s:
+            assert s.wait(timeout=20) == ExecState.COMPLETED
+        assert acks == list(range(len(prog))) and done == [Outcome.COMPLETED]
+        assert s.progress == 1.0 and s.last_acked == len(prog) - 1
+        assert states and states[-1].last_done == len(prog) - 1
+        assert check_exactly_once(emu.execution_log(), 11, len(prog)) == []
+        rep = emu.snapshot()
+        assert rep.nozzle is False and rep.magnets == 0 and rep.lift_urad == 500_000
+
+
+def test_window_bounds_what_is_ahead_of_the_persisted_ack() -> None:
+    prog = moves(30, 0.05)
+    worst = [0]
+    with Emulator("generic", time_scale=5) as emu, RobotLink(emu.url) as link:
+        acked = [-1]
+
+        def on_ack(i: int) -> None:
+            acked[0] = i
+
+        def on_state(rep) -> None:
+            # Robot's view: queued beyond the last persisted ack never exceeds the window.
+            worst[0] = max(worst[0], rep.last_done + rep.buffer_level - acked[0])
+
+        with Streamer(prog, link, run_id=2, on_ack=on_ack, on_state=on_state, window=3) as s:
+            assert s.wait(timeout=20) == ExecState.COMPLETED
+    assert 1 <= worst[0] <= 3
+
+
+def test_pause_holds_and_resume_finishes() -> None:
+    prog = moves(20)
+    with Emulator("generic", time_scale=2) as emu, RobotLink(emu.url) as link:
+        with Streamer(prog, link, run_id=5) as s:
+            assert emu.wait_for(lambda e: e.robot.last_done >= 1, 10)
+            s.pause()
+            assert s.wait({ExecState.PAUSED}, 5) == ExecState.PAUSED
+            assert emu.wait_for(lambda e: e.robot.mode == Mode.PAUSED, 5)
+            held = emu.snapshot()
+            # Nothing moves while paused (heartbeats keep the watchdog quiet meanwhile).
+            assert not emu.wait_for(lambda e: e.robot.report().q_urad != held.q_urad, 0.8)
+            s.resume()
+            assert s.wait(timeout=20) == ExecState.COMPLETED
+        assert check_exactly_once(emu.execution_log(), 5, len(prog)) == []
+
+
+def test_abort_stops_the_robot_and_ends_the_run() -> None:
+    prog = moves(50, 0.2)
+    done: list[Outcome] = []
+    with Emulator("generic") as emu, RobotLink(emu.url) as link:
+        with Streamer(prog, link, run_id=6, on_done=done.append) as s:
+            assert emu.wait_for(lambda e: e.robot.current is not None, 5)
+            s.abort()
+            assert s.wait(timeout=5) == ExecState.ABORTED
+            assert emu.wait_for(lambda e: e.robot.stops and e.robot.stops[-1].reason == "abort", 5)
+            assert emu.wait_for(lambda e: not e.robot.busy, 5)
+            s.abort()  # idempotent, no second on_done
+        assert done == [Outcome.ABORTED]
+        log = emu.execution_log()
+        assert log[-1].outcome == "interrupted" and log[-1].reason == "abort"
+
+
+def test_new_streamer_resumes_from_persisted_index_after_host_restart() -> None:
+    """A server restart: the link and streamer vanish mid-run; new ones resume."""
+    prog = moves(40, 0.1)
+    persisted: list[int] = []
+    with Emulator("generic", time_scale=4) as emu:
+        link = RobotLink(emu.url).start()
+        s = Streamer(prog, link, run_id=77, on_ack=persisted.append).start()
+        assert emu.wait_for(lambda e: e.robot.last_done >= 10, 20)
+        s.close()  # the process dies: nothing is said to the robot …
+        link.close()  # … and the TCP connection drops, so the robot stops at once.
+        assert emu.wait_for(lambda e: not e.robot.busy, 5)
+        with RobotLink(emu.url) as link2:
+            start = persisted[-1] + 1
+            with Streamer(prog, link2, run_id=77, start=start, on_ack=persisted.append) as s2:
+                assert s2.wait(timeout=30) == ExecState.COMPLETED
+        assert persisted == list(range(len(prog)))
+        assert check_exactly_once(emu.execution_log(), 77, len(prog)) == []
+        assert [s.reason for s in emu.stop_events()] == ["link_lost"]
+
+
+def test_stale_resume_point_does_not_repeat_commands() -> None:
+    """The robot completed more than the host persisted: ALREADY_DONE, not again."""
+    prog = moves(12, 0.0)
+    with Emulator("generic") as emu, RobotLink(emu.url) as link:
+        with Streamer(prog, link, run_id=9) as s:
+            assert s.wait(timeout=10) == ExecState.COMPLETED
+        acks: list[int] = []
+        with Streamer(prog, link, run_id=9, start=4, on_ack=acks.append) as s:
+            assert s.wait(timeout=10) == ExecState.COMPLETED
+        assert acks == list(range(4, 12))  # reported from the robot's own progress
+        assert check_exactly_once(emu.execution_log(), 9, len(prog)) == []
+
+
+def test_out_of_limits_command_is_refused_with_its_index() -> None:
+    prog = Program(
+        (JointMove((0.1,) * 6, 0.0), JointMove((0.1, 5.0, 0, 0, 0, 0), 0.0), Nozzle(True))
+    )
+    faults = []
+    with (
+        Emulator("generic") as emu,
+        RobotLink(emu.url) as link,
+        Streamer(prog, link, run_id=3, on_fault=faults.append) as s,
+    ):
+        assert s.wait(STOPPED, 10) == ExecState.FAULTED
+    assert faults[0].kind == FaultKind.REJECTED and faults[0].index == 1
+    assert "LIMIT (detail 1)" in faults[0].message
+    assert [r.index for r in emu.execution_log()] == [0]
+
+
+def test_failing_on_ack_holds_the_robot_and_resume_retries_it() -> None:
+    prog = moves(10, 0.05)
+    calls: list[int] = []
+    fail = threading.Event()
+    fail.set()
+
+    def on_ack(i: int) -> None:
+        if i == 3 and fail.is_set():
+            fail.clear()
+            raise OSError("disk full")
+        calls.append(i)
+
+    with Emulator("generic") as emu, RobotLink(emu.url) as link:
+        with Streamer(prog, link, run_id=4, on_ack=on_ack) as s:
+            assert s.wait(STOPPED, 10) == ExecState.FAULTED
+            assert s.fault.kind == FaultKind.HOST and "disk full" in s.fault.message
+            s.resume()
+            assert s.wait(timeout=10) == ExecState.COMPLETED
+        assert calls == list(range(10))
+        assert check_exactly_once(emu.execution_log(), 4, len(prog)) == []
+
+
+def test_busy_robot_refuses_another_run() -> None:
+    with Emulator("generic") as emu, RobotLink(emu.url) as link:
+        with Streamer(moves(30, 0.2), link, run_id=1) as first:
+            assert emu.wait_for(lambda e: e.robot.current is not None, 5)
+            with Streamer(moves(3), link, run_id=2) as second:
+                assert second.wait(STOPPED, 5) == ExecState.FAULTED
+                assert second.fault.kind == FaultKind.ROBOT_BUSY
+            assert first.state == ExecState.RUNNING  # untouched by the refused newcomer
+            first.abort()
+            assert first.wait(timeout=5) == ExecState.ABORTED
+        assert [s.reason for s in emu.stop_events()] == ["abort"]
+
+
+def test_empty_program_completes_at_once() -> None:
+    with (
+        Emulator("generic") as emu,
+        RobotLink(emu.url) as link,
+        Streamer(Program(()), link, run_id=1) as s,
+    ):
+        assert s.wait(timeout=5) == ExecState.COMPLETED
