@@ -61,9 +61,10 @@ def test_console_plan_approve_and_scene(browser, tmp_path: Path) -> None:
         page.select_option("#kind", "demo.route")
         page.fill("#params", '{"end": "c1"}')
         page.click("#submit-plan")
-        row = page.wait_for_selector("#plans tbody tr[data-state='planned']", timeout=60_000)
-        plan_id = row.get_attribute("data-id")
-        row.click()
+        # The list is re-rendered on every event: use locators, not element handles.
+        page.wait_for_selector("#plans tbody tr[data-state='planned']", timeout=60_000)
+        plan_id = page.locator("#plans tbody tr[data-state='planned']").first.get_attribute("data-id")
+        page.locator(f"#plans tbody tr[data-id='{plan_id}']").click()
         page.wait_for_selector("#d-checks tr[data-check='route_length']")
         assert page.inner_text("#d-state") == "planned"
         assert "PASS" in page.inner_text("#d-checks")
