@@ -9,8 +9,10 @@ from contextlib import asynccontextmanager
 from pathlib import Path
 from typing import Any
 
+import fastapi_offline
 from fastapi import FastAPI, Request
-from fastapi.responses import FileResponse, JSONResponse, RedirectResponse
+from fastapi.openapi.docs import get_swagger_ui_html
+from fastapi.responses import FileResponse, HTMLResponse, JSONResponse, RedirectResponse
 from fastapi.staticfiles import StaticFiles
 from starlette.types import ASGIApp, Message, Receive, Scope, Send
 
@@ -148,7 +150,7 @@ def create_app(settings: Settings | None = None, *, start_scene: bool | None = N
         version=__version__,
         description="Planning server and operator console for steel-bridge robots.",
         lifespan=lifespan,
-        docs_url="/docs",
+        docs_url=None,  # served below from local assets: field laptops are offline
         openapi_url="/openapi.json",
     )
     app.add_middleware(BodySizeLimit, limit_bytes=lambda: settings.max_upload_bytes)
@@ -183,6 +185,19 @@ def create_app(settings: Settings | None = None, *, start_scene: bool | None = N
     @app.get("/", include_in_schema=False)
     def console() -> FileResponse:
         return FileResponse(STATIC_DIR / "index.html", headers={"Cache-Control": "no-store"})
+
+    docs_assets = Path(fastapi_offline.__file__).resolve().parent / "static"
+    app.mount("/docs-assets", StaticFiles(directory=docs_assets), name="docs-assets")
+
+    @app.get("/docs", include_in_schema=False)
+    def docs() -> HTMLResponse:
+        return get_swagger_ui_html(
+            openapi_url="/openapi.json",
+            title="SteelPath API",
+            swagger_js_url="/docs-assets/swagger-ui-bundle.js",
+            swagger_css_url="/docs-assets/swagger-ui.css",
+            swagger_favicon_url="/docs-assets/favicon.png",
+        )
 
     @app.get("/api", include_in_schema=False)
     def api_root() -> RedirectResponse:

@@ -29,7 +29,7 @@ CHROMIUM_ARGS = [
 ]
 
 
-@pytest.fixture
+@pytest.fixture(scope="module")
 def browser():
     if not Path(CHROMIUM).exists():
         pytest.fail(
@@ -63,7 +63,9 @@ def test_console_plan_approve_and_scene(browser, tmp_path: Path) -> None:
         page.click("#submit-plan")
         # The list is re-rendered on every event: use locators, not element handles.
         page.wait_for_selector("#plans tbody tr[data-state='planned']", timeout=60_000)
-        plan_id = page.locator("#plans tbody tr[data-state='planned']").first.get_attribute("data-id")
+        plan_id = page.locator("#plans tbody tr[data-state='planned']").first.get_attribute(
+            "data-id"
+        )
         page.locator(f"#plans tbody tr[data-id='{plan_id}']").click()
         page.wait_for_selector("#d-checks tr[data-check='route_length']")
         assert page.inner_text("#d-state") == "planned"
@@ -98,3 +100,17 @@ def test_console_plan_approve_and_scene(browser, tmp_path: Path) -> None:
     actions = [e.action for e in store.list_audit("plan", plan_id)]
     assert actions[:2] == ["approve", "finish"]
     assert any(e.action == "estop" for e in store.list_audit("robot"))
+
+
+def test_api_docs_render_offline(browser, tmp_path: Path) -> None:
+    settings = make_settings(tmp_path / "var", port=free_port())
+    with live_server(settings) as (url, _tokens, _app):
+        page = browser.new_page()
+        requests: list[str] = []
+        page.on("request", lambda r: requests.append(r.url))
+        page.goto(url + "/docs")
+        page.wait_for_selector(".swagger-ui .opblock", timeout=30_000)
+        assert page.locator(".opblock-summary-path", has_text="/api/v1/plans").count() >= 1
+        assert all(r.startswith(url) for r in requests), [
+            r for r in requests if not r.startswith(url)
+        ]
