@@ -1,0 +1,433 @@
+"""ARA navigation chain (seed Ch. 4): point cloud → bars and cross areas →
+structure graph → inspection route (VOCPP) → boundary-safe robot path.
+
+Entry point :func:`plan_navigation` (DESIGN §5).  Stages, each in its module:
+
+1. :mod:`.preprocess` — pass-through, voxel grid, RANSAC plane, projection (Ch. 4 intro);
+2. :mod:`.segmentation` — bars / cross areas (Alg. 3 as ``"thesis"``, a
+   deterministic strip-based ``"default"``), neighbour borders (§4.1);
+3. :mod:`.boundaries` — NCBE boundary per cluster (Alg. 1);
+4. :mod:`.graph` — structure graph (Alg. 4, fixed to follow every bar);
+5. :func:`planners.vocpp.plan_route` — the route (Alg. 5, exact by default);
+6. :mod:`.pibc` + :mod:`.rrt` — per-edge RRT-Connect in (x, y, yaw) whose
+   samples are valid when every footprint point is on steel (Alg. 6).
+
+Synthetic structures with ground truth for tests and samples live in
+:mod:`.synthetic` (``SAMPLES``, ``STRUCTURES``).
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable, Hashable
+from dataclasses import asdict, dataclass, field, fields
+
+import networkx as nx
+import numpy as np
+
+from planners.errors import EmptyInputError, InvalidInputError, UnknownVertexError
+from planners.navigation.boundaries import Cluster, cluster_geometry
+from planners.navigation.graph import build_graph, default_endpoints
+from planners.navigation.pibc import PIBC_METHODS, BoundarySet, footprint_points, poses_valid
+from planners.navigation.preprocess import PlaneFrame, preprocess
+from planners.navigation.rrt import EdgePath, EdgePlanner, corridor_sampler, settle_pose, wrap
+from planners.navigation.segmentation import borders, segment_default, segment_thesis
+from planners.vocpp import METHODS as ROUTE_METHODS
+from planners.vocpp import Route, plan_route
+
+__all__ = [
+    "SEGMENTATION_METHODS",
+    "Cluster",
+    "EdgePath",
+    "NavigationParams",
+    "NavigationResult",
+    "plan_navigation",
+]
+
+SEGMENTATION_METHODS = ("default", "thesis")
+Progress = Callable[[float, str], None]
+
+
+@dataclass(frozen=True)
+class NavigationParams:
+    """Every parameter of :func:`plan_navigation`, with units in the names."""
+
+    # Pre-processing (Ch. 4 intro); pass-through limits in the robot frame.
+    passthrough_x_m: tuple[float, float] | None = (-1.0, 6.0)
+    passthrough_y_m: tuple[float, float] | None = (-4.0, 4.0)
+    passthrough_z_m: tuple[float, float] | None = (-0.5, 0.5)
+    voxel_m: float = 0.01
+    ransac_threshold_m: float = 0.015
+    ransac_iterations: int = 300
+    min_plane_points: int = 200
+    speckle_radius_m: float = 0.03
+    speckle_min_neighbours: int = 3
+    # Segmentation (Alg. 3): "default" (strip-based) or "thesis" (EM-GMM + Eq. 4.1).
+    segmentation: str = "default"
+    grid_m: float = 0.01
+    n_directions: int = 24
+    long_factor: float = 2.5
+    min_bar_length_m: float = 0.15
+    thesis_clusters_min: int = 2
+    thesis_clusters_max: int = 12
+    thesis_max_points: int = 4000
+    # Neighbour clusters: border length ≥ lb (§4.1), contact distance eps.
+    border_lb_m: float = 0.03
+    border_eps_m: float = 0.05
+    # NCBE sliding factor αs (Alg. 1) and graph threshold dmin (Alg. 4).
+    sliding_factor_m: float = 0.02
+    dmin_m: float = 0.05
+    # Route (Alg. 5): "exact" (min T-join) or "thesis" (as printed).
+    route_method: str = "exact"
+    # Robot footprint in the base frame (ARA robots/ara/params.toml [mobile_footprint]).
+    footprint_length_m: float = 0.68
+    footprint_width_m: float = 0.16
+    footprint_center_x_m: float = -0.25
+    footprint_center_y_m: float = 0.0
+    footprint_spacing_m: float = 0.04
+    # PIBC (Alg. 6): "angular" (exact for star-shaped boundaries) or "thesis".
+    pibc_method: str = "angular"
+    pibc_n_centres: int = 0  # 0 = every boundary near the edge
+    pibc_m_closest: int = 3
+    # Per-edge RRT-Connect and smoothing.
+    plan_paths: bool = True
+    rrt_step_m: float = 0.08
+    rrt_resolution_m: float = 0.01
+    rrt_max_iterations: int = 1500
+    shortcut_rounds: int = 60
+    seed: int = 0
+
+    def validated(self) -> NavigationParams:
+        """Self, or :class:`InvalidInputError` naming the bad field."""
+        if self.segmentation not in SEGMENTATION_METHODS:
+            raise InvalidInputError(
+                f"segmentation must be one of {SEGMENTATION_METHODS}, got {self.segmentation!r}"
+            )
+        if self.route_method not in ROUTE_METHODS:
+            raise InvalidInputError(
+                f"route_method must be one of {ROUTE_METHODS}, got {self.route_method!r}"
+            )
+        if self.pibc_method not in PIBC_METHODS:
+            raise InvalidInputError(
+                f"pibc_method must be one of {PIBC_METHODS}, got {self.pibc_method!r}"
+            )
+        for f in fields(self):
+            v = getattr(self, f.name)
+            if (
+                f.name.endswith("_m")
+                and not isinstance(v, tuple)
+                and f.name
+                not in (
+                    "footprint_center_x_m",
+                    "footprint_center_y_m",
+                )
+                and (not isinstance(v, int | float) or not np.isfinite(v) or v <= 0)
+            ):
+                raise InvalidInputError(f"{f.name} must be a positive number of metres, got {v!r}")
+        if self.thesis_clusters_min < 1 or self.thesis_clusters_max < self.thesis_clusters_min:
+            raise InvalidInputError(
+                "thesis_clusters_min/max must satisfy 1 <= min <= max, got "
+                f"{self.thesis_clusters_min}, {self.thesis_clusters_max}"
+            )
+        return self
+
+    def as_dict(self) -> dict[str, object]:
+        return asdict(self)
+
+
+@dataclass
+class NavigationResult:
+    """Everything :func:`plan_navigation` computed (DESIGN §5)."""
+
+    points: np.ndarray  # (M, 3) processed points (on the fitted plane, input frame)
+    points2d: np.ndarray  # (M, 2) the same in plane coordinates
+    labels: np.ndarray  # (M,) cluster id per processed point, -1 = noise
+    clusters: list[Cluster]
+    graph: nx.Graph
+    route: Route
+    edge_paths: list[EdgePath]  # one per route edge, poses (x, y, yaw) in plane coordinates
+    frame: PlaneFrame
+    start: Hashable
+    end: Hashable
+    params: NavigationParams
+    timings_s: dict[str, float] = field(default_factory=dict)
+    counts: dict[str, int] = field(default_factory=dict)
+    segmentation_info: dict[str, object] = field(default_factory=dict)
+
+    def boundary_xyz(self, cluster: int) -> np.ndarray:
+        """(K, 3) boundary polygon of a cluster in the input frame."""
+        return self.frame.lift(self.clusters[cluster].boundary)
+
+    def path_xyz(self, k: int) -> np.ndarray:
+        """(K, 3) robot positions of route edge ``k``'s path in the input frame."""
+        return self.frame.lift(self.edge_paths[k].poses[:, :2])
+
+    def yaw_axis_xyz(self, yaw: np.ndarray) -> np.ndarray:
+        """(K, 3) unit heading vectors in the input frame for plane-frame yaws."""
+        yaw = np.asarray(yaw, dtype=float).reshape(-1, 1)
+        return np.cos(yaw) * self.frame.e1 + np.sin(yaw) * self.frame.e2
+
+    @property
+    def paths_ok(self) -> bool:
+        return all(p.ok for p in self.edge_paths)
+
+
+def _validate_points(points: object) -> np.ndarray:
+    try:
+        pts = np.asarray(points, dtype=float)
+    except (TypeError, ValueError) as exc:
+        raise InvalidInputError(f"points must be a numeric (N, 3) array ({exc})") from exc
+    if pts.ndim != 2 or pts.shape[1] != 3:
+        raise InvalidInputError(f"points must have shape (N, 3) in metres, got {pts.shape}")
+    if len(pts) == 0:
+        raise EmptyInputError("points is empty: the navigation planner needs a point cloud")
+    bad = ~np.all(np.isfinite(pts), axis=1)
+    if np.any(bad):
+        raise InvalidInputError(
+            f"points has {int(bad.sum())} row(s) with NaN/inf (first at row {int(np.argmax(bad))}); "
+            "drop them first (planners.pointcloud.drop_nonfinite)"
+        )
+    return pts
+
+
+def _check_vertex(g: nx.Graph, v: Hashable, role: str) -> Hashable:
+    if v in g:
+        return v
+    # Accept numeric strings ("3") from REST callers.
+    try:
+        iv = int(v)  # type: ignore[arg-type]
+    except (TypeError, ValueError):
+        iv = None
+    if iv is not None and iv in g:
+        return iv
+    leaves = sorted(n for n in g.nodes if g.degree(n) == 1)
+    raise UnknownVertexError(
+        f"{role} vertex {v!r} is not in the structure graph; vertices are 0..{max(g.nodes)} "
+        f"(leaf vertices: {leaves[:20]})"
+    )
+
+
+def _edge_paths(
+    g: nx.Graph,
+    route: Route,
+    clusters: list[Cluster],
+    p: NavigationParams,
+    progress: Progress | None,
+) -> list[EdgePath]:
+    foot = footprint_points(
+        p.footprint_length_m,
+        p.footprint_width_m,
+        center_x_m=p.footprint_center_x_m,
+        center_y_m=p.footprint_center_y_m,
+        spacing_m=p.footprint_spacing_m,
+    )
+    reach = float(np.max(np.hypot(foot[:, 0], foot[:, 1])))
+    boxes = np.array(
+        [
+            [*c.boundary.min(axis=0), *c.boundary.max(axis=0)]
+            if len(c.boundary)
+            else [0, 0, -1, -1]
+            for c in clusters
+        ]
+    )
+    full = BoundarySet([c.centre for c in clusters], [c.boundary for c in clusters])
+    rng = np.random.default_rng(p.seed)
+    out: list[EdgePath] = []
+    prev: np.ndarray | None = None
+    n_edges = len(route.edges)
+    for k, (u, v, _key) in enumerate(route.edges):
+        a = np.asarray(g.nodes[u]["pos2d"], dtype=float)
+        b = np.asarray(g.nodes[v]["pos2d"], dtype=float)
+        lo = np.minimum(a, b) - reach - 0.05
+        hi = np.maximum(a, b) + reach + 0.05
+        near = np.nonzero(
+            (boxes[:, 0] <= hi[0])
+            & (boxes[:, 2] >= lo[0])
+            & (boxes[:, 1] <= hi[1])
+            & (boxes[:, 3] >= lo[1])
+        )[0]
+        bset = full.subset(near.tolist())
+        n_c = p.pibc_n_centres if p.pibc_n_centres > 0 else len(bset)
+
+        def valid(poses: np.ndarray, bset: BoundarySet = bset, n_c: int = n_c) -> np.ndarray:
+            return poses_valid(
+                poses, foot, bset, method=p.pibc_method, n_centres=n_c, m_closest=p.pibc_m_closest
+            )
+
+        yaw = float(np.arctan2(*(b - a)[::-1])) if np.hypot(*(b - a)) > 1e-9 else 0.0
+        start = prev if prev is not None else settle_pose(a, b, yaw, valid)
+        # Drive backwards rather than turn round on a bar: the goal heading is
+        # the edge direction or its reverse, whichever is nearer the start's.
+        goal_yaw = yaw
+        if start is not None and abs(float(wrap(start[2] - yaw))) > np.pi / 2:
+            goal_yaw = float(wrap(yaw + np.pi))
+        goal = settle_pose(b, a, goal_yaw, valid)
+        if start is None or goal is None:
+            which = "start" if start is None else "end"
+            out.append(
+                EdgePath(
+                    int(u),
+                    int(v),
+                    np.zeros((0, 3)),
+                    False,
+                    f"no pose near the {which} of edge ({u}, {v}) keeps the "
+                    f"{p.footprint_length_m:g} × {p.footprint_width_m:g} m footprint on steel",
+                )
+            )
+            prev = None
+        else:
+            planner = EdgePlanner(
+                valid,
+                yaw_radius_m=0.5 * p.footprint_length_m,
+                step_m=p.rrt_step_m,
+                resolution_m=p.rrt_resolution_m,
+                max_iterations=p.rrt_max_iterations,
+                shortcut_rounds=p.shortcut_rounds,
+            )
+            sampler = corridor_sampler(
+                a, b, rng, lateral_sigma_m=0.03, margin_m=0.5 * p.footprint_length_m
+            )
+            path, iters = planner.plan(start, goal, sampler)
+            if path is None:
+                out.append(
+                    EdgePath(
+                        int(u),
+                        int(v),
+                        np.zeros((0, 3)),
+                        False,
+                        f"RRT-Connect found no on-steel path for edge ({u}, {v}) in {iters} iterations",
+                        iters,
+                    )
+                )
+                prev = None
+            else:
+                path = planner.densify(planner.shortcut(path, rng))
+                out.append(EdgePath(int(u), int(v), path, True, "", iters))
+                prev = path[-1]
+        if progress is not None:
+            progress(0.75 + 0.24 * (k + 1) / max(n_edges, 1), f"path {k + 1}/{n_edges}")
+    return out
+
+
+def plan_navigation(
+    points: np.ndarray,
+    *,
+    start: Hashable | None = None,
+    end: Hashable | None = None,
+    params: NavigationParams | None = None,
+    progress: Progress | None = None,
+) -> NavigationResult:
+    """Plan the ARA's inspection of a steel structure seen as ``points`` (seed Ch. 4).
+
+    ``points`` (N, 3) in the robot frame, metres, all finite.  ``start``/``end``
+    are vertex ids of the structure graph; ``None`` picks two leaf vertices at
+    the ends of the structure (:func:`.graph.default_endpoints`).  ``progress``
+    (fraction, stage) is called between stages and may raise
+    :class:`planners.errors.CancelledError`, which propagates.
+
+    Raises :class:`EmptyInputError` (empty cloud, nothing left after
+    filtering), :class:`InvalidInputError` (bad shape, NaN/inf, bad params),
+    :class:`planners.errors.InfeasibleError` (no structure plane),
+    :class:`UnknownVertexError` (start/end not in the graph) and the route's
+    errors (:func:`planners.vocpp.plan_route`).  Same input → same output.
+    """
+    p = (params or NavigationParams()).validated()
+    pts = _validate_points(points)
+    timings: dict[str, float] = {}
+
+    def stage(fraction: float, name: str) -> None:
+        if progress is not None:
+            progress(fraction, name)
+
+    t = time.perf_counter()
+    stage(0.0, "preprocess")
+    pre = preprocess(
+        pts,
+        passthrough_x_m=p.passthrough_x_m,
+        passthrough_y_m=p.passthrough_y_m,
+        passthrough_z_m=p.passthrough_z_m,
+        voxel_m=p.voxel_m,
+        ransac_threshold_m=p.ransac_threshold_m,
+        ransac_iterations=p.ransac_iterations,
+        min_plane_points=p.min_plane_points,
+        speckle_radius_m=p.speckle_radius_m,
+        speckle_min_neighbours=p.speckle_min_neighbours,
+        seed=p.seed,
+    )
+    timings["preprocess_s"] = time.perf_counter() - t
+
+    t = time.perf_counter()
+    stage(0.15, "segmentation")
+    uv = pre.points2d
+    if p.segmentation == "default":
+        seg = segment_default(
+            uv,
+            grid_m=p.grid_m,
+            n_directions=p.n_directions,
+            long_factor=p.long_factor,
+            min_bar_length_m=p.min_bar_length_m,
+        )
+    else:
+        seg = segment_thesis(
+            uv,
+            n_clusters_min=p.thesis_clusters_min,
+            n_clusters_max=p.thesis_clusters_max,
+            lb_m=p.border_lb_m,
+            eps_m=p.border_eps_m,
+            max_points=p.thesis_max_points,
+            seed=p.seed,
+        )
+    brs = borders(uv, seg.labels, eps_m=p.border_eps_m, lb_m=p.border_lb_m)
+    timings["segmentation_s"] = time.perf_counter() - t
+
+    t = time.perf_counter()
+    stage(0.4, "boundaries")
+    clusters = cluster_geometry(uv, seg.labels, seg.kinds, brs, sliding_factor_m=p.sliding_factor_m)
+    timings["boundaries_s"] = time.perf_counter() - t
+
+    t = time.perf_counter()
+    stage(0.5, "graph")
+    g = build_graph(clusters, brs, pre.frame.lift, dmin_m=p.dmin_m)
+    if g.number_of_edges() == 0:
+        raise EmptyInputError(
+            f"the structure graph has no edges ({len(clusters)} cluster(s), none with a "
+            "neighbour or a free end); is the cloud a steel-bar structure?"
+        )
+    if start is None or end is None:
+        s0, e0 = default_endpoints(g)
+        start = s0 if start is None else start
+        end = e0 if end is None else end
+    start = _check_vertex(g, start, "start")
+    end = _check_vertex(g, end, "end")
+    timings["graph_s"] = time.perf_counter() - t
+
+    t = time.perf_counter()
+    stage(0.6, "route")
+    route = plan_route(g, start, end, weight="weight", method=p.route_method)
+    timings["route_s"] = time.perf_counter() - t
+
+    t = time.perf_counter()
+    stage(0.75, "paths")
+    paths = _edge_paths(g, route, clusters, p, progress) if p.plan_paths else []
+    timings["paths_s"] = time.perf_counter() - t
+    stage(1.0, "done")
+    counts = dict(pre.counts)
+    counts["clusters"] = len(clusters)
+    counts["vertices"] = g.number_of_nodes()
+    counts["edges"] = g.number_of_edges()
+    return NavigationResult(
+        points=pre.points3d,
+        points2d=uv,
+        labels=seg.labels,
+        clusters=clusters,
+        graph=g,
+        route=route,
+        edge_paths=paths,
+        frame=pre.frame,
+        start=start,
+        end=end,
+        params=p,
+        timings_s=timings,
+        counts=counts,
+        segmentation_info=dict(seg.info),
+    )

@@ -1,0 +1,506 @@
+"""Steel-structure segmentation into bars and cross areas (seed Alg. 3, Eq. 4.1).
+
+Two methods over the processed 2D points (plane coordinates, metres):
+
+``"thesis"`` — Algorithm 3 as printed: EM-GMM (scikit-learn
+``GaussianMixture``, fixed seed) for every cluster count ``nc`` in
+``[Ncmin, Ncmax]``; two clusters are neighbours when they share a border of
+length ≥ ``lb``; ``nm``/``ns`` are the most / second most neighbour counts;
+the count with the highest ``r = nm/(nm+ns) + nm/nc`` (Eq. 4.1) is refitted;
+the clusters with ``nm`` neighbours (nm ≥ 2) are the cross areas.  As the seed
+reports (§5.2.3), this fails on the I shape (two cross areas make
+``nm = ns``, so a 3-blob split scores higher) and on trusses, where a
+Gaussian blob cannot follow a bar.
+
+``"default"`` — a deterministic geometric segmentation (no random
+initialisation at all).  It keeps the seed's idea (§4.1: bars are long in one
+direction, cross areas are where bars meet) but measures it directly instead
+of inferring it from a mixture's neighbour counts:
+
+1. rasterise the points (``grid_m``), close gaps of the sparse far field
+   (radius from the measured point spacing), fill small dropout holes;
+2. for every steel cell, measure the chord length of steel through it in
+   ``n_directions`` directions over [0, π) (exact run lengths per direction,
+   vectorised by sorting cells along rotated lines);
+3. a direction is *long* where the chord is ≥ ``long_factor`` × the cell's
+   shortest chord (its local flange width) and ≥ ``long_factor`` × the median
+   flange width; a cell with two or more separate runs of long directions
+   (or long in every direction) lies on two bars at once: a cross area
+   (for an L corner too, where the seed's neighbour count cannot tell);
+4. cross cells → connected cross areas (tiny specks dropped, a margin
+   dilated so bars meeting at a point are separated); the remaining steel
+   splits into connected bars; bar fragments too small to be a bar are merged
+   into the cross area they touch.
+
+Both return per-point labels (−1 = noise) and a kind per cluster.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy import ndimage
+from scipy.spatial import cKDTree
+
+from planners.errors import InvalidInputError
+
+
+@dataclass
+class Segmentation:
+    """Per-point cluster labels (−1 = noise) and the kind of every cluster."""
+
+    labels: np.ndarray  # (M,) int
+    kinds: list[str]  # "bar" | "cross" per cluster id
+    method: str
+    info: dict[str, float | int | list[float]] = field(default_factory=dict)
+
+    @property
+    def n_clusters(self) -> int:
+        return len(self.kinds)
+
+
+@dataclass(frozen=True)
+class Border:
+    """Shared border of two neighbour clusters ``a < b`` (seed §4.1, Fig. 4.2)."""
+
+    a: int
+    b: int
+    length_m: float
+    midpoint: np.ndarray  # (2,) mean of the border points of both sides
+    points: np.ndarray  # indices of the border points (both sides)
+
+
+def point_spacing(uv: np.ndarray) -> float:
+    """Median nearest-neighbour distance (metres) of a 2D cloud."""
+    if len(uv) < 2:
+        return 0.0
+    d, _ = cKDTree(uv).query(uv, k=2)
+    return float(np.median(d[:, 1]))
+
+
+def borders(
+    uv: np.ndarray, labels: np.ndarray, *, eps_m: float, lb_m: float, k: int = 6
+) -> list[Border]:
+    """Neighbour clusters: pairs sharing a border of length ≥ ``lb_m`` (seed §4.1).
+
+    Border points of clusters a and b are the points of either that have a
+    point of the other among their ``k`` nearest neighbours within ``eps_m``
+    (k-nearest rather than a fixed radius, because density falls ~10× with
+    range); the border length is their extent along their principal
+    direction.  Sorted by (a, b).
+    """
+    if len(uv) < 2:
+        return []
+    kk = min(k + 1, len(uv))
+    dist, nb = cKDTree(uv).query(uv, k=kk)
+    src = np.repeat(np.arange(len(uv)), kk - 1)
+    dst = nb[:, 1:].ravel()
+    close = dist[:, 1:].ravel() <= eps_m
+    pairs = np.column_stack([src[close], dst[close]])
+    if len(pairs) == 0:
+        return []
+    la, lb_ = labels[pairs[:, 0]], labels[pairs[:, 1]]
+    cross = (la != lb_) & (la >= 0) & (lb_ >= 0)
+    pairs, la, lb_ = pairs[cross], la[cross], lb_[cross]
+    lo, hi = np.minimum(la, lb_), np.maximum(la, lb_)
+    key = lo.astype(np.int64) * (int(labels.max()) + 1) + hi
+    order = np.argsort(key, kind="stable")
+    key, pairs, lo, hi = key[order], pairs[order], lo[order], hi[order]
+    uniq, starts = np.unique(key, return_index=True)
+    bounds = np.append(starts, len(key))
+    out: list[Border] = []
+    for g in range(len(uniq)):  # one iteration per cluster pair
+        sl = slice(bounds[g], bounds[g + 1])
+        idx = np.unique(pairs[sl].ravel())
+        p = uv[idx]
+        c = p.mean(axis=0)
+        if len(p) >= 2:
+            _, _, vt = np.linalg.svd(p - c, full_matrices=False)
+            proj = (p - c) @ vt[0]
+            length = float(np.ptp(proj))
+        else:
+            length = 0.0
+        if length >= lb_m:
+            out.append(Border(int(lo[sl][0]), int(hi[sl][0]), length, c, idx))
+    return out
+
+
+# ------------------------------------------------------------------ default
+def _disk(radius: int) -> np.ndarray:
+    r = np.arange(-radius, radius + 1)
+    return (r[:, None] ** 2 + r[None, :] ** 2) <= radius * radius + 1e-9
+
+
+_FOUR = np.array([[0, 1, 0], [1, 1, 1], [0, 1, 0]], dtype=bool)
+_EIGHT = np.ones((3, 3), dtype=bool)
+
+
+def _chords(cells: np.ndarray, n_dirs: int) -> np.ndarray:
+    """Chord length (in cells) of the steel run through each cell, per direction.
+
+    ``cells`` (Q, 2) integer coordinates of the steel cells.  For direction θ
+    the cells are bucketed into unit-wide lines ``round(t)`` (t across θ) and
+    sorted along s; a gap wider than 1.5 cells ends a run.  Returns (Q, n_dirs).
+    """
+    q = len(cells)
+    out = np.empty((q, n_dirs))
+    xy = cells.astype(float)
+    for k in range(n_dirs):  # one vectorised pass per direction
+        th = np.pi * k / n_dirs
+        s = xy[:, 0] * np.cos(th) + xy[:, 1] * np.sin(th)
+        t = np.rint(-xy[:, 0] * np.sin(th) + xy[:, 1] * np.cos(th)).astype(np.int64)
+        order = np.lexsort((s, t))
+        ss, tt = s[order], t[order]
+        new = np.ones(q, dtype=bool)
+        new[1:] = (tt[1:] != tt[:-1]) | (np.diff(ss) > 1.5)
+        run = np.cumsum(new) - 1
+        starts = np.nonzero(new)[0]
+        ends = np.append(starts[1:], q) - 1
+        length = ss[ends] - ss[starts] + 1.0
+        out[order, k] = length[run]
+    return out
+
+
+def _bridge(flags: np.ndarray, bridge: int) -> np.ndarray:
+    """Close circular gaps of at most ``bridge`` False entries between True runs."""
+    f = flags.copy()
+    for g in range(1, bridge + 1):
+        for off in range(1, g + 1):
+            f |= np.roll(flags, off, axis=1) & np.roll(flags, off - g - 1, axis=1)
+    return f
+
+
+def _count_runs(flags: np.ndarray) -> np.ndarray:
+    """Number of circular runs of True per row of a (Q, D) boolean array."""
+    return np.count_nonzero(flags & ~np.roll(flags, 1, axis=1), axis=1)
+
+
+def _components(n: int, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Connected-component id of ``n`` nodes joined by edges ``a[i]–b[i]``."""
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    g = coo_matrix((np.ones(len(a), dtype=np.int8), (a, b)), shape=(n, n))
+    return connected_components(g, directed=False)[1]
+
+
+@dataclass
+class _Line:
+    """A straight steel strip: unit direction, offset across it, width, s-range (cells)."""
+
+    d: np.ndarray
+    rho: float
+    width: float
+    s_lo: float
+    s_hi: float
+
+    def coords(self, xy: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        s = xy @ self.d
+        t = xy[:, 1] * self.d[0] - xy[:, 0] * self.d[1]
+        return s, t
+
+
+def _fit_line(xy: np.ndarray, angle: float, widths: np.ndarray) -> _Line:
+    d = np.array([np.cos(angle), np.sin(angle)])
+    line = _Line(d, 0.0, float(np.median(widths)), 0.0, 0.0)
+    s, t = line.coords(xy)
+    line.rho = float(np.median(t))
+    line.s_lo, line.s_hi = float(s.min()), float(s.max())
+    return line
+
+
+def _axis_angles(chords: np.ndarray) -> np.ndarray:
+    """Per cell, the direction of its longest chord, refined by a parabola
+    through the neighbouring directions (radians in [0, π))."""
+    n_dirs = chords.shape[1]
+    k = np.argmax(chords, axis=1)
+    rows = np.arange(len(k))
+    c0 = chords[rows, k]
+    cm = chords[rows, (k - 1) % n_dirs]
+    cp = chords[rows, (k + 1) % n_dirs]
+    denom = cm - 2 * c0 + cp
+    off = np.where(denom < 0, 0.5 * (cm - cp) / np.where(denom < 0, denom, -1.0), 0.0)
+    return (np.pi * (k + np.clip(off, -0.5, 0.5)) / n_dirs) % np.pi
+
+
+def segment_default(
+    uv: np.ndarray,
+    *,
+    grid_m: float = 0.01,
+    n_directions: int = 24,
+    long_factor: float = 2.5,
+    gap_bridge: int = 2,
+    piece_angle_deg: float = 12.0,
+    line_angle_deg: float = 6.0,
+    min_piece_m: float = 0.08,
+    hole_fill_m2: float = 0.01,
+    min_component_m2: float = 0.002,
+    min_bar_length_m: float = 0.15,
+) -> Segmentation:
+    """Deterministic strip-based segmentation (see module docstring, "default")."""
+    uv = np.asarray(uv, dtype=float)
+    if len(uv) < 3:
+        raise InvalidInputError(f"segmentation needs at least 3 points, got {len(uv)}")
+    c = float(grid_m)
+    nn = cKDTree(uv).query(uv, k=2)[0][:, 1]
+    r_close = int(np.clip(np.ceil(1.2 * float(np.percentile(nn, 90)) / c), 1, 5))
+    pad = r_close + 3
+    origin = uv.min(axis=0) - pad * c
+    ij = np.floor((uv - origin) / c).astype(np.int64)
+    shape = tuple(ij.max(axis=0) + pad + 1)
+    occ = np.zeros(shape, dtype=bool)
+    occ[ij[:, 0], ij[:, 1]] = True
+
+    # 1. Close the sparse far field, fill small dropout holes, drop specks.
+    mask = ndimage.binary_closing(occ, structure=_disk(r_close)) | occ
+    holes, n_holes = ndimage.label(~mask)
+    if n_holes:
+        area = np.bincount(holes.ravel(), minlength=n_holes + 1)
+        edge_ids = np.unique(np.concatenate([holes[0], holes[-1], holes[:, 0], holes[:, -1]]))
+        small = area * c * c < hole_fill_m2
+        small[edge_ids] = False
+        small[0] = False
+        mask |= small[holes]
+    comp, n_comp = ndimage.label(mask, structure=_EIGHT)
+    area = np.bincount(comp.ravel(), minlength=n_comp + 1)
+    big = area * c * c >= min_component_m2
+    big[0] = False
+    mask = big[comp]
+    cells = np.argwhere(mask)
+    q = len(cells)
+    if q == 0:
+        raise InvalidInputError("no steel area left after rasterising the points")
+    index = np.full(shape, -1, dtype=np.int64)
+    index[cells[:, 0], cells[:, 1]] = np.arange(q)
+
+    # 2. Directional chords; cells with one run of long directions are bar cells
+    #    with an axis angle.
+    chords = _chords(cells, n_directions)
+    width = chords.min(axis=1)
+    w_med = float(np.median(width))
+    long_dir = chords >= np.maximum(long_factor * width, long_factor * w_med)[:, None]
+    long_dir = _bridge(long_dir, gap_bridge)
+    single = (_count_runs(long_dir) == 1) & ~long_dir.all(axis=1)
+    angle = _axis_angles(chords)
+
+    # 3. Bar pieces: 4-connected single-run cells whose axis angles agree.
+    a_list, b_list = [cells[:0, 0]], [cells[:0, 0]]
+    for di, dj in ((1, 0), (0, 1)):
+        nb = cells + (di, dj)
+        ok = (nb[:, 0] < shape[0]) & (nb[:, 1] < shape[1])
+        src = np.nonzero(ok)[0]
+        dst = index[nb[ok, 0], nb[ok, 1]]
+        keep = dst >= 0
+        src, dst = src[keep], dst[keep]
+        diff = np.abs(np.angle(np.exp(2j * (angle[src] - angle[dst])))) / 2
+        keep = single[src] & single[dst] & (diff < np.deg2rad(piece_angle_deg))
+        a_list.append(src[keep])
+        b_list.append(dst[keep])
+    piece = _components(q, np.concatenate(a_list), np.concatenate(b_list))
+    piece = np.where(single, piece, -1)
+    xy = cells.astype(float)
+    pieces: list[tuple[np.ndarray, _Line]] = []
+    order = np.argsort(piece, kind="stable")
+    ids, starts = np.unique(piece[order], return_index=True)
+    bounds = np.append(starts, q)
+    for k, pid in enumerate(ids):  # per piece (tens to hundreds)
+        if pid < 0:
+            continue
+        sel = order[bounds[k] : bounds[k + 1]]
+        ang = 0.5 * float(np.angle(np.exp(2j * angle[sel]).mean()))
+        line = _fit_line(xy[sel], ang, width[sel])
+        if (line.s_hi - line.s_lo) * c >= max(min_piece_m, 1.5 * line.width * c):
+            pieces.append((sel, line))
+
+    # 4. Pieces → lines, largest first: a piece mostly inside an accepted
+    #    line's strip is part of that line (joined when parallel, otherwise a
+    #    fringe artefact of a crossing and dropped); any other piece starts a
+    #    new line.
+    pieces.sort(key=lambda p: -len(p[0]))
+    line_cells: list[np.ndarray] = []
+    lines: list[_Line] = []
+    for sel, line in pieces:
+        best, best_frac = -1, 0.0
+        for k, other in enumerate(lines):
+            _, t = other.coords(xy[sel])
+            frac = float(np.mean(np.abs(t - other.rho) <= 0.5 * other.width + 1.0))
+            if frac > best_frac:
+                best, best_frac = k, frac
+        if best_frac < 0.5:
+            lines.append(line)
+            line_cells.append(sel)
+        elif abs(float(lines[best].d @ line.d)) >= np.cos(np.deg2rad(line_angle_deg)):
+            merged = np.concatenate([line_cells[best], sel])
+            ang = 0.5 * float(np.angle(np.exp(2j * angle[merged]).mean()))
+            lines[best] = _fit_line(xy[merged], ang, width[merged])
+            line_cells[best] = merged
+
+    # 5. Strip membership of every steel cell; cross cells lie on two or more.
+    #    A strip runs along its line as far as steel continues from its pieces
+    #    (through the crossings at its ends to the far edge of the crossing bar).
+    member = np.zeros((q, len(lines)), dtype=bool)
+    for k, line in enumerate(lines):
+        s, t = line.coords(xy)
+        half = 0.5 * line.width + max(1.0, 0.1 * line.width)
+        in_strip = np.abs(t - line.rho) <= half
+        sbin = np.floor(s).astype(np.int64)
+        lo = int(sbin.min())
+        present = np.zeros(int(sbin.max()) - lo + 2, dtype=bool)
+        present[sbin[in_strip] - lo] = True
+        run = np.cumsum(present & ~np.r_[False, present[:-1]])
+        own = (s >= line.s_lo) & (s <= line.s_hi) & in_strip
+        active = np.zeros(int(run.max()) + 1, dtype=bool)
+        active[run[sbin[own] - lo]] = True
+        member[:, k] = in_strip & active[run[sbin - lo]] & present[sbin - lo]
+    n_member = member.sum(axis=1)
+    cross_cells = np.zeros(shape, dtype=bool)
+    cross_cells[cells[:, 0], cells[:, 1]] = n_member >= 2
+    # A dropout notch can split one crossing in two with a sliver of bar
+    # between: close gaps narrower than about half a flange.
+    r_cross = max(1, round(0.5 * w_med))
+    cross_cells = ndimage.binary_closing(cross_cells, structure=_disk(r_cross)) & mask
+    cross_lab, n_cross = ndimage.label(cross_cells, structure=_EIGHT)
+    if n_cross:
+        area = np.bincount(cross_lab.ravel(), minlength=n_cross + 1)
+        ok = area * c * c >= (0.3 * w_med * c) ** 2
+        ok[0] = False
+        cross_lab, n_cross = ndimage.label(ok[cross_lab], structure=_EIGHT)
+
+    # 6. Bars: cells on exactly one line, split by the cross areas (4-connected).
+    owner = np.where(n_member == 1, np.argmax(member, axis=1), -1)
+    bar_lab = np.zeros(shape, dtype=np.int64)
+    n_bar = 0
+    for k in range(len(lines)):
+        on = np.zeros(shape, dtype=bool)
+        sel = owner == k
+        on[cells[sel, 0], cells[sel, 1]] = True
+        on &= cross_lab == 0
+        lab, n = ndimage.label(on, structure=_FOUR)
+        bar_lab = np.where(lab > 0, lab + n_bar, bar_lab)
+        n_bar += n
+    # Fragments shorter than min_bar_length_m are not bars: they are left
+    # unlabelled and join their neighbour below.
+    if n_bar:
+        bar_cells = np.argwhere(bar_lab > 0)
+        bid = bar_lab[bar_cells[:, 0], bar_cells[:, 1]]
+        srt = np.argsort(bid, kind="stable")
+        starts = np.searchsorted(bid[srt], np.arange(1, n_bar + 1))
+        ends = np.append(starts[1:], len(srt))
+        good = np.zeros(n_bar + 1, dtype=bool)
+        for b in range(n_bar):
+            pts = bar_cells[srt[starts[b] : ends[b]]].astype(float)
+            if len(pts) < 2:
+                continue
+            cen = pts - pts.mean(axis=0)
+            _, _, vt = np.linalg.svd(cen, full_matrices=False)
+            good[b + 1] = float(np.ptp(cen @ vt[0])) * c >= min_bar_length_m
+        bar_lab = np.where(good[bar_lab], bar_lab, 0)
+
+    # 7. Every other steel cell takes the label of the nearest labelled cell.
+    raw = np.where(cross_lab > 0, cross_lab, np.where(bar_lab > 0, n_cross + bar_lab, 0))
+    if np.any(raw > 0):
+        _, (ii, jj) = ndimage.distance_transform_edt(raw == 0, return_indices=True)
+        raw = np.where(mask, raw[ii, jj], 0)
+
+    # Renumber deterministically: cross areas first, then bars, each by (u, v)
+    # of their point centroid.
+    praw = raw[ij[:, 0], ij[:, 1]]
+    present = np.unique(praw[praw > 0])
+    kinds_raw = ["cross" if r <= n_cross else "bar" for r in present]
+    cent = [uv[praw == r].mean(axis=0) for r in present]
+    order_k = sorted(
+        range(len(present)),
+        key=lambda k: (
+            kinds_raw[k] != "cross",
+            round(float(cent[k][0]), 6),
+            round(float(cent[k][1]), 6),
+        ),
+    )
+    remap = np.full(int(praw.max()) + 1, -1, dtype=np.int64)
+    for new, k in enumerate(order_k):
+        remap[present[k]] = new
+    labels = remap[praw]
+    kinds = [kinds_raw[k] for k in order_k]
+    return Segmentation(
+        labels=labels,
+        kinds=kinds,
+        method="default",
+        info={
+            "point_spacing_m": float(np.median(nn)),
+            "closing_radius_cells": r_close,
+            "median_width_m": w_med * c,
+            "n_lines": len(lines),
+            "n_cross": kinds.count("cross"),
+            "n_bar": kinds.count("bar"),
+        },
+    )
+
+
+# ------------------------------------------------------------------- thesis
+def segment_thesis(
+    uv: np.ndarray,
+    *,
+    n_clusters_min: int = 2,
+    n_clusters_max: int = 12,
+    lb_m: float = 0.03,
+    eps_m: float | None = None,
+    max_points: int = 4000,
+    seed: int = 0,
+) -> Segmentation:
+    """Algorithm 3 as printed, with Eq. 4.1 choosing the cluster count (see module doc).
+
+    EM runs on at most ``max_points`` points (an evenly strided subset, as the
+    seed ran it on a down-sampled cloud); all points are then labelled by the
+    fitted mixture.  ``eps_m`` (border contact distance) defaults to 2.5 × the
+    point spacing.
+    """
+    from sklearn.mixture import GaussianMixture
+
+    uv = np.asarray(uv, dtype=float)
+    lo, hi = int(n_clusters_min), int(n_clusters_max)
+    if lo < 1 or hi < lo:
+        raise InvalidInputError(
+            f"thesis cluster range must satisfy 1 <= min <= max, got ({n_clusters_min}, {n_clusters_max})"
+        )
+    if len(uv) < hi:
+        raise InvalidInputError(f"segmentation needs at least {hi} points, got {len(uv)}")
+    eps = 2.5 * point_spacing(uv) if eps_m is None else float(eps_m)
+    stride = max(1, int(np.ceil(len(uv) / max_points)))
+    fit_pts = uv[::stride]
+    centre = uv.mean(axis=0)
+
+    def fit(nc: int) -> np.ndarray:
+        gmm = GaussianMixture(nc, covariance_type="full", random_state=seed, max_iter=200)
+        gmm.fit(fit_pts - centre)
+        return gmm.predict(uv - centre).astype(np.int64)
+
+    scores: list[float] = []
+    degrees: dict[int, np.ndarray] = {}
+    for nc in range(lo, hi + 1):  # Alg. 3 lines 3–12
+        lab = fit(nc)
+        deg = np.zeros(nc, dtype=np.int64)
+        for br in borders(uv, lab, eps_m=eps, lb_m=lb_m):
+            deg[br.a] += 1
+            deg[br.b] += 1
+        srt = np.sort(deg)[::-1]
+        nm = int(srt[0])
+        ns = int(srt[1]) if nc > 1 else 0
+        r = (nm / (nm + ns) if nm + ns else 0.0) + nm / nc  # Eq. 4.1
+        scores.append(r)
+        degrees[nc] = deg
+    best = lo + int(np.argmax(scores))  # first maximum: the smallest count wins ties
+    labels = fit(best)  # Alg. 3 line 14 (same seed: same mixture)
+    deg = degrees[best]
+    nm = int(deg.max())
+    kinds = ["cross" if (d == nm and nm >= 2) else "bar" for d in deg]
+    # Empty mixture components (no point predicted) are dropped and ids compacted.
+    used = np.unique(labels)
+    remap = np.full(best, -1, dtype=np.int64)
+    remap[used] = np.arange(len(used))
+    return Segmentation(
+        labels=remap[labels],
+        kinds=[kinds[u] for u in used],
+        method="thesis",
+        info={"n_clusters": int(best), "ratio_r": scores, "eps_m": eps},
+    )
