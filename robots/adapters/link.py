@@ -32,6 +32,7 @@ import collections
 import contextlib
 import enum
 import logging
+import socket
 import threading
 import time
 from collections.abc import Callable
@@ -374,6 +375,10 @@ class RobotLink:
         """Clear latched robot faults (:class:`FaultFlag` bits); E-stop: use :meth:`clear_estop`."""
         return self._send_sequenced(Clear(faults=int(faults) & ~int(FaultFlag.ESTOP)))
 
+    def ping(self) -> int:
+        """A no-op sequenced frame (CLEAR of no faults): its ACK times the round trip."""
+        return self._send_sequenced(Clear(faults=0))
+
     def estop(self) -> None:
         """Emergency stop, from any state; never raises for a down link.
 
@@ -532,6 +537,7 @@ class RobotLink:
             )
             with contextlib.suppress(Exception):
                 port.reset_input_buffer()  # stale bytes from before this session
+            _disable_nagle(port)
         except Exception as exc:
             with self._lock:
                 self._schedule_retry_locked(f"cannot open {self.url}: {exc}")
@@ -761,6 +767,20 @@ class RobotLink:
         if expected in self._unacked:
             self._gap_resend = (expected, now)
             self._resend_from_locked(expected, now)
+
+
+def _disable_nagle(port: Any) -> None:
+    """Send small frames at once on ``socket://`` ports.
+
+    pyserial's socket handler leaves Nagle's algorithm on, which holds a small
+    write (an E-stop!) while earlier bytes are unacknowledged — tens of ms with
+    delayed ACKs.  (``rfc2217://`` already sets TCP_NODELAY.)  The handler keeps
+    its socket in a private attribute, hence the guarded lookup.
+    """
+    sock = getattr(port, "_socket", None)
+    if isinstance(sock, socket.socket):
+        with contextlib.suppress(OSError):
+            sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
 
 
 def _fault_names(faults: int) -> str:

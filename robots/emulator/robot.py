@@ -426,6 +426,41 @@ class SimRobot:
             self.replies.popitem(last=False)
         return [reply]
 
+    def receive_invalid(self, msg_type: int, seq: int, now: float | None = None) -> list[Message]:
+        """A frame with a valid CRC whose type is unknown or whose payload does not parse.
+
+        A sequenced one is refused ``INVALID`` (consuming its seq, so the host's
+        later frames still get through); anything else is ignored.
+        """
+        now = self.clock() if now is None else now
+        self.advance(now)
+        self.last_host_rx = now
+        if not is_sequenced(msg_type) or not self.session:
+            return []
+        diff = (seq - self.expected_seq) & 0xFFFF
+        if diff >= 0x8000:
+            old = self.replies.get(seq)
+            return [old] if old is not None else []
+        if diff != 0:
+            return [
+                Nak(
+                    ref_type=msg_type,
+                    ref_seq=seq,
+                    reason=NakReason.SEQ_GAP,
+                    expected_seq=self.expected_seq,
+                )
+            ]
+        self.expected_seq = (self.expected_seq + 1) & 0xFFFF
+        reply = Nak(
+            ref_type=msg_type,
+            ref_seq=seq,
+            reason=NakReason.INVALID,
+            expected_seq=self.expected_seq,
+            detail=-1,
+        )
+        self.replies[seq] = reply
+        return [reply]
+
     def _hello(self, msg: Hello, seq: int, now: float) -> list[Message]:
         if msg.major != PROTOCOL_MAJOR:
             self.session = False

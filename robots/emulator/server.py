@@ -454,10 +454,11 @@ class Emulator:
             return
         try:
             msg = decode_message(frame)
+            replies = self.robot.receive(msg, frame.seq, now)
         except MessageError:
             self.stats["frames_rejected"] += 1
-            return
-        for reply in self.robot.receive(msg, frame.seq, now):
+            replies = self.robot.receive_invalid(frame.type, frame.seq, now)
+        for reply in replies:
             self._send(port, reply, now)
         if self.robot.changed:
             # Report immediately after anything that changed (E-stop, completion…).

@@ -318,3 +318,13 @@ def test_profiles_fall_back_and_accept_limits() -> None:
     vm = resolve_profile("denso_vm6083")
     assert vm.n_joints == 6
     assert vm.joint_limits[0, 1] == pytest.approx(math.radians(170))
+
+
+def test_unparseable_sequenced_frame_is_refused_and_consumed() -> None:
+    robot, _ = make()
+    hello(robot)
+    (nak,) = robot.receive_invalid(0x17, 1)  # a command type from a newer minor version
+    assert isinstance(nak, Nak) and nak.reason == NakReason.INVALID and nak.detail == -1
+    assert robot.receive_invalid(0x17, 1) == [nak]  # retransmission: same answer
+    assert isinstance(robot.receive(joints(0), 2)[0], Ack)
+    assert robot.receive_invalid(0x7E, 0) == []  # not sequenced: ignored

@@ -6,6 +6,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+# deadline=None everywhere: a loaded 2-core machine must not fail a property on time.
 from robots.protocol.framing import (
     DELIMITER,
     MAX_ENCODED_FRAME,
@@ -49,6 +50,7 @@ def test_crc_matches_bitwise_reference() -> None:
         assert crc16(data) == ref(data)
 
 
+@settings(deadline=None)
 @given(st.binary(max_size=1000))
 def test_cobs_round_trip_and_no_zero(data: bytes) -> None:
     enc = cobs_encode(data)
@@ -85,6 +87,7 @@ def test_worked_example_from_docs() -> None:
     assert (frame.type, frame.seq, len(frame.payload)) == (0x10, 5, 21)
 
 
+@settings(deadline=None)
 @given(frames_st)
 def test_frame_round_trip(frame: Frame) -> None:
     wire = encode_frame(frame.type, frame.seq, frame.payload)
@@ -93,6 +96,7 @@ def test_frame_round_trip(frame: Frame) -> None:
     assert decode_frame(wire) == frame
 
 
+@settings(deadline=None)
 @given(frames_st, st.data())
 def test_any_single_bit_flip_in_a_frame_is_rejected(frame: Frame, data: st.DataObject) -> None:
     raw = cobs_decode(encode_frame(frame.type, frame.seq, frame.payload)[:-1])
@@ -121,7 +125,7 @@ def test_other_major_version_is_rejected_unless_asked() -> None:
     assert dec.feed(wire) == [] and dec.errors == 1
 
 
-@settings(max_examples=400)
+@settings(max_examples=400, deadline=None)
 @given(st.binary(max_size=2000))
 def test_decoder_never_crashes_and_yields_only_valid_frames(data: bytes) -> None:
     dec = FrameDecoder()
@@ -133,6 +137,7 @@ def test_decoder_never_crashes_and_yields_only_valid_frames(data: bytes) -> None
     assert dec.frames == len(frames)
 
 
+@settings(deadline=None)
 @given(st.lists(st.binary(max_size=300), max_size=20))
 def test_decoder_any_chunks_never_crash(chunks: list[bytes]) -> None:
     dec = FrameDecoder()
@@ -141,6 +146,7 @@ def test_decoder_any_chunks_never_crash(chunks: list[bytes]) -> None:
     assert len(dec._buf) <= MAX_ENCODED_FRAME
 
 
+@settings(deadline=None)
 @given(
     st.lists(st.tuples(st.binary(max_size=60), frames_st), max_size=8),
     st.lists(st.integers(0, 4000), max_size=10),

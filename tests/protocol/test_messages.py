@@ -9,6 +9,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+# deadline=None everywhere: a loaded 2-core machine must not fail a property on time.
 from robots.protocol.framing import Frame, FrameDecoder, ProtocolError
 from robots.protocol.messages import (
     MESSAGE_CLASSES,
@@ -63,7 +64,7 @@ def test_defaults_round_trip(cls: type[Message]) -> None:
     assert frame.seq == 42 and decode_message(frame) == msg
 
 
-@settings(max_examples=300)
+@settings(max_examples=300, deadline=None)
 @given(any_message, st.integers(0, 0xFFFF))
 def test_round_trip_every_message(msg: Message, seq: int) -> None:
     frames = FrameDecoder().feed(encode_message(msg, seq))
@@ -71,7 +72,7 @@ def test_round_trip_every_message(msg: Message, seq: int) -> None:
     assert decode_message(frames[0]) == msg
 
 
-@settings(max_examples=400)
+@settings(max_examples=400, deadline=None)
 @given(st.integers(0, 255), st.binary(max_size=240))
 def test_arbitrary_payload_decodes_or_is_rejected(msg_type: int, payload: bytes) -> None:
     try:
@@ -82,7 +83,7 @@ def test_arbitrary_payload_decodes_or_is_rejected(msg_type: int, payload: bytes)
     assert msg.payload() == payload
 
 
-@settings(max_examples=300)
+@settings(max_examples=300, deadline=None)
 @given(st.binary(max_size=3000))
 def test_byte_stream_to_messages_never_crashes(data: bytes) -> None:
     for frame in FrameDecoder().feed(data):
