@@ -663,6 +663,7 @@ class _Sim:
         d, de = self._lane_error(geo)
         along = self._along(geo)
         self._record(seg_i, STRAIGHT, 0, ROOF, self.x, self.y, self.phi, d, de, along=along)
+        self.t += self.dt  # the stop takes one sample
         lane_len = self.path.segments[seg_i].length_m
         self.lanes.append(
             LaneResult(
@@ -826,6 +827,7 @@ class _Sim:
                 self.x += gap * math.cos(self.phi)
                 self.y += gap * math.sin(self.phi)
         self._record_cb(seg_i, LINE, 0.0, 0.0, dr)
+        self.t += self.dt  # the stop takes one sample
 
     def _run_spin(self, seg_i: int, dr: list[float]) -> None:
         """In-place 90° turn (Eq. 9 wheel speeds) to the next leg's heading,
@@ -850,6 +852,7 @@ class _Sim:
             el, er, gy = self._step(vl, vr)
             self._dr_update(dr, el, er, gy, turning=True)
         self._record_cb(seg_i, SPIN, 0.0, 0.0, dr)
+        self.t += self.dt  # the stop takes one sample
 
     def _dr_update(self, dr: list[float], el: float, er: float, gy: float, turning: bool) -> None:
         """Eq. 10–11 with encoder travel; yaw from the IMU where configured."""
