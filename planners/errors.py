@@ -58,3 +58,7 @@ class NoPlaneError(InfeasibleError):
 
 class MotionPlanningError(InfeasibleError):
     """No collision-free joint path was found within the attempts allowed."""
+
+
+class StreamLengthError(InvalidInputError):
+    """A blasting stream length outside the nozzle's safe window (seed §3.2.1)."""
