@@ -438,6 +438,21 @@ def segment_default(
 
 
 # ------------------------------------------------------------------- thesis
+def ratio_r(degrees: np.ndarray) -> float:
+    """Eq. 4.1: ``r = nm/(nm+ns) + nm/nc`` for the neighbour counts of ``nc`` clusters.
+
+    ``nm``/``ns`` are the most / second most neighbour counts (``ns = 0`` for
+    one cluster; ``r`` has no first term when nobody has a neighbour).
+    """
+    deg = np.sort(np.asarray(degrees, dtype=np.int64))[::-1]
+    nc = len(deg)
+    if nc == 0:
+        return 0.0
+    nm = int(deg[0])
+    ns = int(deg[1]) if nc > 1 else 0
+    return (nm / (nm + ns) if nm + ns else 0.0) + nm / nc
+
+
 def segment_thesis(
     uv: np.ndarray,
     *,
@@ -456,6 +471,7 @@ def segment_thesis(
     point spacing.
     """
     from sklearn.mixture import GaussianMixture
+    from threadpoolctl import threadpool_limits
 
     uv = np.asarray(uv, dtype=float)
     lo, hi = int(n_clusters_min), int(n_clusters_max)
@@ -472,8 +488,11 @@ def segment_thesis(
 
     def fit(nc: int) -> np.ndarray:
         gmm = GaussianMixture(nc, covariance_type="full", random_state=seed, max_iter=200)
-        gmm.fit(fit_pts - centre)
-        return gmm.predict(uv - centre).astype(np.int64)
+        # One BLAS/OpenMP thread: these fits are tiny, and on a shared 2-core
+        # machine thread start-up made each one ~10× slower.
+        with threadpool_limits(limits=1):
+            gmm.fit(fit_pts - centre)
+            return gmm.predict(uv - centre).astype(np.int64)
 
     scores: list[float] = []
     degrees: dict[int, np.ndarray] = {}
@@ -483,11 +502,7 @@ def segment_thesis(
         for br in borders(uv, lab, eps_m=eps, lb_m=lb_m):
             deg[br.a] += 1
             deg[br.b] += 1
-        srt = np.sort(deg)[::-1]
-        nm = int(srt[0])
-        ns = int(srt[1]) if nc > 1 else 0
-        r = (nm / (nm + ns) if nm + ns else 0.0) + nm / nc  # Eq. 4.1
-        scores.append(r)
+        scores.append(ratio_r(deg))
         degrees[nc] = deg
     best = lo + int(np.argmax(scores))  # first maximum: the smallest count wins ties
     labels = fit(best)  # Alg. 3 line 14 (same seed: same mixture)
