@@ -99,3 +99,19 @@ def weld_margin(
         yr = (weld_right + d - x * s) / c
         out = np.minimum(out, np.minimum(hw - np.abs(yl), hw - np.abs(yr)))
     return np.where(x_far >= fp.x_near, out, np.nan)
+
+
+def max_yaw_for_margin(fp: Footprint, weld_half_m: float, safety_m: float) -> float:
+    """Largest yaw ψ (rad) that keeps both welds ``safety_m`` inside the view
+    of a robot on the centreline (d = 0) — where a preview-follow arc ends
+    with its largest yaw.  Bisection on the monotone ``weld_margin(0, ψ)``."""
+    if float(weld_margin(0.0, 0.0, weld_half_m, -weld_half_m, fp)) < safety_m:
+        return 0.0
+    lo, hi = 0.0, math.pi / 2 - 1e-6
+    for _ in range(60):
+        mid = 0.5 * (lo + hi)
+        if float(weld_margin(0.0, mid, weld_half_m, -weld_half_m, fp)) >= safety_m:
+            lo = mid
+        else:
+            hi = mid
+    return lo

@@ -150,7 +150,9 @@ def fig14_tracking(
 ) -> TrackingRun:
     """Centreline tracking from ``(d0, δ0)`` with the preview-follow law as
     printed (no yaw cap unless ``config`` sets one)."""
-    cfg = replace(config or ControllerConfig(max_yaw_rad=None), preview_m=preview_m)
+    cfg = replace(
+        config or ControllerConfig(camera_yaw_cap=False, max_yaw_rad=None), preview_m=preview_m
+    )
     girder = Girder(length_m=lane_length_m, n_ribs=2)
     sim = simulate_lane(
         girder,

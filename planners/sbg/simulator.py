@@ -37,7 +37,7 @@ import numpy as np
 
 from planners.errors import InfeasibleError, InvalidInputError
 from planners.sbg import corner as corner_mod
-from planners.sbg.camera import footprint, weld_margin
+from planners.sbg.camera import footprint, max_yaw_for_margin, weld_margin
 from planners.sbg.girder import ROOF, Girder, WallFrame
 from planners.sbg.path import (
     CORNER_DOWN,
@@ -128,11 +128,15 @@ class ControllerConfig:
     """Controller settings.  ``preview_m`` is Lx (seed: 20 mm); the dead band
     (``d_tol_m``, ``delta_tol_rad``) and the averaging window are chosen.
 
-    ``max_yaw_rad`` (chosen extension, ``None`` = the seed as printed): when
-    the Lx arc would arrive at P turned more than this, the episode uses the
-    smallest longer preview distance that does not (and first turns in
-    place to δ = 0 if |δ| already exceeds it), so a large entry error is
-    corrected without swinging the camera off the welds."""
+    Yaw cap (chosen extension): when the Lx arc would arrive at P turned
+    more than the cap, the episode uses the smallest longer preview distance
+    that does not (and first turns in place to δ = 0 if |δ| already exceeds
+    it), so a large entry error is corrected without swinging the camera off
+    the welds.  The cap is the smaller of ``max_yaw_rad`` and, with
+    ``camera_yaw_cap``, the largest yaw that keeps both welds
+    ``camera_safety_m`` inside the view at P
+    (:func:`planners.sbg.camera.max_yaw_for_margin`).  ``camera_yaw_cap=False``
+    with ``max_yaw_rad=None`` is the seed's law as printed."""
 
     preview_m: float = 0.020
     dt_s: float = 0.05
@@ -145,7 +149,9 @@ class ControllerConfig:
     line_lookahead_m: float = 0.05
     touch_margin_m: float = 0.5e-3
     end_margin_m: float = 0.010
-    max_yaw_rad: float | None = 1.5 * DEG
+    camera_yaw_cap: bool = True
+    camera_safety_m: float = 0.005
+    max_yaw_rad: float | None = None
     dr_yaw: str = "imu_turns"
     corner_profile: str = corner_mod.SMOOTH
     max_segment_s: float = 3000.0
@@ -168,6 +174,8 @@ class ControllerConfig:
             v = getattr(self, name)
             if not math.isfinite(v) or v <= 0:
                 raise InvalidInputError(f"{name} must be > 0, got {v}")
+        if self.camera_safety_m < 0 or not math.isfinite(self.camera_safety_m):
+            raise InvalidInputError(f"camera_safety_m must be ≥ 0, got {self.camera_safety_m}")
         if self.max_yaw_rad is not None and not 0 < self.max_yaw_rad < math.pi / 2:
             raise InvalidInputError(
                 f"max_yaw_rad must be in (0, π/2) or None, got {self.max_yaw_rad}"
@@ -333,6 +341,10 @@ class _Sim:
         self.crossings: list[np.ndarray] = []
         self.x2, self.x3, self.x4 = self.r.sensor_x()
         self.fp = footprint(self.r.camera)
+        caps = [] if cfg.max_yaw_rad is None else [cfg.max_yaw_rad]
+        if cfg.camera_yaw_cap:
+            caps.append(max_yaw_for_margin(self.fp, self.g.lane_width_m / 2.0, cfg.camera_safety_m))
+        self.yaw_cap: float | None = min(caps) if caps else None
         self.last_est = (0.0, 0.0)
         self.travel = [0.0, 0.0]
         self.counts = [0.0, 0.0]
@@ -570,7 +582,7 @@ class _Sim:
                         yaw_est = de_hat
                         episodes += 1
                         window.clear()
-                        cap = cfg.max_yaw_rad
+                        cap = self.yaw_cap
                         arc, arc_left, mode = None, 0.0, ROTATE
                         if cap is None or abs(de_hat) <= cap:
                             lx = cfg.preview_m

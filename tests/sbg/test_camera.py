@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from planners.errors import InvalidInputError
-from planners.sbg.camera import Footprint, footprint, weld_margin
+from planners.sbg.camera import Footprint, footprint, max_yaw_for_margin, weld_margin
 from planners.sbg.robot import CameraParams
 
 
@@ -53,3 +53,12 @@ def test_margin_clipped_by_deck_end() -> None:
     )
     assert m[0] == pytest.approx(0.03)
     assert np.isnan(m[1])
+
+
+def test_max_yaw_for_margin() -> None:
+    fp = Footprint(x_near=0.2, w_near=0.18, x_far=0.7, w_far=0.46)
+    # On the centreline the near edge binds: 0.18 − (0.15 + 0.2 sin ψ)/cos ψ = 0.005.
+    psi = max_yaw_for_margin(fp, 0.15, 0.005)
+    assert (0.15 + 0.2 * math.sin(psi)) / math.cos(psi) == pytest.approx(0.175, abs=1e-9)
+    assert float(weld_margin(0.0, psi, 0.15, -0.15, fp)) == pytest.approx(0.005, abs=1e-9)
+    assert max_yaw_for_margin(fp, 0.15, 0.04) == 0.0  # 30 mm is all there is
