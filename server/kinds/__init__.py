@@ -32,6 +32,7 @@ log = logging.getLogger(__name__)
 
 KIND_MODULES: list[str] = [
     "server.kinds.demo_route",
+    "server.kinds.sbg_inspect",
 ]
 
 _errors: dict[str, str] = {}

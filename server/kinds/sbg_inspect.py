@@ -1,0 +1,462 @@
+"""``sbg.inspect``: full-lane inspection of a steel box girder by the
+magnetic-wheel wall climber (seed 003, Song et al. 2022).
+
+Plans the boustrophedon path over every lane (lane centrelines on the roof,
+90° concave corners, S1–S2–S3 U-turns on the crossbeams) and drives it in the
+closed-loop simulator (trilateration Eq. 5, preview-follow Eq. 6–9, corner law
+Eq. 1–4, dead reckoning Eq. 10–11) under a stated noise model.  The defaults
+plan the seed's experiment on a 3-lane mock-up girder.  See docs/sbg.md.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import asdict, fields
+from typing import Any, Literal
+
+import numpy as np
+from pydantic import BaseModel, Field, create_model
+
+from planners.sbg import (
+    ControllerConfig,
+    Girder,
+    Limits,
+    NoiseModel,
+    plan_inspection,
+    plan_path,
+    sample_girders,
+)
+from planners.sbg import corner as corner_mod
+from planners.sbg import experiments as ex
+from planners.sbg.robot import ClimberParams
+from server.kinds.base import Check, JobContext, KindOutput, PlanKind
+
+DEG = math.pi / 180.0
+_DEFAULT_GIRDER = sample_girders()["seed_lab"]
+
+
+class GirderParams(BaseModel):
+    """Girder bay geometry (metres); defaults: the 3-lane ``seed_lab`` mock-up."""
+
+    length_m: float = Field(
+        _DEFAULT_GIRDER.length_m, gt=0, description="clear length between the crossbeam faces"
+    )
+    n_ribs: int = Field(
+        _DEFAULT_GIRDER.n_ribs, ge=2, le=40, description="U-ribs; lanes = n_ribs − 1"
+    )
+    rib_spacing_m: float = Field(
+        _DEFAULT_GIRDER.rib_spacing_m, gt=0, description="rib centre-to-centre spacing"
+    )
+    rib_top_width_m: float = Field(
+        _DEFAULT_GIRDER.rib_top_width_m, gt=0, description="rib width at the deck"
+    )
+    rib_bottom_width_m: float = Field(
+        _DEFAULT_GIRDER.rib_bottom_width_m, gt=0, description="rib width at its bottom"
+    )
+    rib_depth_m: float = Field(
+        _DEFAULT_GIRDER.rib_depth_m, gt=0, description="rib depth below the deck"
+    )
+    deck_thickness_m: float = Field(
+        _DEFAULT_GIRDER.deck_thickness_m, gt=0, description="roof deck plate"
+    )
+    crossbeam_depth_m: float = Field(
+        _DEFAULT_GIRDER.crossbeam_depth_m, gt=0, description="crossbeam height drawn below the deck"
+    )
+    crossbeam_thickness_m: float = Field(
+        _DEFAULT_GIRDER.crossbeam_thickness_m, gt=0, description="crossbeam plate"
+    )
+    cutout_clearance_m: float = Field(
+        _DEFAULT_GIRDER.cutout_clearance_m,
+        ge=0,
+        description="gap around a rib in the crossbeam cut-out",
+    )
+    edge_width_m: float = Field(
+        _DEFAULT_GIRDER.edge_width_m, ge=0, description="deck drawn beyond the outer rib centres"
+    )
+
+    def build(self) -> Girder:
+        return Girder(**self.model_dump())
+
+
+class RobotOverrides(BaseModel):
+    """Changes to the climber's parameters (robots/sbg_climber/params.toml);
+    ``null`` keeps the file's value."""
+
+    wheel_radius_mm: float | None = Field(None, gt=0, description="R (Eq. 1–2)")
+    track_mm: float | None = Field(
+        None, gt=0, description="B, wheel centre to wheel centre (Eq. 9, 11)"
+    )
+    max_speed_mm_s: float | None = Field(None, gt=0, description="wheel speed cap (Eq. 4: 20 mm/s)")
+    turn_speed_mm_s: float | None = Field(
+        None, gt=0, description="wheel speed of in-place turns (Eq. 9)"
+    )
+    arm_length_mm: float | None = Field(None, gt=0, description="larm (Eq. 1)")
+    arm_l0_mm: float | None = Field(None, gt=0, description="l0 (Eq. 1–2)")
+    arm_dg_mm: float | None = Field(None, gt=0, description="dg (Eq. 1–2)")
+    lift_time_s: float | None = Field(None, gt=0, description="minimum-jerk lift stroke")
+    camera_hfov_deg: float | None = Field(
+        None, gt=0, lt=180, description="camera horizontal field of view"
+    )
+    camera_tilt_deg: float | None = Field(
+        None, gt=0, lt=90, description="camera tilt toward the wall"
+    )
+
+    def build(self) -> ClimberParams:
+        from robots import load_robot
+
+        base = ClimberParams.coerce(load_robot("sbg_climber"))
+        mm = 1e-3
+        ch: dict[str, Any] = {}
+        pairs = {
+            "wheel_radius_mm": ("wheel_radius_m", mm),
+            "track_mm": ("track_m", mm),
+            "max_speed_mm_s": ("max_speed_m_s", mm),
+            "turn_speed_mm_s": ("turn_speed_m_s", mm),
+            "arm_length_mm": ("arm_length_m", mm),
+            "arm_l0_mm": ("arm_l0_m", mm),
+            "arm_dg_mm": ("arm_dg_m", mm),
+            "lift_time_s": ("lift_time_s", 1.0),
+        }
+        for key, (name, scale) in pairs.items():
+            v = getattr(self, key)
+            if v is not None:
+                ch[name] = v * scale
+        cam = base.camera
+        if self.camera_hfov_deg is not None or self.camera_tilt_deg is not None:
+            from dataclasses import replace
+
+            cam = replace(
+                cam,
+                hfov_rad=cam.hfov_rad
+                if self.camera_hfov_deg is None
+                else self.camera_hfov_deg * DEG,
+                tilt_rad=cam.tilt_rad
+                if self.camera_tilt_deg is None
+                else self.camera_tilt_deg * DEG,
+            )
+        return base.with_(camera=cam, **ch)
+
+
+_NOISE_HELP = {
+    "range_sigma_mm": "white noise of each laser range reading",
+    "wall_waviness_mm": "amplitude of a sinusoidal waviness of the rib webs",
+    "wall_wavelength_m": "wavelength of that waviness",
+    "wheel_gain_sigma": "per-wheel constant speed error (fraction)",
+    "wheel_speed_sigma": "per-sample wheel speed noise (fraction)",
+    "encoder_scale_sigma": "common wheel-radius (distance) error (fraction)",
+    "encoder_differential_sigma": "left/right encoder scale mismatch after calibration (fraction)",
+    "encoder_resolution_mm": "encoder count resolution",
+    "turn_slip_mean": "fraction of an in-place turn lost to skid",
+    "turn_slip_sigma": "per-run spread of that fraction",
+    "turn_slip_jitter": "per-sample jitter of that fraction",
+    "turn_centre_sigma_mm": "offset of the skid-steer turn centre from Oc",
+    "gyro_bias_dps": "residual gyro bias (deg/s)",
+    "gyro_bias_walk_dps_rts": "gyro bias random walk (deg/s/√s)",
+    "gyro_arw_deg_rts": "gyro angle random walk (deg/√s)",
+    "gyro_scale_sigma": "gyro scale-factor error (fraction)",
+    "corner_lateral_sigma_mm": "lateral shift across a corner crossing",
+    "corner_yaw_sigma_deg": "yaw kick across a corner crossing",
+    "init_d_sigma_mm": "initial offset from the first lane's centreline",
+    "init_delta_sigma_deg": "initial yaw deviation",
+}
+_NOISE_DEFAULT = NoiseModel()
+NoiseParams = create_model(
+    "NoiseParams",
+    __doc__="Noise model of the simulation (planners.sbg.NoiseModel; all chosen, see docs/sbg.md).",
+    **{
+        f.name: (
+            float,
+            Field(
+                getattr(_NOISE_DEFAULT, f.name), ge=0, description=_NOISE_HELP.get(f.name, f.name)
+            ),
+        )
+        for f in fields(NoiseModel)
+    },
+)
+
+
+class SbgInspectParams(BaseModel):
+    """Girder, robot, operator choices, controller and noise of one inspection plan."""
+
+    girder: GirderParams = Field(default_factory=GirderParams, description="girder bay geometry")
+    robot: RobotOverrides = Field(
+        default_factory=RobotOverrides, description="changes to the climber's parameters"
+    )
+    start_lane: int = Field(0, ge=0, description="lane the inspection starts in (0 = lowest Y)")
+    direction: Literal[1, -1] = Field(
+        1, description="+1 sweeps toward higher lane numbers first, −1 lower"
+    )
+    start_end: Literal[0, 1] = Field(
+        0, description="crossbeam the first lane starts from (0: X = 0, 1: X = length)"
+    )
+    preview_mm: float = Field(20.0, ge=0, le=2000, description="preview distance Lx (seed: 20 mm)")
+    camera_yaw_cap: bool = Field(
+        True,
+        description="cap a correction's yaw so the welds stay in view (false + null max_yaw_deg: the seed's law as printed)",
+    )
+    camera_safety_mm: float = Field(5.0, ge=0, description="weld margin the camera yaw cap keeps")
+    max_yaw_deg: float | None = Field(
+        None, gt=0, lt=90, description="fixed yaw cap of a correction (null: none)"
+    )
+    dr_yaw: Literal["imu_turns", "encoder", "imu"] = Field(
+        "imu_turns",
+        description="U-turn heading: IMU in turns (seed), encoders only (baseline), IMU throughout",
+    )
+    corner_profile: Literal["smooth", "printed"] = Field(
+        "smooth", description="corner wheel/arm profile"
+    )
+    noise: NoiseParams = Field(default_factory=NoiseParams, description="noise model")  # type: ignore[valid-type]
+    seed: int = Field(0, ge=0, description="random seed of the simulation")
+    sweep_lx_mm: list[float] = Field(
+        default_factory=lambda: [0.0, 10.0, 20.0, 40.0, 80.0],
+        max_length=12,
+        description="preview distances (mm) of the Lx sweep shown in the console (empty: no sweep)",
+    )
+    sweep_seeds: int = Field(2, ge=1, le=8, description="seeds per Lx in the sweep")
+    final_d_limit_mm: float = Field(
+        0.33, gt=0, description="check: final |d| at a lane end (seed §4.2)"
+    )
+    final_delta_limit_deg: float = Field(
+        0.06, gt=0, description="check: final |δ| at a lane end (seed §4.2)"
+    )
+    uturn_yaw_limit_deg: float = Field(
+        1.5, gt=0, description="check: |yaw| on reaching the roof after a U-turn"
+    )
+    camera_margin_limit_mm: float = Field(
+        0.0, description="check: weld margin inside the camera view"
+    )
+    pitch_accel_limit_deg_s2: float = Field(
+        20.0, gt=0, description="check: pitch acceleration while crossing"
+    )
+
+
+def _noise(p: SbgInspectParams) -> NoiseModel:
+    return NoiseModel(**p.noise.model_dump())  # type: ignore[attr-defined]
+
+
+def _config(p: SbgInspectParams) -> ControllerConfig:
+    return ControllerConfig(
+        preview_m=p.preview_mm * 1e-3,
+        camera_yaw_cap=p.camera_yaw_cap,
+        camera_safety_m=p.camera_safety_mm * 1e-3,
+        max_yaw_rad=None if p.max_yaw_deg is None else p.max_yaw_deg * DEG,
+        dr_yaw=p.dr_yaw,
+        corner_profile=p.corner_profile,
+    )
+
+
+def validate(p: SbgInspectParams) -> None:
+    """Cheap: the geometry must fit and the path must plan (HTTP 422 if not)."""
+    plan_path(
+        p.girder.build(),
+        p.robot.build(),
+        start_lane=p.start_lane,
+        direction=p.direction,
+        start_end=p.start_end,
+    )
+    _noise(p).validate()
+    _config(p).validate()
+
+
+def _clean(v: Any) -> Any:
+    """JSON-safe copy: non-finite floats become ``None``, arrays lists."""
+    if isinstance(v, dict):
+        return {str(k): _clean(x) for k, x in v.items()}
+    if isinstance(v, list | tuple):
+        return [_clean(x) for x in v]
+    if isinstance(v, np.ndarray):
+        return _clean(v.tolist())
+    if isinstance(v, np.integer):
+        return int(v)
+    if isinstance(v, float | np.floating):
+        return float(v) if math.isfinite(v) else None
+    return v
+
+
+def _thin(n: int, k: int = 400) -> np.ndarray:
+    return np.unique(np.linspace(0, n - 1, min(n, k)).astype(int))
+
+
+def run(p: SbgInspectParams, ctx: JobContext) -> KindOutput:
+    girder, robot = p.girder.build(), p.robot.build()
+    noise, cfg = _noise(p), _config(p)
+    limits = Limits(
+        final_d_m=p.final_d_limit_mm * 1e-3,
+        final_delta_rad=p.final_delta_limit_deg * DEG,
+        uturn_yaw_rad=p.uturn_yaw_limit_deg * DEG,
+        camera_margin_m=p.camera_margin_limit_mm * 1e-3,
+        pitch_accel_deg_s2=p.pitch_accel_limit_deg_s2,
+    )
+    sweep_share = 0.25 if p.sweep_lx_mm else 0.0
+
+    def prog(f: float, stage: str) -> None:
+        ctx.progress(f * (1.0 - sweep_share), stage)
+
+    plan = plan_inspection(
+        girder,
+        robot,
+        start_lane=p.start_lane,
+        direction=p.direction,
+        start_end=p.start_end,
+        preview_m=cfg.preview_m,
+        noise=noise,
+        config=cfg,
+        seed=p.seed,
+        limits=limits,
+        progress=prog,
+    )
+    sim, path = plan.sim, plan.path
+    A = sim.arrays
+    plots: list[dict[str, Any]] = []
+    # Fig. 14 style: d and δ over time on the first lane.
+    seg0 = next(ln.segment for ln in sim.lanes)
+    i0 = np.flatnonzero((A["segment"] == seg0) & np.isfinite(A["d_m"]))
+    if i0.size:
+        k = i0[_thin(i0.size)]
+        plots.append(
+            {
+                "title": f"Fig. 14 style: lane {sim.lanes[0].lane} tracking error",
+                "x": (A["t_s"][k] - A["t_s"][i0[0]]).tolist(),
+                "x_label": "s",
+                "y_label": "d (mm), δ (deg)",
+                "series": {
+                    "d_mm": (A["d_m"][k] * 1e3).tolist(),
+                    "delta_deg": np.degrees(A["delta_rad"][k]).tolist(),
+                },
+            }
+        )
+    # Fig. 12 style: pitch over the first crossing, and the as-printed law beside it.
+    if sim.crossing_pitch:
+        th = sim.crossing_pitch[0]
+        printed = corner_mod.cross_corner(robot, profile=corner_mod.PRINTED, dt=sim.dt_s).theta
+        n = max(len(th), len(printed))
+        t = np.arange(n) * sim.dt_s
+
+        def pad(a: np.ndarray) -> np.ndarray:
+            return np.r_[a, np.full(n - len(a), a[-1])]
+
+        k = _thin(n)
+        plots.append(
+            {
+                "title": "Fig. 12 style: pitch while crossing a corner",
+                "x": t[k].tolist(),
+                "x_label": "s",
+                "y_label": "deg",
+                "series": {
+                    f"{cfg.corner_profile} (this plan)": np.degrees(pad(th))[k].tolist(),
+                    "Eq. 4 as printed": np.degrees(pad(printed))[k].tolist(),
+                },
+            }
+        )
+    # Camera margin over the lanes.
+    im = np.flatnonzero(np.isfinite(A["margin_m"]))
+    if im.size:
+        k = im[_thin(im.size)]
+        plots.append(
+            {
+                "title": "weld margin in the camera view (lanes)",
+                "x": A["t_s"][k].tolist(),
+                "x_label": "s",
+                "y_label": "mm",
+                "series": {"margin_mm": (A["margin_m"][k] * 1e3).tolist()},
+            }
+        )
+    sweep_rows: list[dict[str, Any]] = []
+    best = None
+    if p.sweep_lx_mm:
+        ctx.progress(1.0 - sweep_share, "Lx sweep")
+        values = sorted({float(v) for v in p.sweep_lx_mm})
+        sw = ex.lx_sweep(
+            [v * 1e-3 for v in values], range(p.sweep_seeds), robot, noise=noise, time_limit_s=300.0
+        )
+        best = sw.best_preview_m
+        for r in sw.rows:
+            sweep_rows.append(
+                {
+                    "preview_mm": r.preview_m * 1e3,
+                    "finished_fraction": r.finished_fraction,
+                    "settle_time_mean_s": r.settle_time_mean_s,
+                    "final_d_mean_mm": r.final_d_mean_m * 1e3,
+                    "final_delta_mean_deg": math.degrees(r.final_delta_mean_rad),
+                }
+            )
+        plots.append(
+            {
+                "title": f"Lx sweep (Fig. 14 set-up, {p.sweep_seeds} seeds): time until |d| stays < 1 mm",
+                "x": values,
+                "x_label": "Lx mm",
+                "y_label": "s (missing: never)",
+                "series": {"settle_time_s": [r["settle_time_mean_s"] for r in sweep_rows]},
+            }
+        )
+    ctx.progress(0.99, "storing")
+    segs = [
+        {
+            "kind": s.kind,
+            "lane": s.lane,
+            "to_lane": s.to_lane,
+            "wall": s.wall,
+            "length_m": s.length_m,
+            "turn_deg": math.degrees(s.turn_rad),
+            "start": s.start.tolist(),
+            "end": s.end.tolist(),
+        }
+        for s in path.segments
+    ]
+    seg_index = np.concatenate([np.full(len(s.points), i) for i, s in enumerate(path.segments)])
+    result = {
+        "girder": asdict(girder),
+        "robot": {k: v for k, v in asdict(robot).items() if k != "camera"},
+        "lane_order": path.lane_order,
+        "lane_dirs": {str(k): v for k, v in path.lane_dirs.items()},
+        "segments": segs,
+        "total_length_m": path.total_length_m,
+        "lanes": [asdict(ln) for ln in sim.lanes],
+        "corners": [asdict(c) for c in sim.corners],
+        "uturns": [asdict(u) for u in sim.uturns],
+        "commands": [asdict(c) for c in plan.commands],
+        "noise": asdict(noise),
+        "plots": plots,
+        "lx_sweep": {"rows": sweep_rows, "best_preview_mm": None if best is None else best * 1e3},
+    }
+    arrays = {
+        "path_xyz": np.concatenate([s.points for s in path.segments]),
+        "path_segment": seg_index.astype(np.int32),
+        "traj_t": A["t_s"],
+        "traj_pos": A["pos"],
+        "traj_quat": A["quat"],
+        "traj_segment": A["segment"].astype(np.int32),
+        "traj_mode": A["mode"].astype(np.int8),
+        "traj_pitch": A["pitch_rad"],
+        "traj_d": A["d_m"],
+        "traj_delta": A["delta_rad"],
+        "traj_wheels": np.stack([A["v_left"], A["v_right"], A["v_front"], A["v_rear"]], axis=1),
+        "traj_arm": A["arm_rad"],
+        "traj_margin": A["margin_m"],
+    }
+    checks = [
+        Check(name=c.name, passed=c.passed, value=c.value, limit=c.limit, message=c.message)
+        for c in plan.checks
+    ]
+    metrics = {k: float(v) for k, v in plan.metrics.items() if math.isfinite(v)}
+    if best is not None:
+        metrics["lx_sweep_best_mm"] = best * 1e3
+    return KindOutput(result=_clean(result), arrays=arrays, checks=checks, metrics=metrics)
+
+
+def _draw(ctx: Any, plan: Any) -> None:
+    from server.scene.sbg_inspect import draw
+
+    draw(ctx, plan)
+
+
+KIND = PlanKind(
+    name="sbg.inspect",
+    title="Box girder: full-lane inspection by the wall climber",
+    description=__doc__ or "",
+    params_model=SbgInspectParams,
+    run=run,
+    robot="sbg_climber",
+    draw=_draw,
+    validate=validate,
+)
