@@ -56,6 +56,8 @@ def cmd_serve(args: argparse.Namespace) -> int:
         port=settings.port,
         log_level=settings.log_level,
         ws="websockets-sansio",
+        # Event streams and scene sockets never end on their own: bound the wait.
+        timeout_graceful_shutdown=3,
     )
     return 0
 

@@ -27,7 +27,12 @@ def live_server(settings: Settings) -> Iterator[tuple[str, dict[str, str], objec
     """Yields ``(base_url, tokens_by_role, app)`` while the server runs."""
     app = create_app(settings)
     config = uvicorn.Config(
-        app, host="127.0.0.1", port=settings.port, log_level="warning", ws="websockets-sansio"
+        app,
+        host="127.0.0.1",
+        port=settings.port,
+        log_level="warning",
+        ws="websockets-sansio",
+        timeout_graceful_shutdown=2,
     )
     server = uvicorn.Server(config)
     thread = threading.Thread(target=server.run, daemon=True)
