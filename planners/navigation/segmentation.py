@@ -202,12 +202,38 @@ class _Line:
 
 
 def _fit_line(xy: np.ndarray, angle: float, widths: np.ndarray) -> _Line:
+    """Line through cells ``xy``: direction by trimmed PCA when the cells are
+    long (≥ 3 widths: a long baseline beats the per-cell angles, quantised to
+    the chord directions; trimming drops cells of a crossing bar caught at a
+    piece's end), else the given mean axis ``angle``; offset = median."""
+    width = float(np.median(widths))
     d = np.array([np.cos(angle), np.sin(angle)])
-    line = _Line(d, 0.0, float(np.median(widths)), 0.0, 0.0)
+    keep = np.ones(len(xy), dtype=bool)
+    for _ in range(3):
+        if np.count_nonzero(keep) < 3:
+            break
+        sub = xy[keep]
+        cen = sub - sub.mean(axis=0)
+        _, _, vt = np.linalg.svd(cen, full_matrices=False)
+        if np.ptp(cen @ vt[0]) < 3.0 * width:
+            break
+        d = vt[0] if float(vt[0] @ d) >= 0 else -vt[0]
+        t = xy[:, 1] * d[0] - xy[:, 0] * d[1]
+        keep = np.abs(t - np.median(t[keep])) <= 0.5 * width + 1.0
+    line = _Line(d, 0.0, width, 0.0, 0.0)
     s, t = line.coords(xy)
-    line.rho = float(np.median(t))
+    line.rho = float(np.median(t[keep])) if np.any(keep) else float(np.median(t))
     line.s_lo, line.s_hi = float(s.min()), float(s.max())
     return line
+
+
+def _one_strip(xy: np.ndarray, angle: np.ndarray, widths: np.ndarray) -> tuple[_Line, bool]:
+    """Fit one line to ``xy``; True when ≥ 90 % of the cells lie in its strip."""
+    ang = 0.5 * float(np.angle(np.exp(2j * angle).mean()))
+    line = _fit_line(xy, ang, widths)
+    _, t = line.coords(xy)
+    inside = np.abs(t - line.rho) <= 0.5 * line.width + max(1.0, 0.15 * line.width)
+    return line, bool(np.mean(inside) >= 0.9)
 
 
 def _axis_angles(chords: np.ndarray) -> np.ndarray:
@@ -243,17 +269,31 @@ def segment_default(
     if len(uv) < 3:
         raise InvalidInputError(f"segmentation needs at least 3 points, got {len(uv)}")
     c = float(grid_m)
-    nn = cKDTree(uv).query(uv, k=2)[0][:, 1]
-    r_close = int(np.clip(np.ceil(1.2 * float(np.percentile(nn, 90)) / c), 1, 5))
-    pad = r_close + 3
+    # Local point spacing: mean distance to the 3 nearest neighbours.  Density
+    # falls ~10× with range, so gaps are closed with a radius per point.
+    dk = cKDTree(uv).query(uv, k=min(4, len(uv)))[0]
+    nn = dk[:, 1]
+    local = dk[:, 1:].mean(axis=1)
+    r_pt = np.clip(np.ceil(1.2 * local / c), 1, 6).astype(np.int64)
+    pad = int(r_pt.max()) + 3
     origin = uv.min(axis=0) - pad * c
     ij = np.floor((uv - origin) / c).astype(np.int64)
     shape = tuple(ij.max(axis=0) + pad + 1)
     occ = np.zeros(shape, dtype=bool)
     occ[ij[:, 0], ij[:, 1]] = True
 
-    # 1. Close the sparse far field, fill small dropout holes, drop specks.
-    mask = ndimage.binary_closing(occ, structure=_disk(r_close)) | occ
+    # 1. Close the gaps of the sparse far field (each radius class on its own
+    #    points: a closing is extensive, so the union keeps every point), fill
+    #    small dropout holes, drop specks.
+    mask = occ.copy()
+    for r in np.unique(r_pt):
+        sub = np.zeros(shape, dtype=bool)
+        sel = r_pt == r
+        sub[ij[sel, 0], ij[sel, 1]] = True
+        # Neighbouring points of smaller radius still bridge the gap edges.
+        sub |= occ & ndimage.binary_dilation(sub, structure=_disk(int(r)))
+        mask |= ndimage.binary_closing(sub, structure=_disk(int(r)))
+    r_close = int(np.median(r_pt))
     holes, n_holes = ndimage.label(~mask)
     if n_holes:
         area = np.bincount(holes.ravel(), minlength=n_holes + 1)
@@ -310,7 +350,13 @@ def segment_default(
         sel = order[bounds[k] : bounds[k + 1]]
         ang = 0.5 * float(np.angle(np.exp(2j * angle[sel]).mean()))
         line = _fit_line(xy[sel], ang, width[sel])
-        if (line.s_hi - line.s_lo) * c >= max(min_piece_m, 1.5 * line.width * c):
+        # A piece must be long and span most of its own flange width: a sliver
+        # along a ragged (far, noisy) edge is not a bar of its own.
+        _, t = line.coords(xy[sel])
+        thick = float(np.subtract(*np.percentile(t, [95, 5]))) + 1.0
+        if (line.s_hi - line.s_lo) * c >= max(min_piece_m, 1.5 * line.width * c) and (
+            thick >= 0.5 * line.width
+        ):
             pieces.append((sel, line))
 
     # 4. Pieces → lines, largest first: a piece mostly inside an accepted
@@ -335,6 +381,25 @@ def segment_default(
             ang = 0.5 * float(np.angle(np.exp(2j * angle[merged]).mean()))
             lines[best] = _fit_line(xy[merged], ang, width[merged])
             line_cells[best] = merged
+    # Two lines fitted to the same bar from distant pieces (a long chord) can
+    # both survive; merge near-parallel lines when one strip explains both.
+    merged_any = True
+    while merged_any:
+        merged_any = False
+        for i in range(len(lines)):
+            for j in range(i + 1, len(lines)):
+                if abs(float(lines[i].d @ lines[j].d)) < np.cos(np.deg2rad(2 * line_angle_deg)):
+                    continue
+                cells_ij = np.concatenate([line_cells[i], line_cells[j]])
+                line, ok = _one_strip(xy[cells_ij], angle[cells_ij], width[cells_ij])
+                if not ok:
+                    continue
+                lines[i], line_cells[i] = line, cells_ij
+                del lines[j], line_cells[j]
+                merged_any = True
+                break
+            if merged_any:
+                break
 
     # 5. Strip membership of every steel cell; cross cells lie on two or more.
     #    A strip runs along its line as far as steel continues from its pieces
