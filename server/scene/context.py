@@ -43,6 +43,7 @@ class DrawContext:
     gui: Any
     root: str
     propose: Callable[[dict[str, Any]], str]
+    server: Any = None  # the viser.ViserServer (ViserUrdf needs it, not the SceneApi)
     lock: threading.RLock = field(default_factory=threading.RLock)
     animations: list[Animation] = field(default_factory=list)
     gui_handles: list[Any] = field(default_factory=list)
@@ -56,10 +57,18 @@ class DrawContext:
         frame = self.scene.add_frame(f"{self.root}/{name}", show_axes=False)
         if root_pose is not None:
             set_frame_pose(frame, root_pose)
-        return ViserUrdf(self.scene, Path(model.urdf_path), root_node_name=f"{self.root}/{name}")
+        target = self.server if self.server is not None else _SceneOnly(self.scene)
+        return ViserUrdf(target, Path(model.urdf_path), root_node_name=f"{self.root}/{name}")
 
     def animate(self, duration_s: float, update: Callable[[float], None]) -> None:
         self.animations.append(Animation(max(float(duration_s), 1e-3), update))
+
+
+@dataclass
+class _SceneOnly:
+    """What ``ViserUrdf`` reads from its target: the ``scene`` attribute."""
+
+    scene: Any
 
 
 def set_frame_pose(handle: Any, T: np.ndarray) -> None:

@@ -54,22 +54,8 @@ def _lift_off_walls(p: np.ndarray, length: float) -> np.ndarray:
 
 
 def _add_robot(ctx: DrawContext) -> Any:
-    """The climber's URDF under ``{root}/robot``.  ``DrawContext.add_urdf``
-    hands viser's ``SceneApi`` to ``ViserUrdf``, which wants an object with a
-    ``.scene``; fall back to building it here when that fails."""
-    try:
-        return ctx.add_urdf("sbg_climber", "robot")
-    except AttributeError:
-        from pathlib import Path
-        from types import SimpleNamespace
-
-        from viser.extras import ViserUrdf
-
-        from robots import load_robot
-
-        ctx.scene.add_frame(f"{ctx.root}/robot", show_axes=False)
-        path = Path(load_robot("sbg_climber").urdf_path)
-        return ViserUrdf(SimpleNamespace(scene=ctx.scene), path, root_node_name=f"{ctx.root}/robot")
+    """The climber's URDF under ``{root}/robot``."""
+    return ctx.add_urdf("sbg_climber", "robot")
 
 
 def draw(ctx: DrawContext, plan: Any) -> None:

@@ -109,6 +109,7 @@ class SceneService:
             gui=self._server.gui,
             root="/plan",
             propose=lambda patch: self._on_propose(plan.id, patch),
+            server=self._server,
             lock=self._lock,
         )
         try:
