@@ -17,9 +17,11 @@ outside a long edge read as inside (measured in the tests and the benchmark).
 ``"angular"`` (default) — the same centre comparison, but against the
 boundary *along the ray* C→P: the two boundary vertices bracketing P's angle
 about C, and the radius of the edge between them at that angle.  For a
-polygon star-shaped about C (which :func:`planners.navigation.boundaries.star_polygon`
-guarantees) this is an exact point-in-polygon test, with one
-``searchsorted`` per cluster instead of an edge loop per point.
+polygon star-shaped about C (vertices ordered by angle by
+:func:`planners.navigation.boundaries.star_polygon`, with C inside) this is an
+exact point-in-polygon test, with one ``searchsorted`` per cluster instead of
+an edge loop per point; a boundary whose centre lies outside it (every
+angular gap must be < π) falls back to ray casting.
 
 :func:`point_in_polygon` is an independent exact even–odd ray-casting test
 used to cross-check both.
@@ -57,6 +59,7 @@ class _Star:
     ang: np.ndarray  # sorted vertex angles about the centre
     pts: np.ndarray  # vertices in that order
     tree: cKDTree
+    star: bool  # centre strictly inside (every angular gap < π): the ray test is exact
 
 
 class BoundarySet:
@@ -72,7 +75,11 @@ class BoundarySet:
             d = poly - c
             ang = np.arctan2(d[:, 1], d[:, 0])
             order = np.argsort(ang, kind="stable")
-            self.stars.append(_Star(c, ang[order], poly[order], cKDTree(poly)))
+            sa = ang[order]
+            gaps = np.diff(np.append(sa, sa[:1] + 2 * np.pi)) if len(sa) else np.array([2 * np.pi])
+            self.stars.append(
+                _Star(c, sa, poly[order], cKDTree(poly), bool(len(sa) >= 3 and gaps.max() < np.pi))
+            )
         self.centres = np.array([s.centre for s in self.stars]) if self.stars else np.zeros((0, 2))
 
     def __len__(self) -> int:
@@ -89,6 +96,10 @@ class BoundarySet:
         k = len(s.pts)
         if k < 3:
             return np.zeros(len(p), dtype=bool)
+        if not s.star:
+            # Centre outside its own boundary (a bent GMM blob): no single ray
+            # crossing to compare with; use the exact crossing count instead.
+            return point_in_polygon(p, s.pts)
         d = p - s.centre
         phi = np.arctan2(d[:, 1], d[:, 0])
         # Bracketing vertices (cyclic): ang[i-1] <= phi < ang[i].
@@ -104,7 +115,8 @@ class BoundarySet:
         t = np.where(np.abs(den) > 1e-15, ca / np.where(np.abs(den) > 1e-15, den, 1.0), 0.5)
         hit = ea + np.clip(t, 0.0, 1.0)[:, None] * (eb - ea)
         radius = hit[:, 0] * u[:, 0] + hit[:, 1] * u[:, 1]
-        return np.hypot(d[:, 0], d[:, 1]) < radius
+        ds = np.hypot(d[:, 0], d[:, 1])
+        return (ds < radius) | (ds == 0.0)  # the centre itself is inside a star
 
     def _inside_thesis(self, s: _Star, p: np.ndarray, m: int) -> np.ndarray:
         if len(s.pts) == 0:

@@ -147,8 +147,16 @@ class EdgePlanner:
             return np.array([start, goal]), 0
         ta, tb = _Tree(start, 256), _Tree(goal, 256)
         a_is_start = True
+        buffer: list[np.ndarray] = []
         for it in range(1, self.max_iter + 1):
-            q = sampler()
+            # Grow towards free samples only: on a narrow bar most raw samples
+            # are off the steel, and extending towards them mostly fails.  The
+            # samples are checked 256 at a time (one vectorised PIBC call).
+            if not buffer:
+                batch = np.array([sampler() for _ in range(256)])
+                ok = self.valid(batch)
+                buffer = list(batch[ok][::-1]) if ok.any() else list(batch[:32][::-1])
+            q = buffer.pop()
             status, ja = self._extend(ta, q)
             if status != "trapped":
                 status_b, jb = self._connect(tb, ta.q[ja])
@@ -190,8 +198,9 @@ def corridor_sampler(
     lateral_sigma_m: float,
     margin_m: float,
 ) -> Callable[[], np.ndarray]:
-    """Half the samples near the segment a→b with yaw near its direction
-    (either way), half uniform in its bounding box (± margin) with any yaw."""
+    """40 % of the samples near the segment a→b with yaw near its direction
+    (either way), 30 % around its end points with any yaw (a turn happens at a
+    vertex: a crossing), 30 % uniform in its bounding box (± margin)."""
     d = b - a
     yaw = float(np.arctan2(d[1], d[0])) if np.hypot(*d) > 1e-9 else 0.0
     normal = np.array([-np.sin(yaw), np.cos(yaw)])
@@ -199,10 +208,14 @@ def corridor_sampler(
     hi = np.maximum(a, b) + margin_m
 
     def sample() -> np.ndarray:
-        if rng.random() < 0.5:
+        u = rng.random()
+        if u < 0.4:
             t = rng.uniform(-0.2, 1.2)
             p = a + t * d + rng.normal(0.0, lateral_sigma_m) * normal
             y = yaw + (np.pi if rng.random() < 0.5 else 0.0) + rng.normal(0.0, 0.35)
+        elif u < 0.7:
+            p = (a if rng.random() < 0.5 else b) + rng.normal(0.0, 0.5 * margin_m, 2)
+            y = rng.uniform(-np.pi, np.pi)
         else:
             p = rng.uniform(lo, hi)
             y = rng.uniform(-np.pi, np.pi)
