@@ -41,6 +41,7 @@ import threading
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
+from typing import Any
 
 from robots.adapters.link import (
     CONNECTED_STATES,
@@ -430,8 +431,7 @@ class Streamer:
         if self._state in TERMINAL_STATES:
             return
         self._set_state(ExecState(outcome.value))
-        if self._on_done is not None:
-            self._on_done(outcome)
+        self._call(self._on_done, outcome)
 
     def _to_fault(self, state: ExecState, fault: StreamFault) -> None:
         if self._state in TERMINAL_STATES:
@@ -440,8 +440,7 @@ class Streamer:
         self._waiting_link = state == ExecState.INTERRUPTED
         log.warning("run %s %s: %s", self.run_id, state.value, fault)
         self._set_state(state)
-        if self._on_fault is not None:
-            self._on_fault(fault)
+        self._call(self._on_fault, fault)
 
     # --- link events ----------------------------------------------------------------------
 
@@ -497,9 +496,17 @@ class Streamer:
                 # The robot finished it earlier; its reports will carry last_done ≥ index.
                 log.info("run %s: command %s already done on the robot", self.run_id, msg.index)
 
+    def _call(self, callback: Callable[[Any], None] | None, arg: object) -> None:
+        """Run a mirror/notification callback; its failure is logged, not fatal."""
+        if callback is None:
+            return
+        try:
+            callback(arg)
+        except Exception:
+            log.exception("run %s: callback %r failed", self.run_id, callback)
+
     def _on_report(self, report: State) -> None:
-        if self._on_state is not None:
-            self._on_state(report)
+        self._call(self._on_state, report)
         if self._waiting_link:
             if self._state == ExecState.PENDING and self.link.connected:
                 self._begin()

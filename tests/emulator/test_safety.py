@@ -27,8 +27,24 @@ from .helpers import STOPPED
 FUNCTIONAL_BOUND_S = 2.0
 
 
-def long_program(n: int = 40, step_s: float = 0.5) -> Program:
-    return Program(tuple(JointMove((0.02 * (k + 1),) * 6, step_s) for k in range(n)))
+def long_program(
+    n: int = 40, step_s: float = 0.5, long_index: int = 0, long_s: float = 5.0
+) -> Program:
+    """Way-points of ``step_s``, except command ``long_index`` which takes ``long_s``.
+
+    Tests act while the long one executes, so "the robot is moving" holds for
+    seconds whatever the machine's load, instead of depending on a race.
+    """
+    return Program(
+        tuple(
+            JointMove((0.02 * (k + 1),) * 6, long_s if k == long_index else step_s)
+            for k in range(n)
+        )
+    )
+
+
+def executing(index: int):
+    return lambda e: e.robot.current is not None and e.robot.current.msg.index == index
 
 
 def test_watchdog_stops_motion_when_heartbeats_stop() -> None:
@@ -60,14 +76,14 @@ def test_heartbeats_keep_a_long_motion_going() -> None:
 def test_watchdog_on_a_silent_serial_line() -> None:
     """pty: the host cannot see the cable go; the robot's watchdog stops it, and the
     run resumes from the last acknowledged command after the line comes back."""
-    prog = long_program(12, 0.3)
+    prog = long_program(12, 0.3, long_index=2, long_s=4.5)  # 1.5 s of wall time
     persisted: list[int] = []
     with (
         Emulator("generic", listen=None, pty=True, time_scale=3) as emu,
         RobotLink(emu.pty_path) as link,
     ):
         with Streamer(prog, link, run_id=8, on_ack=persisted.append) as s:
-            assert emu.wait_for(lambda e: e.robot.last_done >= 2, 10)
+            assert emu.wait_for(executing(2), 10)
             emu.drop_link(silence_s=1.5)
             assert s.wait(STOPPED, 10) == ExecState.INTERRUPTED
             assert [e.reason for e in emu.stop_events()] == ["watchdog"]
@@ -78,12 +94,12 @@ def test_watchdog_on_a_silent_serial_line() -> None:
 
 
 def test_estop_mid_motion_then_clear_and_resume() -> None:
-    prog = long_program(20, 0.3)
+    prog = long_program(20, 0.3, long_index=2, long_s=4.5)  # 1.5 s of wall time
     persisted: list[int] = []
     done: list[Outcome] = []
     with Emulator("generic", time_scale=3) as emu, RobotLink(emu.url) as link:
         with Streamer(prog, link, run_id=21, on_ack=persisted.append, on_done=done.append) as s:
-            assert emu.wait_for(lambda e: e.robot.last_done >= 1 and e.robot.current, 10)
+            assert emu.wait_for(executing(2), 10)
             t0 = time.monotonic()
             s.estop()
             assert emu.wait_for(lambda e: e.robot.stops, FUNCTIONAL_BOUND_S)
@@ -108,10 +124,10 @@ def test_estop_mid_motion_then_clear_and_resume() -> None:
 
 
 def test_estop_while_the_link_is_reconnecting() -> None:
-    prog = long_program(20, 0.3)
+    prog = long_program(20, 0.3, long_index=0, long_s=20.0)
     with Emulator("generic") as emu, RobotLink(emu.url) as link:
         with Streamer(prog, link, run_id=5) as s:
-            assert emu.wait_for(lambda e: e.robot.current is not None, 10)
+            assert emu.wait_for(executing(0), 10)
             emu.drop_link(silence_s=2.5)  # the cable is pulled, TCP stays open
             assert link.wait_for(lambda lk: not lk.connected, 5)
             assert link.state in (LinkState.DISCONNECTED, LinkState.HANDSHAKING)
@@ -120,7 +136,7 @@ def test_estop_while_the_link_is_reconnecting() -> None:
         # Meanwhile the robot's watchdog stopped it; once the line is back the
         # latched E-stop is the first thing it hears.
         assert emu.wait_for(lambda e: e.robot.faults & FaultFlag.ESTOP, 10)
-        assert next(e.reason for e in emu.stop_events()) == "watchdog"
+        assert emu.stop_events()[0].reason == "watchdog", emu.stop_events()
         assert link.wait_for(lambda lk: lk.connected and lk.last_report.mode == Mode.ESTOP, 5)
 
 
