@@ -378,6 +378,11 @@ def plan_navigation(
             seed=p.seed,
         )
     brs = borders(uv, seg.labels, eps_m=p.border_eps_m, lb_m=p.border_lb_m)
+    if p.segmentation == "default":
+        # "Their two ends connect two cross areas" (§4.1): with every crossing
+        # found, two bars that touch beside a narrow-angle crossing are not
+        # neighbours, so the route turns in the crossing, not on a corner.
+        brs = [b for b in brs if seg.kinds[b.a] != seg.kinds[b.b]]
     timings["segmentation_s"] = time.perf_counter() - t
 
     t = time.perf_counter()

@@ -13,8 +13,8 @@ TEST_SEEDS = (0, 1, 2)
 #: A small inspection crawler that fits the 60–150 mm synthetic flanges; the
 #: ARA's own footprint (0.68 × 0.16 m) fits none of them.
 SMALL_ROBOT = {
-    "footprint_length_m": 0.12,
-    "footprint_width_m": 0.03,
+    "footprint_length_m": 0.08,
+    "footprint_width_m": 0.025,
     "footprint_center_x_m": 0.0,
 }
 
