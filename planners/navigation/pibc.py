@@ -60,6 +60,8 @@ class _Star:
     pts: np.ndarray  # vertices in that order
     tree: cKDTree
     star: bool  # centre strictly inside (every angular gap < π): the ray test is exact
+    lo: np.ndarray  # bounding box of the boundary
+    hi: np.ndarray
 
 
 class BoundarySet:
@@ -78,7 +80,15 @@ class BoundarySet:
             sa = ang[order]
             gaps = np.diff(np.append(sa, sa[:1] + 2 * np.pi)) if len(sa) else np.array([2 * np.pi])
             self.stars.append(
-                _Star(c, sa, poly[order], cKDTree(poly), bool(len(sa) >= 3 and gaps.max() < np.pi))
+                _Star(
+                    c,
+                    sa,
+                    poly[order],
+                    cKDTree(poly),
+                    bool(len(sa) >= 3 and gaps.max() < np.pi),
+                    poly.min(axis=0) if len(poly) else c,
+                    poly.max(axis=0) if len(poly) else c,
+                )
             )
         self.centres = np.array([s.centre for s in self.stars]) if self.stars else np.zeros((0, 2))
 
@@ -139,11 +149,22 @@ class BoundarySet:
         if len(self.stars) == 0 or len(p) == 0:
             return out
         n = min(int(n_centres), len(self.stars))
-        d2 = ((p[:, None, :] - self.centres[None]) ** 2).sum(axis=2)  # Alg. 6 l. 6
-        near = np.argpartition(d2, n - 1, axis=1)[:, :n] if n < len(self.stars) else None
-        for k, s in enumerate(self.stars):  # per cluster, all points at once
-            sel = np.arange(len(p)) if near is None else np.nonzero(np.any(near == k, axis=1))[0]
+        if n < len(self.stars):
+            d2 = ((p[:, None, :] - self.centres[None]) ** 2).sum(axis=2)  # Alg. 6 l. 6
+            near = np.argpartition(d2, n - 1, axis=1)[:, :n].ravel()  # l. 7
+            # Group the (point, cluster) candidates by cluster in one sort.
+            order = np.argsort(near, kind="stable")
+            owner = np.repeat(np.arange(len(p)), n)[order]
+            bounds = np.searchsorted(near[order], np.arange(len(self.stars) + 1))
+        for k, s in enumerate(self.stars):  # per cluster, all its points at once
+            sel = owner[bounds[k] : bounds[k + 1]] if n < len(self.stars) else np.arange(len(p))
             sel = sel[~out[sel]]
+            if method == "angular":
+                # Exact test: only points inside the boundary's bounding box can
+                # be inside it, so skip the rest before the ray computation.
+                q = p[sel]
+                box = np.all((q >= s.lo) & (q <= s.hi), axis=1)
+                sel = sel[box]
             if len(sel) == 0:
                 continue
             if method == "angular":

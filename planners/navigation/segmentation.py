@@ -140,8 +140,11 @@ def _chords(cells: np.ndarray, n_dirs: int) -> np.ndarray:
     """Chord length (in cells) of the steel run through each cell, per direction.
 
     ``cells`` (Q, 2) integer coordinates of the steel cells.  For direction θ
-    the cells are bucketed into unit-wide lines ``round(t)`` (t across θ) and
-    sorted along s; a gap wider than 1.5 cells ends a run.  Returns (Q, n_dirs).
+    the cells are bucketed into digital lines ``round(t / max(|cos θ|, |sin θ|))``
+    (t across θ: one cell per column or row, 8-connected, like a naive digital
+    line) and sorted along s; a gap wider than 1.5 cells ends a run (neighbours
+    on a digital line are at most √2 apart, a missing cell makes it ≥ 1.8).
+    Returns (Q, n_dirs).
     """
     q = len(cells)
     out = np.empty((q, n_dirs))
@@ -149,7 +152,8 @@ def _chords(cells: np.ndarray, n_dirs: int) -> np.ndarray:
     for k in range(n_dirs):  # one vectorised pass per direction
         th = np.pi * k / n_dirs
         s = xy[:, 0] * np.cos(th) + xy[:, 1] * np.sin(th)
-        t = np.rint(-xy[:, 0] * np.sin(th) + xy[:, 1] * np.cos(th)).astype(np.int64)
+        band = max(abs(np.cos(th)), abs(np.sin(th)))
+        t = np.rint((-xy[:, 0] * np.sin(th) + xy[:, 1] * np.cos(th)) / band).astype(np.int64)
         order = np.lexsort((s, t))
         ss, tt = s[order], t[order]
         new = np.ones(q, dtype=bool)
