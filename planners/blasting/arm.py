@@ -1,0 +1,328 @@
+"""Arm motion for blasting (seed §3.4.1, §4.2.4): spot poses, IK selection,
+approximate IK when no exact solution exists, way-points and speed limits.
+
+* The nozzle is a fixed transform along the flange z axis (length 100 mm);
+  the blast axis is the flange z axis and points into the surface, so the
+  flange stands ``stream + nozzle`` off the spot along the surface normal.
+  The blast is axisymmetric, so the roll about the axis is free: J6 keeps
+  its start value and never moves (the seed's Fig. 4.15 shows large J6 swings
+  at turns because its poses fixed the roll).
+* Every spot gets all closed-form solutions; the branch per spot is chosen by
+  dynamic programming over the visiting order for the least joint change
+  (§3.4.1.1 — the seed picks the least change greedily; DP is the optimum of
+  the same criterion), skipping solutions in collision.
+* No exact solution (out of reach, joint limits, collision): the nozzle is
+  first tilted up to 45° off the normal (§3.2.1 allows 45–90° to the
+  surface), then :func:`approximate_ik` minimises Eq. 3.11
+  (αp·Perr + αo·Oerr, Eq. 3.9–3.10) with bounded least squares from several
+  starts — a stronger optimiser than the seed's GA (:func:`ga_ik`, kept for
+  comparison) — and the residual is reported.
+* Way-points: m = 100 joint-space way-points from the start pose to the first
+  spot; straight Cartesian moves between spots at ``step`` spacing, each
+  way-point taking the solution nearest the previous one.  Segment times are
+  stretched so that no joint exceeds the speed limit (Eq. 3.12–3.13).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.optimize import least_squares, minimize
+
+from planners.blasting.collision import Obstacles, Spheroids, clearance
+
+ALPHA_P = 1.0  # Eq. 3.11 weight per metre of position error (chosen)
+ALPHA_O = 0.05  # Eq. 3.11 weight per unit of |a − n| (chosen: 1° ≈ 0.9 mm)
+
+
+# -- geometry of the tool and the force-field ellipsoids --------------------------
+def link_spheroids(
+    robot, q: np.ndarray, nozzle_m: float, kp: tuple[float, ...], foci: tuple[tuple[int, int], ...]
+) -> Spheroids:
+    """Spheroids (T,E) covering the links for joint vectors q (T,6): foci are
+    D-H frame origins (index −1 = nozzle tip); major axis L·Kp (§3.4.2)."""
+    F = robot.frames(np.atleast_2d(q))  # (T,7,4,4)
+    org = F[:, :, :3, 3]
+    tip = org[:, -1] + nozzle_m * F[:, -1, :3, 2]
+    pts = np.concatenate([org, tip[:, None]], axis=1)  # index 7 = tip
+    f1 = np.stack([pts[:, i if i >= 0 else 7] for i, _ in foci], axis=1)
+    f2 = np.stack([pts[:, j if j >= 0 else 7] for _, j in foci], axis=1)
+    L = np.linalg.norm(f2 - f1, axis=-1)
+    cf = L * np.asarray(kp, dtype=float)
+    return Spheroids(f1, f2, cf)
+
+
+def tilted_axes(axis: np.ndarray, tilts_deg: np.ndarray, n_azimuth: int = 8) -> np.ndarray:
+    """Unit axes tilted from ``axis`` by each tilt toward ``n_azimuth``
+    directions: (len(tilts)·n_azimuth, 3)."""
+    axis = axis / np.linalg.norm(axis)
+    helper = np.array([1.0, 0.0, 0.0]) if abs(axis[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
+    e1 = np.cross(axis, helper)
+    e1 /= np.linalg.norm(e1)
+    e2 = np.cross(axis, e1)
+    t = np.deg2rad(np.asarray(tilts_deg, dtype=float))[:, None]
+    ph = np.linspace(0, 2 * np.pi, n_azimuth, endpoint=False)[None, :]
+    d = np.cos(ph)[..., None] * e1 + np.sin(ph)[..., None] * e2
+    out = np.cos(t)[..., None] * axis + np.sin(t)[..., None] * d
+    return out.reshape(-1, 3)
+
+
+# -- IK selection -------------------------------------------------------------------
+def _change(qa: np.ndarray, qb: np.ndarray) -> np.ndarray:
+    """Least-change score: largest joint move (sets the time under a uniform
+    speed limit) plus a small Euclidean tie-breaker."""
+    d = np.abs(qa - qb)
+    return d.max(axis=-1) + 1e-3 * np.linalg.norm(d, axis=-1)
+
+
+def choose_branches(Q: np.ndarray, ok: np.ndarray, q_start: np.ndarray) -> np.ndarray:
+    """Viterbi over spots in visiting order: the branch index per spot that
+    minimises Σ least-change(q_i, q_{i+1}) from ``q_start`` (§3.4.1.1's
+    criterion, optimised over the whole path).  Every spot needs at least
+    one valid branch (the planner substitutes tilted or approximate
+    solutions first)."""
+    N, K, _ = Q.shape
+    if N == 0:
+        return np.zeros(0, dtype=int)
+    if not ok.any(axis=1).all():
+        raise ValueError("every spot needs at least one valid IK branch")
+    cost = np.where(ok[0], _change(Q[0], q_start), np.inf)
+    back = np.zeros((N, K), dtype=int)
+    for i in range(1, N):
+        tot = cost[:, None] + _change(Q[i - 1][:, None, :], Q[i][None, :, :])  # (K,K)
+        back[i] = np.argmin(tot, axis=0)
+        cost = np.where(ok[i], tot[back[i], np.arange(K)], np.inf)
+    out = np.empty(N, dtype=int)
+    out[-1] = int(np.argmin(cost))
+    for i in range(N - 1, 0, -1):
+        out[i - 1] = back[i, out[i]]
+    return out
+
+
+# -- approximate IK (Eq. 3.9–3.11) -------------------------------------------------------
+@dataclass
+class ApproxIK:
+    q: np.ndarray
+    pos_err_m: float
+    axis_err_deg: float
+    objective: float
+
+
+def _axis_residual(robot, q5: np.ndarray, q6: float, p: np.ndarray, a: np.ndarray) -> np.ndarray:
+    q = np.append(q5, q6)
+    T = robot.frames(q)[-1]
+    return np.concatenate([ALPHA_P * (T[:3, 3] - p), ALPHA_O * (T[:3, 2] - a)])
+
+
+def _axis_jacobian(robot, q5: np.ndarray, q6: float) -> np.ndarray:
+    """d[αp·p; αo·z]/dq1..5 from the geometric Jacobian (dz/dqi = ωi × z)."""
+    q = np.append(q5, q6)
+    F = robot.frames(q)
+    J = robot.jacobian(q)[:, :5]
+    z = F[-1, :3, 2]
+    return np.vstack([ALPHA_P * J[:3], ALPHA_O * np.cross(J[3:].T, z).T])
+
+
+def approximate_ik(
+    robot, p: np.ndarray, a: np.ndarray, q_ref: np.ndarray, *, seed: int = 0
+) -> ApproxIK:
+    """Joint vector minimising Eq. 3.11 (αp·|P_t − P_e| + αo·|a − n_t|) inside
+    the limits for flange position ``p`` and blast axis ``a``: the seed's GA
+    (:func:`ga_ik`) gives one start, ``q_ref`` and the closed-form solutions
+    of the target pulled back into reach give others, and each is refined by
+    bounded least squares on the residual vector (analytic Jacobian; exact
+    solutions end here) and then L-BFGS-B on Eq. 3.11 itself.  The result is
+    never worse than the GA's."""
+    lo, hi = robot.joint_limits[:5, 0], robot.joint_limits[:5, 1]
+    q6 = float(q_ref[5])
+    ga = ga_ik(robot, p, a, q_ref, population=60, seed=seed)
+    starts = [ga.q[:5], np.clip(q_ref[:5], lo, hi)]
+    base_p = robot.base[:3, 3]
+    for s in (1.0, 0.97, 0.93, 0.85):
+        Q, ok = robot.ik_axis((base_p + s * (p - base_p))[None], a[None], q_ref)
+        starts += [Q[0, k, :5] for k in np.nonzero(ok[0])[0]]
+        if ok.any():
+            break
+
+    def res(x: np.ndarray) -> np.ndarray:
+        return _axis_residual(robot, x, q6, p, a)
+
+    def jac(x: np.ndarray) -> np.ndarray:
+        return _axis_jacobian(robot, x, q6)
+
+    def eq311(x: np.ndarray) -> float:
+        r = res(x)
+        return float(np.linalg.norm(r[:3]) + np.linalg.norm(r[3:]))
+
+    def f_and_grad(x: np.ndarray) -> tuple[float, np.ndarray]:
+        r, J = res(x), jac(x)
+        g = np.zeros(5)
+        f = 0.0
+        for sl in (slice(0, 3), slice(3, 6)):
+            n = np.linalg.norm(r[sl])
+            f += n
+            if n > 1e-15:
+                g += (r[sl] / n) @ J[sl]
+        return f, g
+
+    best_x, best_f = ga.q[:5], ga.objective
+    for s0 in starts[:4]:
+        x0 = np.clip(s0, lo + 1e-9, hi - 1e-9)
+        r = least_squares(
+            res, x0, jac=jac, bounds=(lo, hi), xtol=1e-12, ftol=1e-12, gtol=1e-12, max_nfev=60
+        )
+        x, f = r.x, eq311(r.x)
+        if f > 1e-9:
+            r2 = minimize(
+                f_and_grad, x, jac=True, method="L-BFGS-B", bounds=list(zip(lo, hi, strict=True))
+            )
+            if r2.fun < f:
+                x, f = r2.x, float(r2.fun)
+        if f < best_f:
+            best_x, best_f = x, f
+        if best_f < 1e-9:
+            break
+    q = np.append(best_x, q6)
+    T = robot.frames(q)[-1]
+    pe = float(np.linalg.norm(T[:3, 3] - p))
+    ae = float(np.degrees(np.arccos(np.clip(T[:3, 2] @ a, -1.0, 1.0))))
+    return ApproxIK(q, pe, ae, ALPHA_P * pe + ALPHA_O * float(np.linalg.norm(T[:3, 2] - a)))
+
+
+def ga_ik(
+    robot,
+    p: np.ndarray,
+    a: np.ndarray,
+    q_ref: np.ndarray,
+    *,
+    population: int = 100,
+    max_generations: int = 300,
+    patience: int = 10,
+    crossover: float = 0.9,
+    mutation: float = 0.1,
+    seed: int = 0,
+) -> ApproxIK:
+    """The seed's GA-amended IK (§3.4.1.2) for comparison: real-coded joints
+    q1..q5 inside the limits, fitness Eq. 3.11, rank roulette, blend
+    crossover 0.9, Gaussian mutation 0.1, ≤ 300 generations, stop after 10
+    without improvement (one elite kept)."""
+    rng = np.random.default_rng(seed)
+    lo, hi = robot.joint_limits[:5, 0], robot.joint_limits[:5, 1]
+    P = population
+
+    def fitness(X: np.ndarray) -> np.ndarray:
+        q = np.concatenate([X, np.full((len(X), 1), q_ref[5])], axis=1)
+        T = robot.frames(q)[:, -1]
+        return ALPHA_P * np.linalg.norm(T[:, :3, 3] - p, axis=1) + ALPHA_O * np.linalg.norm(
+            T[:, :3, 2] - a, axis=1
+        )
+
+    X = rng.uniform(lo, hi, size=(P, 5))
+    f = fitness(X)
+    best_i = int(np.argmin(f))
+    best, best_f = X[best_i].copy(), float(f[best_i])
+    w = np.arange(P, 0, -1, dtype=float)
+    w /= w.sum()
+    stale = 0
+    for _ in range(max_generations):
+        ranked = np.argsort(f)
+        par = X[ranked[rng.choice(P, size=P, p=w)]]
+        child = par.copy()
+        cross = rng.random(P // 2) < crossover
+        lam = rng.random((P // 2, 1))
+        A, B = par[0::2][: P // 2], par[1::2][: P // 2]
+        child[0::2][: P // 2] = np.where(cross[:, None], lam * A + (1 - lam) * B, A)
+        child[1::2][: P // 2] = np.where(cross[:, None], (1 - lam) * A + lam * B, B)
+        mut = rng.random((P, 5)) < mutation
+        child = np.where(mut, child + rng.normal(scale=0.05 * (hi - lo), size=(P, 5)), child)
+        child = np.clip(child, lo, hi)
+        child[0] = best
+        X, f = child, fitness(child)
+        i = int(np.argmin(f))
+        if f[i] < best_f - 1e-12:
+            best, best_f, stale = X[i].copy(), float(f[i]), 0
+        else:
+            stale += 1
+            if stale >= patience:
+                break
+    q = np.append(best, q_ref[5])
+    T = robot.frames(q)[-1]
+    pe = float(np.linalg.norm(T[:3, 3] - p))
+    ae = float(np.degrees(np.arccos(np.clip(T[:3, 2] @ a, -1.0, 1.0))))
+    return ApproxIK(q, pe, ae, best_f)
+
+
+# -- trajectory -------------------------------------------------------------------------
+def follow_line(
+    robot, P: np.ndarray, A: np.ndarray, q_prev: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """Joint vectors along way-point poses (flange P (M,3), axes A (M,3)),
+    each the valid closed-form solution nearest the previous one; returns q
+    (M,6) and ok (M,) (False where no solution exists: q repeats)."""
+    M = len(P)
+    if M == 0:
+        return np.zeros((0, 6)), np.zeros(0, dtype=bool)
+    Q, ok = robot.ik_axis(P, A, q_prev)
+    out = np.empty((M, 6))
+    good = np.zeros(M, dtype=bool)
+    q = q_prev
+    for k in range(M):
+        if ok[k].any():
+            # re-express the wrap-around joints near the running q
+            cand = Q[k]
+            sc = np.where(ok[k], _change(cand, q), np.inf)
+            j = int(np.argmin(sc))
+            qn = cand[j].copy()
+            for jj in (3,):
+                d = (qn[jj] - q[jj] + np.pi) % (2 * np.pi) - np.pi
+                alt = q[jj] + d
+                if robot.joint_limits[jj, 0] <= alt <= robot.joint_limits[jj, 1]:
+                    qn[jj] = alt
+            q = qn
+            good[k] = True
+        out[k] = q
+    return out, good
+
+
+def joint_path(q0: np.ndarray, q1: np.ndarray, n: int) -> np.ndarray:
+    """n way-points linear in joint space from q0 (excluded) to q1 (included)."""
+    t = np.arange(1, n + 1)[:, None] / n
+    return q0 + t * (q1 - q0)
+
+
+def time_stamps(q: np.ndarray, dt_nominal: np.ndarray, v_max: float) -> np.ndarray:
+    """Eq. 3.12–3.13: each segment takes its nominal time unless some joint
+    would exceed ``v_max`` (rad/s); then the time is stretched to
+    |Δθ|/v_max.  Returns time stamps (T,) from 0."""
+    if len(q) < 2:
+        return np.zeros(len(q))
+    dq = np.abs(np.diff(q, axis=0)).max(axis=1)
+    dt = np.maximum(np.asarray(dt_nominal, dtype=float), dq / v_max)
+    return np.concatenate([[0.0], np.cumsum(dt)])
+
+
+def waypoint_clearance(
+    robot,
+    q: np.ndarray,
+    obstacles: Obstacles,
+    nozzle_m: float,
+    kp,
+    foci,
+    chunk: int = 4096,
+    *,
+    horizon: float = np.inf,
+    sign_only: bool = False,
+    margin: float = 0.0,
+) -> np.ndarray:
+    """Signed clearance (m) of the force-field ellipsoids per way-point (see
+    :func:`planners.blasting.collision.clearance` for ``horizon``/``sign_only``)."""
+    if obstacles.empty:
+        return np.full(len(q), np.inf)
+    out = np.empty(len(q))
+    for s in range(0, len(q), chunk):
+        S = link_spheroids(robot, q[s : s + chunk], nozzle_m, kp, foci)
+        out[s : s + chunk] = clearance(
+            S, obstacles, horizon=horizon, sign_only=sign_only, margin=margin
+        )
+    return out

@@ -1,0 +1,165 @@
+"""Arm motion (seed §3.4.1, Eq. 3.9–3.13) and the whole plan_blasting chain
+on the seed's under-deck scenes."""
+
+from __future__ import annotations
+
+import itertools
+
+import numpy as np
+import pytest
+
+from planners.blasting import arm as A
+from planners.blasting import plan_blasting, scenes
+from planners.errors import CancelledError, InvalidInputError, StreamLengthError
+from robots import load_robot
+
+ROBOT = load_robot("denso_vm6083").with_base(scenes.robot_base())
+
+
+def test_eq_3_12_3_13_time_stretching():
+    q = np.deg2rad(np.array([[0, 0], [3, 0], [3, 60], [3, 61]], dtype=float))
+    t = A.time_stamps(q, np.array([1.0, 1.0, 1.0]), np.deg2rad(30))
+    np.testing.assert_allclose(np.diff(t), [1.0, 2.0, 1.0])  # only the 60° step is stretched
+    v = np.abs(np.diff(q, axis=0)).max(axis=1) / np.diff(t)
+    assert v.max() <= np.deg2rad(30) + 1e-12
+
+
+def test_branch_dp_matches_brute_force():
+    rng = np.random.default_rng(1)
+    for _ in range(5):
+        Q = rng.normal(size=(4, 8, 6))
+        ok = rng.random((4, 8)) < 0.6
+        ok[:, 0] = True
+        q0 = rng.normal(size=6)
+        got = A.choose_branches(Q, ok, q0)
+
+        def cost(seq, Q=Q, q0=q0):
+            c = A._change(Q[0, seq[0]], q0)
+            return c + sum(A._change(Q[i, seq[i]], Q[i - 1, seq[i - 1]]) for i in range(1, 4))
+
+        best = min(
+            (
+                s
+                for s in itertools.product(range(8), repeat=4)
+                if all(ok[i, s[i]] for i in range(4))
+            ),
+            key=cost,
+        )
+        assert cost(got) == pytest.approx(cost(best))
+
+
+def test_approximate_ik_exact_when_reachable_and_beats_the_seed_ga():
+    q = np.deg2rad([20, -10, 100, 15, 40, 0])
+    T = ROBOT.fk(q)
+    p, a = T[:3, 3], T[:3, 2]
+    q_ref = np.deg2rad([0, -75, 160, 0, 30, 0])
+    ap = A.approximate_ik(ROBOT, p, a, q_ref)
+    assert ap.pos_err_m < 1e-7 and ap.axis_err_deg < 1e-5
+    # out of reach: the residual is at least the distance beyond the reach
+    far = ROBOT.base[:3, 3] + np.array([1.2, 0.0, 0.6])
+    ap = A.approximate_ik(ROBOT, far, np.array([1.0, 0, 0]), q_ref)
+    shoulder = ROBOT.frames(np.zeros(6))[1, :3, 3]
+    reach = 0.385 + np.hypot(0.1, 0.445) + 0.09
+    assert ap.pos_err_m >= np.linalg.norm(far - shoulder) - reach - 1e-3
+    ga = A.ga_ik(ROBOT, far, np.array([1.0, 0, 0]), q_ref, seed=0)
+    assert ap.objective <= ga.objective + 1e-9
+    assert ROBOT.within_limits(ap.q) and ROBOT.within_limits(ga.q)
+
+
+@pytest.fixture(scope="module")
+def s1_plan():
+    return plan_blasting(
+        scenes.bridge_surface(1),
+        disc_radius_m=scenes.DISC_RADIUS_M,
+        robot=ROBOT,
+        obstacles=scenes.bridge_obstacles(),
+    )
+
+
+def test_surface_1_plan_passes_every_check(s1_plan):
+    p = s1_plan
+    failed = [c["message"] for c in p.checks() if not c["passed"]]
+    assert not failed, failed
+    assert p.coverage >= 0.99 and p.overspray <= 0.005
+    assert p.within_joint_limits
+    assert p.max_joint_speed_rad_s <= np.deg2rad(30) * (1 + 1e-9)
+    assert p.min_clearance_m > 0 and np.isfinite(p.clearance).all()
+    assert np.all(np.diff(p.times) >= 0)
+    assert sorted(np.r_[p.order, p.skipped]) == list(range(len(p.centers)))
+
+
+def test_trajectory_structure_and_nozzle_on_the_spots(s1_plan):
+    p = s1_plan
+    q = p.joint_trajectory
+    # start pose, then 100 approach way-points ending on the first spot (§4.2.4)
+    np.testing.assert_allclose(np.degrees(q[0]), [0, -75, 160, 0, 30, 0])
+    assert (p.segment[1:101] == 1).all() and p.waypoint_spot[100] == p.order[0]
+    assert (q[:, 5] == 0).all()  # the free roll: J6 never moves
+    # at every spot the nozzle axis (flange z) passes through the disc centre
+    # with the tip one stream length away (300 mm, or 100 mm for the small
+    # fill discs) — independent FK check
+    at = np.nonzero(p.waypoint_spot >= 0)[0]
+    spots = p.waypoint_spot[at]
+    assert set(spots) == set(p.order)
+    F = ROBOT.frames(q[at])[:, -1]
+    tip = F[:, :3, 3] + 0.1 * F[:, :3, 2]
+    target = tip + (p.stream_mm[spots] / 1000.0)[:, None] * F[:, :3, 2]
+    np.testing.assert_allclose(target, p.centers[spots], atol=1e-6)
+    # tilt stays within the seed's 45–90° to the surface
+    n_in = -np.sign((ROBOT.base[:3, 3] - scenes.bridge_surface(1).origin) @ [0, 0, -1]) * np.array(
+        [0, 0, -1.0]
+    )
+    ang = np.degrees(np.arccos(np.clip(F[:, :3, 2] @ n_in, -1, 1)))
+    assert ang.max() <= 45 + 1e-6
+    np.testing.assert_allclose(ang, p.tilt_deg[spots], atol=1e-6)
+    assert (p.ik_residual_mm == 0).all()
+
+
+def test_plan_is_deterministic_and_ga_option_works():
+    s = scenes.bridge_surface(3)
+    a = plan_blasting(s, disc_radius_m=0.04, robot=ROBOT, seed=3)
+    b = plan_blasting(s, disc_radius_m=0.04, robot=ROBOT, seed=3)
+    np.testing.assert_array_equal(a.order, b.order)
+    np.testing.assert_array_equal(a.joint_trajectory, b.joint_trajectory)
+    # without a robot there is no tilt, so compare on the same (untilted) discs
+    d = plan_blasting(s, disc_radius_m=0.04, seed=3)
+    g = plan_blasting(s, disc_radius_m=0.04, sequencer="ga", seed=3)
+    assert g.joint_trajectory is None and sorted(g.order) == sorted(d.order)
+    np.testing.assert_array_equal(g.centers, d.centers)
+    assert d.objective < g.objective
+
+
+def test_colliding_spots_are_rejected_not_planned_through():
+    # a box hanging just under part of Surface 2 blocks the arm there
+    blocker = scenes.Box.from_bounds([0.12, 0.30, 1.30], [0.40, 0.52, 1.48], "blocker")
+    p = plan_blasting(
+        scenes.bridge_surface(2),
+        disc_radius_m=0.04,
+        robot=ROBOT,
+        obstacles=(*scenes.bridge_obstacles(), blocker),
+    )
+    at = p.waypoint_spot >= 0
+    assert (p.clearance[at] > 0).all()  # no spot is blasted from a penetrating pose
+    assert len(p.skipped) > 0 or (p.tilt_deg > p.params["tilt_deg"]).any()
+    # the skipped discs are not in the sequence and coverage says so
+    assert not set(p.skipped) & set(p.order)
+    assert p.coverage <= p.coverage_planned
+
+
+def test_inputs_are_validated():
+    s = scenes.bridge_surface(1)
+    with pytest.raises(StreamLengthError):
+        plan_blasting(s, stream_length_mm=600)
+    with pytest.raises(InvalidInputError, match="sequencer"):
+        plan_blasting(s, sequencer="tsp")
+    with pytest.raises(InvalidInputError, match="kp"):
+        plan_blasting(s, kp=(1.0, 1.1, 1.1))
+
+    def cancel(f, stage):
+        if stage == "sequencing":
+            raise CancelledError("stop")
+
+    with pytest.raises(CancelledError):
+        plan_blasting(s, progress=cancel)
+    # default disc radius comes from Eq. 3.1 (medium nozzle, 300 mm)
+    assert plan_blasting(s).radius == pytest.approx(0.015875)
