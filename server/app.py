@@ -23,7 +23,7 @@ from server.events import EventBus
 from server.jobs import JobRunner
 from server.kinds import registry
 from server.lifecycle import IllegalTransitionError
-from server.routers import clouds, events, health, plans, safety, tokens
+from server.routers import clouds, events, health, plans, robots, safety, tokens
 from server.scene import proxy
 from server.services import Services
 from server.settings import Settings, get_settings
@@ -134,6 +134,16 @@ def create_app(settings: Settings | None = None, *, start_scene: bool | None = N
             scene.start()
             services.scene = scene
             jobs.on_finished.append(scene.plan_finished)
+        from server.dispatch import DispatchEngine
+
+        dispatch = DispatchEngine(store, bus, settings, scene=services.scene)
+        dispatch.start()
+        services.dispatch = dispatch
+
+        def estop_robots(robot: str | None, reason: str) -> None:
+            dispatch.estop(robot, reason)
+
+        services.estop_handlers.append(estop_robots)
         jobs.start()
         try:
             yield
@@ -174,6 +184,7 @@ def create_app(settings: Settings | None = None, *, start_scene: bool | None = N
         health.router,
         clouds.router,
         plans.router,
+        robots.router,
         events.router,
         safety.router,
         tokens.router,

@@ -20,6 +20,7 @@ import time
 import traceback
 from concurrent.futures import Executor, Future, ProcessPoolExecutor, ThreadPoolExecutor
 from concurrent.futures.process import BrokenProcessPool
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -275,9 +276,17 @@ class JobRunner:
             exc = fut.exception()
             if exc is None:
                 result, arrays, checks, metrics = fut.result()
+                program, check = compile_program(plan, result, arrays, checks, metrics)
+                if check is not None:
+                    checks = [*checks, check]
                 try:
                     rec = self.store.store_plan_result(
-                        plan_id, result=result, arrays=arrays, checks=checks, metrics=metrics
+                        plan_id,
+                        result=result,
+                        arrays=arrays,
+                        checks=checks,
+                        metrics=metrics,
+                        program=program,
                     )
                 except (ValueError, TypeError) as store_exc:  # e.g. NaN in result JSON
                     self._transition(
@@ -308,6 +317,78 @@ class JobRunner:
                         "".join(traceback.format_exception(exc)),
                     )
                 self._transition(plan_id, "fail", "planner", msg, error=msg)
+
+
+@dataclass
+class _ResultView:
+    """A just-computed plan as :class:`server.kinds.base.PlanView` (for compilers)."""
+
+    id: str
+    kind: str
+    state: str
+    params: dict[str, Any]
+    result: dict[str, Any]
+    metrics: dict[str, float]
+    checks: list[dict[str, Any]]
+    arrays_data: dict[str, np.ndarray]
+
+    @property
+    def arrays(self) -> dict[str, str]:
+        return {k: k for k in self.arrays_data}
+
+    def array(self, name: str) -> np.ndarray:
+        return self.arrays_data[name]
+
+
+def compile_program(
+    plan: Any,
+    result: dict[str, Any],
+    arrays: dict[str, np.ndarray],
+    checks: list[dict[str, Any]],
+    metrics: dict[str, float],
+) -> tuple[list[dict[str, Any]] | None, dict[str, Any] | None]:
+    """Compile a finished plan into its robot command program, with a check.
+
+    The program is validated as the dispatch engine will parse it, and joint
+    way-points against the robot's URDF limits, so an operator approves
+    exactly what will be sent.  A kind without a compiler yields no program
+    and no check (it cannot be dispatched).
+    """
+    from robots import load_robot
+    from robots.protocol.commands import CommandError
+    from robots.protocol.program import Program
+    from server.kinds import registry
+
+    kind = registry().get(plan.kind)
+    if kind is None or kind.compile is None:
+        return None, None
+    view = _ResultView(plan.id, plan.kind, "planning", plan.params, result, metrics, checks, arrays)
+    try:
+        dicts = kind.compile(view)
+        program = Program.from_dicts(dicts, robot=kind.robot)
+        problems = []
+        if kind.robot is not None:
+            problems = program.check_joint_limits(load_robot(kind.robot).joint_limits)
+    except (CommandError, ValueError, KeyError) as exc:
+        return None, {
+            "name": "command_program",
+            "passed": False,
+            "value": None,
+            "limit": None,
+            "message": f"could not compile the robot program: {exc}",
+        }
+    ok = not problems
+    return program.to_dicts(), {
+        "name": "command_program",
+        "passed": ok,
+        "value": len(program),
+        "limit": None,
+        "message": (
+            f"{len(program)} commands, {program.duration_s:.1f} s, within joint limits"
+            if ok
+            else f"{len(problems)} way-points outside joint limits: " + "; ".join(problems[:3])
+        ),
+    }
 
 
 def _event_body(plan: Any) -> dict[str, Any]:

@@ -39,6 +39,12 @@ class Settings(BaseSettings):
     )
     job_workers: int = Field(2, ge=1, le=64, description="concurrent planning jobs")
     emulators: bool = Field(True, description="start one robot emulator per robot on serve")
+    emulator_time_scale: float = Field(
+        1.0,
+        gt=0,
+        le=1000,
+        description="embedded emulators run motions this much faster than real time",
+    )
     log_level: str = Field("info", description="uvicorn log level")
 
     @property

@@ -10,6 +10,7 @@ from pydantic import BaseModel, Field
 
 from server.auth import Operator, Viewer
 from server.services import Services, get_services
+from server.store import NotFoundError
 
 router = APIRouter(tags=["safety"])
 log = logging.getLogger(__name__)
@@ -28,6 +29,10 @@ def trigger_estop(services: Services, robot: str | None, actor: str, reason: str
     Handlers run first and each in isolation: a failing handler must not keep
     the others from stopping their robots; the audit write comes after.
     """
+    if robot is not None and services.dispatch is not None:
+        known = services.dispatch.robot_names()
+        if robot not in known:
+            raise NotFoundError(f"no robot {robot!r}; robots: {', '.join(known)}")
     reached, errors = [], []
     for handler in list(services.estop_handlers):
         try:

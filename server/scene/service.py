@@ -44,6 +44,7 @@ class SceneService:
         self._stop = threading.Event()
         self._anim_thread: threading.Thread | None = None
         self.current: dict[str, Any] = {}
+        self._live: dict[str, Any] = {}
         self.proposals: list[dict[str, Any]] = []
 
     # -------------------------------------------------------------- lifecycle
@@ -85,6 +86,7 @@ class SceneService:
                 h.remove()
         self._gui_handles = []
         self._animations = []
+        self._live = {}
 
     def show_plan(self, plan_id: str) -> dict[str, Any]:
         """Draw a stored plan (its kind's drawer); follow it if still planning."""
@@ -95,7 +97,14 @@ class SceneService:
             self._follow = plan.id
         with self._lock:
             self._clear()
-            self.current = {"plan_id": plan.id, "kind": plan.kind, "state": plan.state}
+            kind = registry().get(plan.kind)
+            self.current = {
+                "plan_id": plan.id,
+                "kind": plan.kind,
+                "state": plan.state,
+                "robot": kind.robot if kind else None,
+                "base_pose": plan.result.get("robot_base_pose"),
+            }
             if plan.result or plan.arrays:
                 self._draw(plan)
         return {"shown": plan.id, "state": plan.state, "following": self._follow == plan.id}
@@ -147,6 +156,44 @@ class SceneService:
                 position=tuple(center),
             )
         return {"shown": rec.id, "points_drawn": len(pts)}
+
+    def update_live_robot(self, robot: str, q: np.ndarray) -> None:
+        """Show the robot's *reported* joints beside the planned ghost (orange)."""
+        if not self.running or self.current.get("robot") != robot:
+            return
+        with self._lock:
+            handle = self._live.get(robot)
+            if handle is None:
+                handle = self._add_live(robot)
+                if handle is None:
+                    return
+            names = handle.get_actuated_joint_names()
+            if len(q) == len(names):
+                handle.update_cfg(np.asarray(q, dtype=float))
+
+    def _add_live(self, robot: str) -> Any:
+        from pathlib import Path
+
+        from viser.extras import ViserUrdf
+
+        from robots import load_robot
+        from server.scene.context import set_frame_pose
+
+        try:
+            path = Path(load_robot(robot).urdf_path)
+        except ValueError:
+            return None
+        frame = self._server.scene.add_frame(f"/plan/live_{robot}", show_axes=False)
+        if self.current.get("base_pose") is not None:
+            set_frame_pose(frame, np.asarray(self.current["base_pose"], dtype=float))
+        handle = ViserUrdf(
+            self._server,
+            path,
+            root_node_name=f"/plan/live_{robot}",
+            mesh_color_override=(1.0, 0.55, 0.1, 0.7),
+        )
+        self._live[robot] = handle
+        return handle
 
     def plan_finished(self, plan_id: str) -> None:
         """Called when a plan leaves planning; redraw if it is the one followed."""

@@ -88,6 +88,23 @@ MIGRATIONS: list[str] = [
     CREATE INDEX audit_entity ON audit_events(entity, entity_id);
     CREATE INDEX executions_plan ON executions(plan_id);
     """,
+    # 3: dispatch: compiled programs, resumable executions, ack log, robot state mirror
+    """
+    ALTER TABLE plans ADD COLUMN program TEXT;
+    ALTER TABLE executions ADD COLUMN run_id INTEGER NOT NULL DEFAULT 0;
+    ALTER TABLE executions ADD COLUMN fault TEXT;
+    CREATE TABLE execution_acks (
+        execution_id TEXT NOT NULL REFERENCES executions(id) ON DELETE CASCADE,
+        idx INTEGER NOT NULL,
+        ts TEXT NOT NULL,
+        PRIMARY KEY (execution_id, idx)
+    );
+    CREATE TABLE robot_states (
+        name TEXT PRIMARY KEY,
+        state TEXT NOT NULL,
+        updated_at TEXT NOT NULL
+    );
+    """,
 ]
 
 SCHEMA_VERSION = len(MIGRATIONS)

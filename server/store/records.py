@@ -66,6 +66,7 @@ class PlanRecord:
     created_by: str
     approved_by: str | None
     approved_at: str | None
+    program: list[dict[str, Any]] | None = None
     _loader: Any = field(default=None, repr=False, compare=False)
 
     @classmethod
@@ -76,6 +77,7 @@ class PlanRecord:
         d["metrics"] = _loads(d["metrics"], {})
         d["checks"] = _loads(d["checks"], [])
         d["arrays"] = _loads(d["arrays"], {})
+        d["program"] = _loads(d.get("program"), None)
         return cls(**d, _loader=loader)
 
     def array(self, name: str) -> np.ndarray:
@@ -108,9 +110,11 @@ class PlanRecord:
             "approved_at": self.approved_at,
             "allowed_actions": allowed_actions(self.state),
             "arrays": {k: f"/api/v1/plans/{self.id}/arrays/{k}" for k in sorted(self.arrays)},
+            "program_length": None if self.program is None else len(self.program),
         }
         if include_result:
             out["result"] = self.result
+            out["program"] = self.program
         return out
 
 
@@ -126,6 +130,8 @@ class ExecutionRecord:
     created_at: str
     updated_at: str
     created_by: str
+    run_id: int = 0
+    fault: str | None = None
 
     @classmethod
     def from_row(cls, row: sqlite3.Row) -> ExecutionRecord:

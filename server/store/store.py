@@ -238,6 +238,7 @@ class Store:
         arrays: Mapping[str, np.ndarray],
         checks: list[dict[str, Any]],
         metrics: dict[str, float],
+        program: list[dict[str, Any]] | None = None,
         actor: str = "planner",
     ) -> PlanRecord:
         """Persist a finished plan: ``planned`` if every check passed, else ``rejected``."""
@@ -252,6 +253,7 @@ class Store:
             if failed
             else f"{len(checks)} checks passed"
         )
+        extra = {"program": _json(program)} if program is not None else {}
         return self.transition_plan(
             plan_id,
             action,
@@ -264,6 +266,7 @@ class Store:
             metrics=metrics,
             progress=1.0,
             stage="done",
+            **extra,
         )
 
     def delete_plan(self, plan_id: str, actor: str) -> None:
@@ -274,6 +277,11 @@ class Store:
             )
         with self.db.transaction() as conn:
             conn.execute("UPDATE plans SET parent_id = NULL WHERE parent_id = ?", (plan_id,))
+            conn.execute(
+                "DELETE FROM execution_acks WHERE execution_id IN "
+                "(SELECT id FROM executions WHERE plan_id = ?)",
+                (plan_id,),
+            )
             conn.execute("DELETE FROM executions WHERE plan_id = ?", (plan_id,))
             conn.execute("DELETE FROM plans WHERE id = ?", (plan_id,))
             self._audit(conn, actor, "plan", plan_id, "delete", plan.state, None)
@@ -287,15 +295,18 @@ class Store:
         return [PlanRecord.from_row(r, loader=self.arrays.load) for r in rows]
 
     # ------------------------------------------------------------- executions
-    def create_execution(self, plan_id: str, robot: str, total: int, actor: str) -> ExecutionRecord:
+    def create_execution(
+        self, plan_id: str, robot: str, total: int, actor: str, run_id: int = 0
+    ) -> ExecutionRecord:
         """Create an execution and move its plan to ``executing`` atomically."""
         eid = new_id("ex")
         now = utcnow()
         with self.db.transaction() as conn:
             self.transition_plan(plan_id, "dispatch", actor, f"to robot {robot} as {eid}")
             conn.execute(
-                "INSERT INTO executions VALUES (?,?,?,?,?,?,?,?,?,?)",
-                (eid, plan_id, robot, "pending", 0, total, None, now, now, actor),
+                "INSERT INTO executions (id, plan_id, robot, state, acked, total, error, "
+                "created_at, updated_at, created_by, run_id) VALUES (?,?,?,?,?,?,?,?,?,?,?)",
+                (eid, plan_id, robot, "pending", 0, total, None, now, now, actor, run_id),
             )
             self._audit(conn, actor, "execution", eid, "create", None, "pending", f"plan {plan_id}")
         return self.get_execution(eid)
@@ -343,6 +354,42 @@ class Store:
             if plan_action is not None:
                 self.transition_plan(ex.plan_id, plan_action, actor, reason)
         return self.get_execution(execution_id)
+
+    def record_ack(self, execution_id: str, index: int) -> None:
+        """Command ``index`` finished on the robot: log it and advance ``acked``.
+
+        Idempotent (a repeated ack changes nothing) and durable before it
+        returns, so the streamer may advance only after this call.
+        """
+        with self.db.transaction() as conn:
+            conn.execute(
+                "INSERT OR IGNORE INTO execution_acks VALUES (?,?,?)",
+                (execution_id, int(index), utcnow()),
+            )
+            conn.execute(
+                "UPDATE executions SET acked = MAX(acked, ?), updated_at = ? WHERE id = ?",
+                (int(index) + 1, utcnow(), execution_id),
+            )
+
+    def list_acks(self, execution_id: str) -> list[int]:
+        rows = self.db.query(
+            "SELECT idx FROM execution_acks WHERE execution_id = ? ORDER BY idx", (execution_id,)
+        )
+        return [int(r["idx"]) for r in rows]
+
+    def save_robot_state(self, name: str, state: dict[str, Any]) -> None:
+        with self.db.transaction() as conn:
+            conn.execute(
+                "INSERT INTO robot_states VALUES (?,?,?) ON CONFLICT(name) DO UPDATE SET "
+                "state = excluded.state, updated_at = excluded.updated_at",
+                (name, _json(state), utcnow()),
+            )
+
+    def robot_state(self, name: str) -> tuple[dict[str, Any], str] | None:
+        row = self.db.query_one(
+            "SELECT state, updated_at FROM robot_states WHERE name = ?", (name,)
+        )
+        return None if row is None else (json.loads(row["state"]), row["updated_at"])
 
     def set_execution_acked(self, execution_id: str, acked: int) -> None:
         with self.db.transaction() as conn:

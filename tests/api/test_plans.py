@@ -15,7 +15,7 @@ def test_submit_plan_and_read_it_back(api) -> None:
     assert plan["progress"] == 1.0 and plan["stage"] == "done"
     # Dijkstra on the default 3×3 grid (1 m spacing) from a0 to c2: 4 m.
     assert plan["metrics"]["route_length_m"] == 4.0
-    assert [c["name"] for c in plan["checks"]] == ["route_found", "route_length"]
+    assert [c["name"] for c in plan["checks"]] == ["route_found", "route_length", "command_program"]
     assert all(set(c) == {"name", "passed", "value", "limit", "message"} for c in plan["checks"])
     assert plan["result"]["path"][0] == "a0" and plan["result"]["path"][-1] == "c2"
     assert [a["action"] for a in reversed(plan["audit"])] == ["submit", "start", "finish"]

@@ -39,6 +39,12 @@ def test_help_everywhere(args: list[str]) -> None:
     assert "usage: steelpath" in r.stdout
 
 
+def test_emulate_help_and_bad_flags() -> None:
+    r = steelpath("emulate", "--help")
+    assert r.returncode == 0 and "--listen" in r.stdout and "--robot" in r.stdout
+    assert steelpath("emulate", "--listen", "nonsense://x").returncode != 0
+
+
 def test_console_script_installed() -> None:
     exe = Path(sys.executable).parent / "steelpath"
     assert exe.exists()

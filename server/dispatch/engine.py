@@ -1,0 +1,491 @@
+"""The dispatch engine: approved plans → robots, with a human in the loop.
+
+Nothing else in the service talks to a robot.  The engine keeps one
+:class:`robots.adapters.link.RobotLink` per robot (and, by default, one
+embedded emulator per robot so a new user can dispatch at once), streams a
+plan's compiled program with a :class:`robots.adapters.streamer.Streamer`,
+records every acknowledgement in SQLite *before* the streamer may advance
+(``on_ack`` runs synchronously on the streamer's thread), and mirrors robot
+state into the store, the event bus and the scene.
+
+Executions survive a server restart as ``interrupted`` and resume from the
+last acknowledged command with the same ``run_id``: the robot itself refuses
+to re-run a command it has completed, so nothing runs twice and nothing is
+skipped.  The E-stop reaches every link from the caller's thread, in any
+state, including while a link is reconnecting.
+"""
+
+from __future__ import annotations
+
+import logging
+import secrets
+import threading
+import time
+from dataclasses import asdict, dataclass, is_dataclass
+from typing import Any
+
+import numpy as np
+
+from robots import ROBOT_NAMES
+from robots.adapters.link import CONNECTED_STATES, LinkConfig, LinkState, RobotLink
+from robots.adapters.streamer import ExecState, Outcome, Streamer, StreamFault
+from robots.protocol.commands import CommandError
+from robots.protocol.messages import LINK_FAULTS, FaultFlag, State
+from robots.protocol.program import Program
+from server.events import EventBus
+from server.lifecycle import ExecutionState, IllegalTransitionError, PlanState
+from server.settings import Settings
+from server.store import ExecutionRecord, NotFoundError, Store
+
+log = logging.getLogger(__name__)
+
+RESUMABLE = {ExecutionState.PAUSED, ExecutionState.INTERRUPTED, ExecutionState.FAULTED}
+ACTIVE = {ExecutionState.PENDING, ExecutionState.RUNNING} | RESUMABLE
+
+
+class DispatchError(Exception):
+    """Dispatch refused; ``status`` is the HTTP status the API answers with."""
+
+    def __init__(self, message: str, status: int = 409) -> None:
+        super().__init__(message)
+        self.status = status
+
+
+@dataclass
+class _Robot:
+    name: str
+    url: str
+    link: RobotLink
+    emulator: Any = None
+    last_state: dict[str, Any] | None = None
+    last_saved: float = 0.0
+
+
+def state_to_dict(report: State | None) -> dict[str, Any] | None:
+    """A state report as JSON (SI units: rad, m) for the store, API and scene."""
+    if report is None:
+        return None
+    d = asdict(report) if is_dataclass(report) else dict(vars(report))
+    q = [v * 1e-6 for v in d.pop("q_urad", ())]
+    odo = [v * 1e-6 for v in d.pop("odometry_um", ())]
+    lift = d.pop("lift_urad", 0) * 1e-6
+    return {**d, "q_rad": q, "odometry_m": odo, "lift_rad": lift}
+
+
+class DispatchEngine:
+    """Owns robot links, embedded emulators and running executions."""
+
+    def __init__(
+        self,
+        store: Store,
+        events: EventBus,
+        settings: Settings,
+        *,
+        scene: Any = None,
+        link_config: LinkConfig | None = None,
+    ) -> None:
+        self.store = store
+        self.events = events
+        self.settings = settings
+        self.scene = scene
+        self._link_config = link_config
+        self._lock = threading.RLock()
+        self._robots: dict[str, _Robot] = {}
+        self._streamers: dict[str, Streamer] = {}
+
+    # ------------------------------------------------------------- lifecycle
+    def start(self) -> None:
+        self._interrupt_leftovers()
+        stored = self.store.robot_urls()
+        for name in ROBOT_NAMES:
+            emulator = None
+            url = stored.get(name)
+            if url is None and self.settings.emulators:
+                emulator = self._start_emulator(name)
+                url = emulator.url
+            if url is None:
+                url = "loop://"  # no robot configured: a link that never handshakes
+            self._robots[name] = _Robot(name, url, self._new_link(name, url), emulator)
+
+    def _start_emulator(self, name: str) -> Any:
+        from robots.emulator.server import Emulator
+
+        return Emulator(
+            name, listen="tcp://127.0.0.1:0", time_scale=self.settings.emulator_time_scale
+        ).start()
+
+    def _new_link(self, name: str, url: str) -> RobotLink:
+        base = self._link_config or LinkConfig()
+        cfg = LinkConfig(**{**asdict(base), "expected_robot": name})
+        link = RobotLink(url, cfg, name=name)
+        link.subscribe(lambda ev, n=name: self._on_link_event(n, ev))
+        return link.start()
+
+    def shutdown(self) -> None:
+        with self._lock:
+            streamers = list(self._streamers.values())
+            robots = list(self._robots.values())
+        for s in streamers:
+            s.close(timeout=2)
+        for r in robots:
+            r.link.close(timeout=2)
+            if r.emulator is not None:
+                r.emulator.close(timeout=2)
+
+    def _interrupt_leftovers(self) -> None:
+        """Executions a previous server left running are interrupted (resumable)."""
+        for ex in self.store.list_executions(limit=10_000):
+            if ex.state in (ExecutionState.PENDING, ExecutionState.RUNNING, ExecutionState.PAUSED):
+                self._transition(ex.id, "interrupt", "system", "server restarted during execution")
+
+    # --------------------------------------------------------------- robots
+    def robot_names(self) -> list[str]:
+        return list(self._robots)
+
+    def _robot(self, name: str) -> _Robot:
+        try:
+            return self._robots[name]
+        except KeyError:
+            raise NotFoundError(
+                f"no robot {name!r}; robots: {', '.join(self._robots) or 'none'}"
+            ) from None
+
+    def robot_status(self, name: str) -> dict[str, Any]:
+        r = self._robot(name)
+        st = r.link.status()
+        busy = self._active_execution_for(name)
+        return {
+            "name": name,
+            "url": r.url,
+            "emulated": r.emulator is not None and r.url == r.emulator.url,
+            "state": str(st.state),
+            "reason": st.reason,
+            "connected": st.state in (LinkState.READY, LinkState.STREAMING),
+            "estop_latched": st.estop_latched,
+            "last_heartbeat": st.last_rx_wall,
+            "robot_info": _plain(st.robot),
+            "report": state_to_dict(st.report),
+            "faults": int(st.report.faults) if st.report is not None else 0,
+            "execution": busy,
+            "stats": dict(st.stats),
+        }
+
+    def set_connection(self, name: str, url: str, actor: str) -> dict[str, Any]:
+        """Persist a robot's URL and reconnect; a latched E-stop carries over."""
+        r = self._robot(name)
+        if self._active_execution_for(name, running_only=True):
+            raise DispatchError(f"robot {name} is executing; pause or abort it before reconnecting")
+        was_latched = r.link.estop_latched
+        self.store.set_robot_url(name, url, actor)
+        with self._lock:
+            r.link.close(timeout=2)
+            r.url = url
+            r.link = self._new_link(name, url)
+            if was_latched:
+                r.link.estop()
+        self.events.publish("robot", {"name": name, "url": url, "state": str(r.link.state)})
+        return self.robot_status(name)
+
+    def clear_estop(self, name: str, actor: str) -> dict[str, Any]:
+        r = self._robot(name)
+        r.link.clear_estop()
+        self.store.audit(actor, "robot", name, "clear-estop")
+        self.events.publish("robot", {"name": name, "estop_latched": False})
+        return self.robot_status(name)
+
+    def wait_connected(self, name: str, timeout: float) -> bool:
+        return self._robot(name).link.wait_connected(timeout)
+
+    # ------------------------------------------------------------- dispatch
+    def dispatch(self, plan_id: str, robot: str, actor: str) -> ExecutionRecord:
+        """Start executing an approved plan on ``robot`` (409 with the reason otherwise)."""
+        from server.kinds import registry
+
+        plan = self.store.get_plan(plan_id)
+        r = self._robot(robot)
+        if plan.state != PlanState.APPROVED:
+            raise IllegalTransitionError(
+                "plan", plan_id, plan.state, "dispatch", _allowed(plan.state)
+            )
+        if plan.failed_checks:
+            names = ", ".join(c["name"] for c in plan.failed_checks)
+            raise DispatchError(
+                f"plan {plan_id} has failed checks ({names}); it cannot move a robot"
+            )
+        kind = registry().get(plan.kind)
+        if kind is not None and kind.robot is not None and kind.robot != robot:
+            raise DispatchError(f"plan kind {plan.kind} drives robot {kind.robot!r}, not {robot!r}")
+        if not plan.program:
+            raise DispatchError(
+                f"plan {plan_id} has no compiled command program (kind {plan.kind} has no compiler)"
+            )
+        try:
+            program = Program.from_dicts(plan.program, robot=robot)
+        except CommandError as exc:
+            raise DispatchError(f"stored program of plan {plan_id} is invalid: {exc}") from None
+        busy = self._active_execution_for(robot)
+        if busy:
+            raise DispatchError(f"robot {robot} is busy with execution {busy}")
+        status = r.link.status()
+        if status.estop_latched:
+            raise DispatchError(f"robot {robot} is E-stopped; clear the E-stop first")
+        why = not_ready_reason(status, allow_link_faults=True)
+        if why:
+            raise DispatchError(f"robot {robot} {why}; check its connection ({r.url})")
+        run_id = secrets.randbelow(0xFFFFFFFE) + 1
+        ex = self.store.create_execution(plan_id, robot, len(program), actor, run_id=run_id)
+        self.events.publish(
+            "plan", {"id": plan_id, "state": PlanState.EXECUTING, "kind": plan.kind}
+        )
+        self._start_streamer(ex, program, start=0)
+        return self.store.get_execution(ex.id)
+
+    def _start_streamer(self, ex: ExecutionRecord, program: Program, start: int) -> Streamer:
+        r = self._robot(ex.robot)
+        eid = ex.id
+        streamer = Streamer(
+            program,
+            r.link,
+            run_id=ex.run_id,
+            start=start,
+            on_ack=lambda i: self._on_ack(eid, i),
+            on_done=lambda outcome: self._on_done(eid, outcome),
+            on_fault=lambda fault: self._on_fault(eid, fault),
+        )
+        with self._lock:
+            old = self._streamers.pop(eid, None)
+            self._streamers[eid] = streamer
+        if old is not None:
+            old.close(timeout=2)
+        if ex.state == ExecutionState.PENDING:
+            self._transition(eid, "start", "dispatch", f"streaming {len(program)} commands")
+        streamer.start()
+        return streamer
+
+    def _active_execution_for(self, robot: str, running_only: bool = False) -> str | None:
+        states = {ExecutionState.PENDING, ExecutionState.RUNNING} if running_only else ACTIVE
+        for ex in self.store.list_executions(limit=10_000):
+            if ex.robot == robot and ex.state in states:
+                return ex.id
+        return None
+
+    # ------------------------------------------------------- operator actions
+    def pause(self, execution_id: str, actor: str) -> ExecutionRecord:
+        ex = self._transition(execution_id, "pause", actor, "operator pause", strict=True)
+        s = self._streamers.get(execution_id)
+        if s is not None:
+            s.pause()
+        return ex
+
+    def resume(self, execution_id: str, actor: str, clear_faults: bool = False) -> ExecutionRecord:
+        ex = self.store.get_execution(execution_id)
+        if ex.state not in RESUMABLE:
+            raise IllegalTransitionError(
+                "execution",
+                execution_id,
+                ex.state,
+                "resume",
+                ["pause", "abort"] if ex.state == ExecutionState.RUNNING else [],
+            )
+        r = self._robot(ex.robot)
+        if r.link.estop_latched:
+            raise DispatchError(f"robot {ex.robot} is E-stopped; clear the E-stop before resuming")
+        if (
+            ex.state == ExecutionState.FAULTED
+            and ex.fault
+            and "robot_fault" in ex.fault
+            and not clear_faults
+        ):
+            raise DispatchError(
+                f"execution {execution_id} stopped on a robot fault ({ex.fault}); resume with "
+                '{"clear_faults": true} once the cause is fixed'
+            )
+        why = not_ready_reason(r.link.status(), allow_robot_faults=clear_faults)
+        if why:
+            raise DispatchError(f"robot {ex.robot} {why}")
+        s = self._streamers.get(execution_id)
+        ex = self._transition(
+            execution_id, "resume", actor, f"resume from command {ex.acked}", strict=True
+        )
+        if s is not None and s.state not in (
+            ExecState.COMPLETED,
+            ExecState.ABORTED,
+            ExecState.ESTOPPED,
+        ):
+            s.resume(clear_robot_faults=clear_faults)
+        else:
+            # After a restart (or a terminal streamer): a new streamer, same run_id.
+            plan = self.store.get_plan(ex.plan_id)
+            program = Program.from_dicts(plan.program or [], robot=ex.robot)
+            streamer = self._start_streamer(ex, program, start=ex.acked)
+            if clear_faults:
+                streamer.resume(clear_robot_faults=True)
+        return self.store.get_execution(execution_id)
+
+    def abort(self, execution_id: str, actor: str) -> ExecutionRecord:
+        ex = self.store.get_execution(execution_id)
+        s = self._streamers.get(execution_id)
+        if s is not None and s.state not in (
+            ExecState.COMPLETED,
+            ExecState.ABORTED,
+            ExecState.ESTOPPED,
+        ):
+            s.abort()
+        return self._transition(execution_id, "abort", actor, "operator abort", strict=True) or ex
+
+    def estop(self, robot: str | None, reason: str) -> list[str]:
+        """Stop every robot (or one) now; returns the robots reached.
+
+        ``link.estop()`` writes the frame from this thread and latches it for
+        reconnects, so this never waits on a busy link or a streamer.
+        """
+        targets = list(self._robots.values()) if robot is None else [self._robot(robot)]
+        reached = []
+        for r in targets:
+            try:
+                r.link.estop()
+                reached.append(r.name)
+            except Exception:  # one dead link must not stop the others' E-stop
+                log.exception("E-stop to %s failed", r.name)
+        for eid, s in list(self._streamers.items()):
+            ex = self.store.get_execution(eid)
+            if robot is None or ex.robot == robot:
+                s.estop()
+                if ex.state in ACTIVE:
+                    self._transition(eid, "abort", "estop", reason)
+        return reached
+
+    # ------------------------------------------------------------- callbacks
+    def _on_ack(self, execution_id: str, index: int) -> None:
+        # Runs on the streamer thread; the streamer advances only after this returns.
+        self.store.record_ack(execution_id, index)
+        ex = self.store.get_execution(execution_id)
+        self.events.publish(
+            "execution",
+            {
+                "id": ex.id,
+                "plan_id": ex.plan_id,
+                "state": ex.state,
+                "acked": ex.acked,
+                "total": ex.total,
+            },
+        )
+
+    def _on_done(self, execution_id: str, outcome: Outcome) -> None:
+        action = {"completed": "complete", "aborted": "abort", "estopped": "abort"}[str(outcome)]
+        reason = "E-stop" if outcome == Outcome.ESTOPPED else f"robot reported {outcome}"
+        self._transition(execution_id, action, "robot", reason)
+        with self._lock:
+            s = self._streamers.pop(execution_id, None)
+        if s is not None:
+            threading.Thread(target=s.close, daemon=True).start()
+
+    def _on_fault(self, execution_id: str, fault: StreamFault) -> None:
+        action = "interrupt" if fault.kind.value == "link_lost" else "fault"
+        self._transition(execution_id, action, "robot", str(fault), fault=str(fault))
+
+    def _on_link_event(self, name: str, event: Any) -> None:
+        from robots.adapters.link import LinkStateChanged, ReportReceived
+
+        r = self._robots.get(name)
+        if r is None:
+            return
+        if isinstance(event, ReportReceived):
+            state = state_to_dict(event.report)
+            r.last_state = state
+            now = time.monotonic()
+            if now - r.last_saved > 0.5:  # mirror at 2 Hz: enough for a console
+                r.last_saved = now
+                try:
+                    self.store.save_robot_state(name, state or {})
+                except Exception:
+                    log.exception("could not store state of %s", name)
+                self.events.publish("robot", {"name": name, "report": state})
+                if self.scene is not None and state is not None:
+                    self.scene.update_live_robot(name, np.asarray(state["q_rad"]))
+        elif isinstance(event, LinkStateChanged):
+            self.events.publish(
+                "robot", {"name": name, "state": str(event.new), "reason": event.reason}
+            )
+
+    # --------------------------------------------------------------- helpers
+    def _transition(
+        self,
+        execution_id: str,
+        action: str,
+        actor: str,
+        reason: str = "",
+        *,
+        strict: bool = False,
+        **fields: Any,
+    ) -> ExecutionRecord | None:
+        plan_action = {
+            "start": None,
+            "pause": "pause",
+            "resume": "resume",
+            "complete": "complete",
+            "abort": "abort",
+            "fault": "fault",
+            "interrupt": "interrupt",
+        }[action]
+        try:
+            ex = self.store.transition_execution(
+                execution_id, action, actor, reason, plan_action=plan_action, **fields
+            )
+        except IllegalTransitionError:
+            if strict:
+                raise
+            log.info("ignored %s of execution %s", action, execution_id)
+            return None
+        self.events.publish(
+            "execution",
+            {
+                "id": ex.id,
+                "plan_id": ex.plan_id,
+                "state": ex.state,
+                "acked": ex.acked,
+                "total": ex.total,
+                "fault": ex.fault,
+            },
+        )
+        plan = self.store.get_plan(ex.plan_id)
+        self.events.publish("plan", {"id": plan.id, "kind": plan.kind, "state": plan.state})
+        return ex
+
+
+def not_ready_reason(
+    status: Any, *, allow_link_faults: bool = True, allow_robot_faults: bool = False
+) -> str | None:
+    """Why the robot cannot take a run now, or ``None``.
+
+    A robot that lost its host (watchdog, new session) latches a *link* fault;
+    the streamer clears those itself when it starts, so they do not block.
+    A robot-side fault (``DRIVE``) blocks until an operator clears it.
+    """
+    if status.state not in CONNECTED_STATES:
+        return f"is not connected ({status.state}: {status.reason})"
+    faults = int(status.report.faults) if status.report is not None else 0
+    other = faults & ~int(LINK_FAULTS) & ~int(FaultFlag.ESTOP)
+    if faults & int(LINK_FAULTS) and not allow_link_faults:
+        return f"reports link faults ({FaultFlag(faults & int(LINK_FAULTS))!r})"
+    if other and not allow_robot_faults:
+        return f"reports a robot fault ({FaultFlag(other)!r}, code {status.report.fault_code})"
+    return None
+
+
+def _allowed(state: str) -> list[str]:
+    from server.lifecycle import allowed_actions
+
+    return allowed_actions(state)
+
+
+def _plain(obj: Any) -> Any:
+    if obj is None:
+        return None
+    if is_dataclass(obj):
+        return {k: _plain(v) for k, v in asdict(obj).items()}
+    if isinstance(obj, tuple | list):
+        return [_plain(v) for v in obj]
+    if isinstance(obj, bytes):
+        return obj.decode(errors="replace")
+    return obj

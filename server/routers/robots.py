@@ -1,0 +1,144 @@
+"""``/api/v1/robots``, ``/plans/{id}/dispatch`` and ``/executions``."""
+
+from __future__ import annotations
+
+from typing import Annotated, Any
+
+from fastapi import APIRouter, Depends, HTTPException
+from pydantic import BaseModel, Field, field_validator
+
+from server.auth import Admin, Operator, Viewer
+from server.dispatch import DispatchEngine, DispatchError
+from server.services import Services, get_services
+
+router = APIRouter(tags=["robots"])
+
+Svc = Annotated[Services, Depends(get_services)]
+
+
+def engine(services: Services) -> DispatchEngine:
+    if services.dispatch is None:
+        raise HTTPException(503, detail="dispatch is not running")
+    return services.dispatch
+
+
+def _refuse(exc: DispatchError) -> HTTPException:
+    return HTTPException(exc.status, detail=str(exc))
+
+
+class ConnectionRequest(BaseModel):
+    url: str = Field(
+        ...,
+        description="pyserial URL: /dev/ttyUSB0, socket://host:port, loop://, rfc2217://host:port",
+        examples=["socket://127.0.0.1:5000"],
+    )
+
+    @field_validator("url")
+    @classmethod
+    def _looks_like_a_port(cls, v: str) -> str:
+        v = v.strip()
+        if not v:
+            raise ValueError("url must not be empty")
+        if "://" in v:
+            scheme = v.split("://", 1)[0]
+            if scheme not in {"socket", "loop", "rfc2217", "spy", "alt", "hwgrep"}:
+                raise ValueError(
+                    f"unsupported URL scheme {scheme!r}: use a device path, socket://host:port, "
+                    "loop:// or rfc2217://host:port"
+                )
+        elif not v.startswith("/") and not v.upper().startswith("COM"):
+            raise ValueError("a serial device must be an absolute path like /dev/ttyUSB0")
+        return v
+
+
+class DispatchRequest(BaseModel):
+    robot: str = Field(..., description="robot name (GET /robots)")
+
+
+class ResumeRequest(BaseModel):
+    clear_faults: bool = Field(
+        False, description="clear a latched robot fault first (only once its cause is fixed)"
+    )
+
+
+@router.get("/robots")
+def list_robots(services: Svc, _: Viewer) -> list[dict[str, Any]]:
+    eng = engine(services)
+    return [eng.robot_status(n) for n in eng.robot_names()]
+
+
+@router.get("/robots/{name}/state")
+def robot_state(name: str, services: Svc, _: Viewer) -> dict[str, Any]:
+    """Live link status and the last state report (also persisted, 2 Hz)."""
+    status = engine(services).robot_status(name)
+    stored = services.store.robot_state(name)
+    status["stored_report"] = stored[0] if stored else None
+    status["stored_at"] = stored[1] if stored else None
+    return status
+
+
+@router.put("/robots/{name}/connection")
+def set_connection(name: str, req: ConnectionRequest, services: Svc, who: Admin) -> dict[str, Any]:
+    """Persist the robot's connection URL and reconnect."""
+    try:
+        return engine(services).set_connection(name, req.url, who.actor)
+    except DispatchError as exc:
+        raise _refuse(exc) from None
+
+
+@router.post("/robots/{name}/clear-estop")
+def clear_estop(name: str, services: Svc, who: Operator) -> dict[str, Any]:
+    return engine(services).clear_estop(name, who.actor)
+
+
+@router.post("/plans/{plan_id}/dispatch", status_code=201)
+def dispatch(plan_id: str, req: DispatchRequest, services: Svc, who: Operator) -> dict[str, Any]:
+    """Send an approved plan whose checks passed to a connected robot."""
+    try:
+        ex = engine(services).dispatch(plan_id, req.robot, who.actor)
+    except DispatchError as exc:
+        raise _refuse(exc) from None
+    return ex.public()
+
+
+@router.get("/executions")
+def list_executions(
+    services: Svc, _: Viewer, plan_id: str | None = None, state: str | None = None
+) -> list[dict[str, Any]]:
+    return [e.public() for e in services.store.list_executions(plan_id, state)]
+
+
+@router.get("/executions/{execution_id}")
+def get_execution(execution_id: str, services: Svc, _: Viewer) -> dict[str, Any]:
+    ex = services.store.get_execution(execution_id)
+    out = ex.public()
+    plan = services.store.get_plan(ex.plan_id)
+    out["current_command"] = (
+        plan.program[ex.acked] if plan.program and ex.acked < len(plan.program) else None
+    )
+    out["audit"] = [e.public() for e in services.store.list_audit("execution", execution_id)]
+    return out
+
+
+@router.post("/executions/{execution_id}/pause")
+def pause(execution_id: str, services: Svc, who: Operator) -> dict[str, Any]:
+    try:
+        return engine(services).pause(execution_id, who.actor).public()
+    except DispatchError as exc:
+        raise _refuse(exc) from None
+
+
+@router.post("/executions/{execution_id}/resume")
+def resume(
+    execution_id: str, services: Svc, who: Operator, req: ResumeRequest | None = None
+) -> dict[str, Any]:
+    try:
+        ex = engine(services).resume(execution_id, who.actor, bool(req and req.clear_faults))
+    except DispatchError as exc:
+        raise _refuse(exc) from None
+    return ex.public()
+
+
+@router.post("/executions/{execution_id}/abort")
+def abort(execution_id: str, services: Svc, who: Operator) -> dict[str, Any]:
+    return engine(services).abort(execution_id, who.actor).public()
