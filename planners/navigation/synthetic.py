@@ -274,11 +274,16 @@ def make_structure(
     noise_k_per_m: float = 0.001,
     camera_height_m: float = 1.0,
     holes_per_bar: float = 0.6,
+    flange_m: tuple[float, float] = (0.06, 0.15),
+    scale: float = 1.0,
 ) -> SyntheticStructure:
     """Generate ``shape`` (one of :data:`SHAPES`) with ground truth; deterministic in ``seed``.
 
     ``n_points`` is the approximate total (steel + outliers).  Depth noise has
     σ(r) = ``noise_sigma0_m`` + ``noise_k_per_m``·r² along the viewing ray.
+    ``flange_m`` maps the drawn widths (60–150 mm) linearly onto another
+    range and ``scale`` multiplies every length — for scenes sized for a
+    bigger robot; the defaults are the issue's ranges.
     """
     if shape not in _LAYOUTS:
         raise InvalidInputError(f"unknown structure {shape!r}; known: {', '.join(SHAPES)}")
@@ -286,6 +291,14 @@ def make_structure(
         raise InvalidInputError(f"n_points must be >= 100, got {n_points}")
     rng = np.random.default_rng([int(seed), SHAPES.index(shape)])
     layout = _LAYOUTS[shape](rng)
+    if flange_m != (0.06, 0.15) or scale != 1.0:
+        lo, hi = (float(v) for v in flange_m)
+        if not 0 < lo <= hi or scale <= 0:
+            raise InvalidInputError(
+                f"flange_m must be 0 < lo <= hi and scale > 0, got {flange_m}, {scale}"
+            )
+        widths = lo + (layout.widths - 0.06) * (hi - lo) / 0.09
+        layout = Layout(layout.nodes * float(scale), layout.bars, widths)
 
     # Place the structure: random yaw (trusses broadside), the nearest steel
     # 0.35–0.6 m ahead of the robot, tilted 2–5° about a random horizontal axis.

@@ -33,6 +33,7 @@ log = logging.getLogger(__name__)
 KIND_MODULES: list[str] = [
     "server.kinds.demo_route",
     "server.kinds.sbg_inspect",
+    "server.kinds.ara_navigate",
 ]
 
 _errors: dict[str, str] = {}

@@ -1,0 +1,89 @@
+"""``ara.navigate`` through the REST API and the scene."""
+
+from __future__ import annotations
+
+import socket
+import types
+
+CRAWLER = {"footprint_length_m": 0.08, "footprint_width_m": 0.025, "footprint_center_x_m": 0.0}
+
+
+def free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def test_defaults_plan_the_ara_on_the_cross_sample(api) -> None:
+    """Defaults: the Cross sample with the ARA's own footprint, which does not
+    fit the 60–150 mm flanges: the route is planned, the path check says why
+    the plan cannot be driven."""
+    plan = api.wait(api.submit("ara.navigate")["id"], timeout=240)
+    assert plan["state"] == "rejected", plan.get("error")
+    checks = {c["name"]: c for c in plan["checks"]}
+    assert checks["bars_covered"]["passed"] and checks["route_endpoints"]["passed"]
+    assert checks["poses_on_steel"]["passed"]  # no pose was planned off the steel
+    assert not checks["paths_found"]["passed"]
+    assert "0.68 × 0.16 m footprint" in checks["paths_found"]["message"]
+    m = plan["metrics"]
+    assert m["cluster_count"] == 5 and m["bar_count"] == 4 and m["cross_count"] == 1
+    assert m["route_length_m"] >= m["route_lower_bound_m"] > 0
+    assert abs(m["deadhead_m"] - (m["route_length_m"] - m["route_lower_bound_m"])) < 1e-9
+    for stage in ("preprocess", "segmentation", "boundaries", "graph", "route", "paths"):
+        assert f"{stage}_time_s" in m
+    res = plan["result"]
+    assert res["footprint"]["length_m"] == 0.68 and res["footprint"]["center_x_m"] == -0.25
+    assert {c["kind"] for c in res["clusters"]} == {"bar", "cross"}
+
+
+def test_small_robot_plan_passes_every_check_and_draws(make_api) -> None:
+    sapi = make_api(scene_port=free_port())
+    cid = sapi.post("/api/v1/clouds", json={"sample": "t"}).json()["id"]
+    plan = sapi.wait(sapi.submit("ara.navigate", {"cloud_id": cid, **CRAWLER})["id"], timeout=240)
+    assert plan["state"] == "planned", [c["message"] for c in plan["checks"] if not c["passed"]]
+    assert all(c["passed"] for c in plan["checks"])
+    res = plan["result"]
+    route = res["route"]
+    assert route["vertices"][0] == res["start"] and route["vertices"][-1] == res["end"]
+    assert len(res["paths"]) == len(route["edges"]) and all(p["ok"] for p in res["paths"])
+    r = sapi.get(f"/api/v1/plans/{plan['id']}/arrays/path_xyz")
+    assert r.status_code == 200
+
+    assert sapi.post("/api/v1/scene/show", json={"plan_id": plan["id"]}).status_code == 200
+    scene = sapi.services.scene.server.scene
+    for name in (
+        "/plan/vertices",
+        "/plan/route",
+        "/plan/robot",
+        "/plan/graph",
+        "/plan/boundaries/0",
+        "/plan/cloud/0",
+    ):
+        assert scene.get_handle_by_name(name) is not None, name
+    # Two vertex clicks propose a child plan with that start and end.
+    handle = scene.get_handle_by_name("/plan/vertices")
+    ids = [n["id"] for n in res["graph"]["nodes"]]
+    leaves = [n["id"] for n in res["graph"]["nodes"] if n["degree"] == 1]
+    for v in (leaves[1], leaves[0]):
+        for entry in handle._impl.click_cb:
+            entry.callback(types.SimpleNamespace(instance_index=ids.index(v)))
+    children = sapi.get(f"/api/v1/plans?parent_id={plan['id']}").json()
+    assert len(children) == 1
+    child = sapi.wait(children[0]["id"], timeout=240)
+    assert child["params"]["start"] == leaves[1] and child["params"]["end"] == leaves[0]
+    assert child["result"]["route"]["vertices"][0] == leaves[1]
+
+
+def test_bad_requests(api) -> None:
+    r = api.post("/api/v1/plans", json={"kind": "ara.navigate", "params": {"sample": "zz"}})
+    assert r.status_code == 422 and "unknown sample" in r.text
+    r = api.post("/api/v1/plans", json={"kind": "ara.navigate", "params": {"segmentation": "gmm"}})
+    assert r.status_code == 422
+    r = api.post("/api/v1/plans", json={"kind": "ara.navigate", "params": {"cloud_id": "cl_nope"}})
+    assert r.status_code == 422
+    plan = api.wait(api.submit("ara.navigate", {"start": 999, "plan_paths": False})["id"])
+    assert plan["state"] == "failed" and "start vertex 999" in (plan.get("error") or "")
+    # Every synthetic structure is a sample cloud.
+    r = api.post("/api/v1/clouds", json={"sample": "warren"})
+    assert r.status_code in (200, 201), r.text
+    assert r.json()["n_points"] > 10_000
