@@ -212,6 +212,11 @@ function renderDetail(p) {
   $("#cancel").disabled = !allowed.has("cancel");
   $("#revise").disabled = !allowed.has("revise");
   $("#delete").disabled = !allowed.has("delete");
+  $("#dispatch").disabled = !allowed.has("dispatch") || !p.program;
+  $("#dispatch-box").hidden = true;
+  $("#d-program-len").textContent = p.program ? `(${p.program.length} commands)` : "(this kind has no compiler)";
+  $("#d-program").textContent = p.program ? p.program.map((c, i) => `${i}: ${JSON.stringify(c)}`).join("\n") : "";
+  loadExecutionFor(p.id);
   const ct = $("#d-checks tbody");
   ct.innerHTML = "";
   for (const c of p.checks || []) {
@@ -302,6 +307,85 @@ async function showInScene(id) {
   } catch (e) { $("#scene-msg").textContent = e.message; }
 }
 
+// ---------------------------------------------------------- robots & runs
+state.robots = [];
+state.execution = null;
+
+async function loadRobots() {
+  state.robots = await api("GET", "/robots");
+  const tb = $("#robots tbody");
+  tb.innerHTML = "";
+  for (const r of state.robots) {
+    const hb = r.last_heartbeat ? `${Math.max(0, Date.now() / 1000 - r.last_heartbeat).toFixed(1)} s ago` : "never";
+    const faults = (r.faults ? `0x${r.faults.toString(16)}` : "none") + (r.estop_latched ? " · E-STOP latched" : "");
+    const clear = el("button", { class: "secondary", onclick: () => clearEstop(r.name) }, "clear E-stop");
+    clear.disabled = !r.estop_latched;
+    tb.append(el("tr", { "data-robot": r.name, "data-link": r.state },
+      el("td", {}, r.name), el("td", { class: `link-${r.state}` }, r.state),
+      el("td", { title: r.reason }, r.url + (r.emulated ? " (emulator)" : "")),
+      el("td", {}, hb), el("td", {}, faults), el("td", {}, clear)));
+  }
+  const sel = $("#dispatch-robot");
+  const keep = sel.value;
+  sel.innerHTML = "";
+  for (const r of state.robots) sel.append(el("option", { value: r.name }, `${r.name} (${r.state})`));
+  if (keep) sel.value = keep;
+}
+
+async function clearEstop(name) {
+  try { await api("POST", `/robots/${name}/clear-estop`); flash(`E-stop cleared on ${name}`); await loadRobots(); }
+  catch (e) { flash(e.message, true); }
+}
+
+$("#dispatch").addEventListener("click", () => {
+  const p = state.plans.get(state.selected);
+  const kind = p && state.kinds[p.kind];
+  if (kind && kind.robot) $("#dispatch-robot").value = kind.robot;
+  $("#dispatch-box").hidden = false;
+});
+$("#dispatch-cancel").addEventListener("click", () => { $("#dispatch-box").hidden = true; });
+$("#dispatch-confirm").addEventListener("click", async () => {
+  try {
+    const ex = await api("POST", `/plans/${state.selected}/dispatch`, { robot: $("#dispatch-robot").value });
+    $("#dispatch-box").hidden = true;
+    flash(`dispatched as ${ex.id}`);
+    showExecution(ex);
+    await select(state.selected);
+  } catch (e) { flash(e.message, true); }
+});
+
+async function loadExecutionFor(planId) {
+  const runs = await api("GET", `/executions?plan_id=${planId}`);
+  if (runs.length) showExecution(runs[0]); else { state.execution = null; $("#execution").hidden = true; }
+}
+
+async function showExecution(ex) {
+  const full = await api("GET", `/executions/${ex.id}`);
+  state.execution = full;
+  $("#execution").hidden = false;
+  $("#x-id").textContent = full.id;
+  const st = $("#x-state");
+  st.textContent = full.state; st.className = `state ${full.state}`;
+  $("#x-progress div").style.width = `${full.progress * 100}%`;
+  $("#x-progress span").textContent = `${full.acked}/${full.total} commands`;
+  $("#x-current").textContent = full.current_command ? JSON.stringify(full.current_command) : "–";
+  $("#x-fault").textContent = full.fault || "";
+  const allowed = new Set(full.allowed_actions || []);
+  $("#x-pause").disabled = !allowed.has("pause");
+  $("#x-resume").disabled = !allowed.has("resume");
+  $("#x-abort").disabled = !allowed.has("abort");
+}
+
+for (const action of ["pause", "resume", "abort"]) {
+  $(`#x-${action}`).addEventListener("click", async () => {
+    if (!state.execution) return;
+    try {
+      const ex = await api("POST", `/executions/${state.execution.id}/${action}`, action === "resume" ? {} : undefined);
+      showExecution(ex);
+    } catch (e) { flash(e.message, true); }
+  });
+}
+
 // ------------------------------------------------------------------- audit
 async function loadAudit() {
   const events = await api("GET", "/audit?limit=30");
@@ -335,11 +419,15 @@ function openEvents() {
     }
     if (!["planning"].includes(d.state)) refreshAudit();
   });
+  let robotTimer = null;
+  const refreshRobots = () => { if (!robotTimer) robotTimer = setTimeout(() => { robotTimer = null; loadRobots(); }, 500); };
   for (const t of ["estop", "cloud", "execution", "robot"]) {
     es.addEventListener(t, (m) => {
       const d = JSON.parse(m.data);
-      if (t === "estop") flash(`E-STOP (${d.robot}) by ${d.by}`, true);
+      if (t === "estop") { flash(`E-STOP (${d.robot}) by ${d.by}`, true); refreshRobots(); }
       if (t === "cloud") loadClouds();
+      if (t === "execution" && state.execution && d.id === state.execution.id) showExecution(d);
+      if (t === "robot") { refreshRobots(); return; }
       refreshAudit();
       document.dispatchEvent(new CustomEvent("steelpath:" + t, { detail: d }));
     });
@@ -353,7 +441,8 @@ async function start() {
   $("#whoami").textContent = `${me.name} (${me.role})`;
   $("#logout").hidden = false;
   const health = await fetch(API + "/health").then((r) => r.json());
-  await Promise.all([loadKinds(), loadSamples(), loadClouds(), loadPlans(), loadAudit()]);
+  await Promise.all([loadKinds(), loadSamples(), loadClouds(), loadPlans(), loadAudit(), loadRobots()]);
+  setInterval(loadRobots, 3000);  // heartbeat ages keep moving even when nothing else does
   openEvents();
   if (health.scene.running && me.role !== "viewer") $("#scene").src = "/scene/";
   else $("#scene-msg").textContent = health.scene.running ? "the scene needs the operator role" : "scene not running";

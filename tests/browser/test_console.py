@@ -114,3 +114,90 @@ def test_api_docs_render_offline(browser, tmp_path: Path) -> None:
         assert all(r.startswith(url) for r in requests), [
             r for r in requests if not r.startswith(url)
         ]
+
+
+def _plan_and_approve(page, params: str) -> str:
+    page.select_option("#kind", "demo.route")
+    page.fill("#params", params)
+    before = set(
+        page.eval_on_selector_all("#plans tbody tr", "rows => rows.map(r => r.dataset.id)")
+    )
+    page.click("#submit-plan")
+    page.wait_for_function(
+        "ids => [...document.querySelectorAll('#plans tbody tr[data-state=planned]')]"
+        ".some(r => !ids.includes(r.dataset.id))",
+        arg=list(before),
+        timeout=60_000,
+    )
+    plan_id = page.eval_on_selector_all(
+        "#plans tbody tr[data-state=planned]",
+        "(rows, ids) => rows.map(r => r.dataset.id).filter(i => !ids.includes(i))[0]",
+        list(before),
+    )
+    page.locator(f"#plans tbody tr[data-id='{plan_id}']").click()
+    page.wait_for_function(
+        f"document.querySelector('#d-title').textContent.startsWith('{plan_id}')"
+    )
+    page.wait_for_selector("#d-checks tr[data-check='command_program']")
+    page.click("#approve")
+    page.wait_for_function("document.querySelector('#d-state').textContent === 'approved'")
+    return plan_id
+
+
+def test_dispatch_to_emulator_then_estop(browser, tmp_path: Path) -> None:
+    settings = make_settings(
+        tmp_path / "var", port=free_port(), emulators=True, emulator_time_scale=4.0
+    )
+    with live_server(settings) as (url, tokens, app):
+        for name in app.state.services.dispatch.robot_names():
+            assert app.state.services.dispatch.wait_connected(name, 30)
+        page = browser.new_page(viewport={"width": 1400, "height": 1100})
+        errors: list[str] = []
+        page.on("pageerror", lambda e: errors.append(str(e)))
+        page.goto(url + "/")
+        page.fill("#login-token", tokens["operator"])
+        page.click("#login-form button[type=submit]")
+        page.wait_for_selector("#robots tr[data-robot='ara'][data-link='ready']", timeout=30_000)
+
+        # A sample cloud, loaded through the page.
+        page.select_option("#sample", "demo_plane")
+        page.click("#load-sample")
+        page.wait_for_function(
+            "document.querySelector('#cloud-msg').textContent.includes('5000 points')"
+        )
+
+        # Run 1: plan, approve, dispatch to the emulator, watch it complete.
+        plan1 = _plan_and_approve(page, '{"end": "b1"}')
+        assert "wheels" in (page.text_content("#d-program") or "")
+        page.click("#dispatch")
+        page.select_option("#dispatch-robot", "ara")
+        page.click("#dispatch-confirm")
+        page.wait_for_function(
+            "document.querySelector('#x-state').textContent === 'completed'", timeout=90_000
+        )
+        assert "commands" in page.inner_text("#x-progress")
+
+        # Run 2: stopped with the E-stop button while the robot moves.
+        plan2 = _plan_and_approve(page, '{"end": "c2"}')
+        page.click("#dispatch")
+        page.click("#dispatch-confirm")
+        page.wait_for_function(
+            "document.querySelector('#x-state').textContent === 'running'", timeout=30_000
+        )
+        page.click("#estop")
+        page.wait_for_function(
+            "document.querySelector('#x-state').textContent === 'aborted'", timeout=30_000
+        )
+        page.wait_for_function(
+            "document.querySelector('#robots tr[data-robot=ara]').textContent.includes('E-STOP latched')",
+            timeout=30_000,
+        )
+        ARTIFACTS.mkdir(exist_ok=True)
+        page.screenshot(path=str(ARTIFACTS / "console-dispatch.png"), full_page=True)
+        emulator = app.state.services.dispatch._robots["ara"].emulator
+        assert emulator.stop_events(), "the emulator never saw the stop"
+        assert not errors, errors
+        store = app.state.services.store
+        ex1, ex2 = (store.list_executions(plan_id=p)[0] for p in (plan1, plan2))
+        assert (ex1.state, ex1.acked == ex1.total) == ("completed", True)
+        assert ex2.state == "aborted" and ex2.acked < ex2.total
