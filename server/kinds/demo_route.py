@@ -9,7 +9,6 @@ edge weights are the Euclidean lengths; the route is Dijkstra's shortest path
 
 from __future__ import annotations
 
-import itertools
 import time
 from typing import Any
 
@@ -136,7 +135,7 @@ def run(p: DemoRouteParams, ctx: JobContext) -> KindOutput:
 
 #: Differential-drive constants used to turn the route into wheel commands
 #: (the ARA robot's mobile mode; values chosen for the demo).
-TRACK_M = 0.2
+TRACK_M = 0.14
 DRIVE_SPEED_M_S = 0.1
 TURN_RATE_RAD_S = 0.5
 
@@ -144,25 +143,14 @@ TURN_RATE_RAD_S = 0.5
 def compile_wheels(plan: Any) -> list[dict[str, Any]]:
     """The route as ARA wheel commands: turn in place to each segment's heading,
     drive it straight, stop at the end (robot starts at the first vertex facing +x)."""
-    from robots.protocol.commands import Stop, WheelSpeeds
+    from server.kinds.programs import as_dicts, differential_drive
 
-    xyz = plan.array("path_xyz")
-    heading = 0.0
-    cmds: list[Any] = []
-    for a, b in itertools.pairwise(xyz):
-        d = b[:2] - a[:2]
-        length = float(np.hypot(*d))
-        if length < 1e-9:
-            continue
-        target = float(np.arctan2(d[1], d[0]))
-        turn = (target - heading + np.pi) % (2 * np.pi) - np.pi
-        if abs(turn) > 1e-6:
-            w = np.sign(turn) * TURN_RATE_RAD_S * TRACK_M / 2
-            cmds.append(WheelSpeeds((-w, w), abs(turn) / TURN_RATE_RAD_S))
-        cmds.append(WheelSpeeds((DRIVE_SPEED_M_S, DRIVE_SPEED_M_S), length / DRIVE_SPEED_M_S))
-        heading = target
-    cmds.append(Stop())
-    return [c.to_dict() for c in cmds]
+    xy = plan.array("path_xyz")[:, :2]
+    return as_dicts(
+        differential_drive(
+            xy, track_m=TRACK_M, speed_m_s=DRIVE_SPEED_M_S, turn_rate_rad_s=TURN_RATE_RAD_S
+        )
+    )
 
 
 def sample_plane(seed: int) -> np.ndarray:

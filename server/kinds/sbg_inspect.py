@@ -450,6 +450,29 @@ def _draw(ctx: Any, plan: Any) -> None:
     draw(ctx, plan)
 
 
+def compile_program(plan: Any) -> list[dict[str, Any]]:
+    """Wheel-speed and lift-arm commands reproducing the simulated run.
+
+    The four physical wheels, in order front-left, front-right, rear-left,
+    rear-right (m/s): on a wall they follow the differential-drive speeds
+    (v_left, v_right; Eq. 9), in a corner the front/rear speeds of Eq. 4;
+    the lift arm in rad.  The robot's own controllers (trilateration,
+    preview-follow) close the loop on board; this program carries the
+    planned speed profile.
+    """
+    from server.kinds.programs import as_dicts, sampled_wheels_and_lift
+
+    w = plan.array("traj_wheels")  # columns: v_left, v_right, v_front, v_rear (NaN when unused)
+    on_wall = np.isfinite(w[:, 0]) & np.isfinite(w[:, 1])
+    fl = np.where(on_wall, w[:, 0], w[:, 2])
+    fr = np.where(on_wall, w[:, 1], w[:, 2])
+    rl = np.where(on_wall, w[:, 0], w[:, 3])
+    rr = np.where(on_wall, w[:, 1], w[:, 3])
+    wheels = np.nan_to_num(np.stack([fl, fr, rl, rr], axis=1), nan=0.0)
+    arm = np.nan_to_num(plan.array("traj_arm"), nan=0.0)
+    return as_dicts(sampled_wheels_and_lift(plan.array("traj_t"), wheels, arm, dt_s=0.5))
+
+
 KIND = PlanKind(
     name="sbg.inspect",
     title="Box girder: full-lane inspection by the wall climber",
@@ -459,4 +482,5 @@ KIND = PlanKind(
     robot="sbg_climber",
     draw=_draw,
     validate=validate,
+    compile=compile_program,
 )
