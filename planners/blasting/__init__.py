@@ -570,8 +570,10 @@ def _trajectory(
     jump larger than 15° between neighbours becomes a joint-space
     reconfiguration.  Way-points whose ellipsoids penetrate an obstacle are
     rejected (their state is removed and the DP re-run, up to 4 times), and
-    the approach tries a direct move, then "rotate folded, then extend" and
-    "extend, then rotate" via-points, keeping the first one that is clear."""
+    the approach and reconfigurations try a direct move, then "rotate
+    folded, then extend" and "extend, then rotate" via-points, keeping the
+    first one that is clear (else the clearest; the clearance check then
+    fails and the plan cannot be approved)."""
     # Cartesian way-points between consecutive spots
     P, A, spot = [flange[order[0]]], [axes[order[0]]], [order[0]]
     for a_i, b_i in itertools.pairwise(order):
@@ -610,8 +612,8 @@ def _trajectory(
     for k in range(1, len(qb)):
         dq = np.abs(qb[k] - qb[k - 1]).max()
         if dq > JUMP_RAD:
-            n = int(np.ceil(dq / np.deg2rad(2.0)))
-            out.append(_arm.joint_path(qb[k - 1], qb[k], n))
+            n = max(int(np.ceil(dq / np.deg2rad(2.0))), 2)
+            out.append(_approach(qb[k - 1], qb[k], n, clear_fn))
             seg.append(np.full(n, 3))
             sp.append(np.r_[np.full(n - 1, -1), spot[k]])
         else:

@@ -132,7 +132,7 @@ def approximate_ik(
     (:func:`ga_ik`) gives one start, ``q_ref`` and the closed-form solutions
     of the target pulled back into reach give others, and each is refined by
     bounded least squares on the residual vector (analytic Jacobian; exact
-    solutions end here) and then L-BFGS-B on Eq. 3.11 itself.  The result is
+    solutions end here) and then SLSQP on Eq. 3.11 itself.  The result is
     never worse than the GA's."""
     lo, hi = robot.joint_limits[:5, 0], robot.joint_limits[:5, 1]
     q6 = float(q_ref[5])
@@ -175,7 +175,7 @@ def approximate_ik(
         x, f = r.x, eq311(r.x)
         if f > 1e-9:
             r2 = minimize(
-                f_and_grad, x, jac=True, method="L-BFGS-B", bounds=list(zip(lo, hi, strict=True))
+                f_and_grad, x, jac=True, method="SLSQP", bounds=list(zip(lo, hi, strict=True))
             )
             if r2.fun < f:
                 x, f = r2.x, float(r2.fun)

@@ -336,8 +336,16 @@ def clearance(
             best[rest] = np.minimum(best[rest], lbs[rest, k])
     if obstacles._tree is not None:
         d_c, _ = obstacles._tree.query(c, k=1)
-        radius = np.minimum(d_c + a, horizon + a)
-        lists = obstacles._tree.query_ball_point(c, radius)
+        # only points that could beat the pose's current upper bound (the box
+        # distances, and each spheroid's distance to its nearest-centre point,
+        # which is ≤ d_c) are refined; in sign-only mode only those within
+        # the margin matter
+        if sign_only:
+            bound = np.full(n, max(margin, 0.0))
+        else:
+            ub_pose = np.minimum(best, d_c).reshape(-1, E).min(axis=1)
+            bound = np.minimum(np.repeat(ub_pose, E), horizon)
+        lists = obstacles._tree.query_ball_point(c, np.maximum(bound, 0.0) + a)
         lens = np.fromiter((len(li) for li in lists), dtype=np.int64, count=n)
         if lens.sum():
             idx = np.concatenate([np.asarray(li, dtype=np.int64) for li in lists if len(li)])

@@ -124,13 +124,17 @@ def bridge_obstacles() -> tuple[Box, ...]:
     )
 
 
-def obstacle_points(seed: int = 0, n: int = 400) -> np.ndarray:
+def obstacle_points(
+    seed: int = 0, n: int = 400, *, xy: tuple[float, float] = (0.75, 0.55), z_low: float = 1.40
+) -> np.ndarray:
     """A point obstacle in the workspace (the seed's red points, Fig. 4.27):
-    a chosen 40 mm hanger rod from the deck near Surface 1, sampled."""
+    a chosen 40 mm hanger rod from the deck down to ``z_low`` at ``xy`` (m),
+    sampled on its surface.  The default stands at the edge of Surface 1,
+    where the wrist passes close to it."""
     rng = np.random.default_rng(seed)
-    z = rng.uniform(1.40, 1.70, n)
+    z = rng.uniform(z_low, 1.70, n)
     t = rng.uniform(0, 2 * np.pi, n)
-    return np.stack([0.86 + 0.02 * np.cos(t), 0.30 + 0.02 * np.sin(t), z], axis=1)
+    return np.stack([xy[0] + 0.02 * np.cos(t), xy[1] + 0.02 * np.sin(t), z], axis=1)
 
 
 _S1 = np.array(
