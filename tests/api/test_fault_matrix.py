@@ -1,0 +1,127 @@
+"""Each injected link/robot fault × each plan kind that compiles to commands:
+the run completes after operator resumes, with nothing lost and nothing
+executed twice (asserted from the emulator's own execution log)."""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Iterator
+
+import pytest
+from fastapi.testclient import TestClient
+
+from robots.emulator.faults import FaultConfig
+from robots.emulator.robot import check_exactly_once
+from robots.emulator.server import Emulator
+from server.app import create_app
+from server.auth import create_token
+from server.kinds import registry
+from tests.conftest import Api, make_settings
+
+pytestmark = pytest.mark.slow
+
+#: Link drops are triggered mid-run (after the first acknowledged command);
+#: the rest are the emulator's fault-injection settings.
+MID_RUN_DROPS = {"drop": None, "silence": 1.5}
+FAULTS: dict[str, FaultConfig] = {
+    "drop": FaultConfig(),
+    "silence": FaultConfig(),
+    "corrupt": FaultConfig(corrupt_rate=0.003, seed=7),
+    "delay": FaultConfig(delay_s=0.15),
+    "nak": FaultConfig(nak_index=2, nak_times=2),
+    "reject": FaultConfig(nak_index=3, nak_permanent=True),
+    "robot_fault": FaultConfig(fault_at_index=3),
+}
+
+#: Small seed experiments per kind, so each run streams its whole program quickly.
+PARAMS: dict[str, dict] = {
+    "demo.route": {"end": "c1"},
+    "sbg.inspect": {},
+}
+
+KINDS = sorted(k for k, v in registry().items() if v.compile is not None and v.robot is not None)
+
+
+@pytest.fixture(scope="module")
+def mapi(tmp_path_factory) -> Iterator[Api]:
+    settings = make_settings(tmp_path_factory.mktemp("faults") / "var", emulators=False)
+    app = create_app(settings)
+    with TestClient(app) as client:
+        store = app.state.services.store
+        tokens = {r: create_token(store, r, r, "test")[1] for r in ("viewer", "operator", "admin")}
+        yield Api(client, tokens, app)
+
+
+@pytest.fixture(scope="module")
+def base_plans(mapi) -> dict[str, dict]:
+    """One planned plan per kind; each matrix cell revises it (a plan runs once)."""
+    out = {}
+    for kind in KINDS:
+        plan = mapi.wait(mapi.submit(kind, PARAMS.get(kind, {}))["id"], timeout=300)
+        assert plan["state"] == "planned", (kind, plan["error"], plan["checks"])
+        out[kind] = plan
+    return out
+
+
+def _fresh_approved(mapi: Api, base: dict) -> dict:
+    r = mapi.post(f"/api/v1/plans/{base['id']}/revise", json={"params": {}})
+    plan = mapi.wait(r.json()["id"], timeout=300)
+    assert plan["state"] == "planned", plan["error"]
+    assert mapi.post(f"/api/v1/plans/{plan['id']}/approve").status_code == 200
+    return plan
+
+
+@pytest.mark.parametrize("fault", sorted(FAULTS))
+@pytest.mark.parametrize("kind", KINDS)
+def test_fault_matrix(mapi, base_plans, kind: str, fault: str) -> None:
+    robot = registry()[kind].robot
+    # Run each program in about 3 s of wall time, whatever its length, so the
+    # faults land mid-run.
+    duration = sum(c.get("duration_s", 0.0) for c in base_plans[kind]["program"])
+    scale = max(duration / 3.0, 1.0)
+    plan = _fresh_approved(mapi, base_plans[kind])
+    emulator = Emulator(robot, faults=FAULTS[fault], time_scale=scale).start()
+    try:
+        r = mapi.put(f"/api/v1/robots/{robot}/connection", "admin", json={"url": emulator.url})
+        assert r.status_code == 200, r.text
+        deadline = time.monotonic() + 30
+        while True:  # a corrupting or slow link may need a few handshakes
+            assert mapi.services.dispatch.wait_connected(robot, 20)
+            r = mapi.post(f"/api/v1/plans/{plan['id']}/dispatch", json={"robot": robot})
+            if r.status_code == 201 or time.monotonic() > deadline:
+                break
+        assert r.status_code == 201, r.text
+        eid = r.json()["id"]
+        resumes, dropped, deadline = 0, False, time.monotonic() + 240
+        while True:
+            ex = mapi.get(f"/api/v1/executions/{eid}").json()
+            if fault in MID_RUN_DROPS and not dropped and ex["acked"] >= 1:
+                emulator.drop_link(MID_RUN_DROPS[fault])
+                dropped = True
+            if ex["state"] == "completed":
+                break
+            assert ex["state"] != "aborted", ex
+            stopped = ex["state"] in ("interrupted", "faulted")
+            if stopped and mapi.services.dispatch.wait_connected(robot, 0.2):
+                # The operator's decision: resume (clearing a robot fault once "fixed").
+                body = {"clear_faults": True} if "robot_fault" in (ex["fault"] or "") else {}
+                r = mapi.post(f"/api/v1/executions/{eid}/resume", json=body)
+                resumes += r.status_code == 200
+            assert time.monotonic() < deadline, f"stuck: {ex}"
+            time.sleep(0.05)
+        problems = check_exactly_once(emulator.execution_log(), ex["run_id"], ex["total"])
+        assert problems == [], problems
+        assert mapi.services.store.list_acks(eid) == list(range(ex["total"]))
+        stats = emulator.stats
+        # The fault really happened (no vacuous pass).
+        if fault in MID_RUN_DROPS:
+            assert dropped and resumes >= 1
+        elif fault == "corrupt":
+            assert stats["bytes_corrupted"] > 0
+        elif fault in ("reject", "robot_fault"):
+            assert resumes >= 1
+        elif fault == "nak":
+            link_stats = mapi.services.dispatch._robots[robot].link.status().stats
+            assert link_stats.get("naks", 0) >= 1, link_stats
+    finally:
+        emulator.close()
