@@ -114,3 +114,21 @@ def test_proxy_websocket_carries_the_scene(sapi) -> None:
         assert ws.accepted_subprotocol == proto
         first = ws.receive_bytes()
         assert len(first) > 0
+
+
+def test_live_robot_state_beside_the_plan(make_api) -> None:
+    api = make_api(scene_port=free_port(), emulators=True, emulator_time_scale=2.0)
+    assert api.services.dispatch.wait_connected("ara", 20)
+    plan = api.wait(api.submit("demo.route")["id"])
+    api.post(f"/api/v1/plans/{plan['id']}/approve")
+    api.post("/api/v1/scene/show", json={"plan_id": plan["id"]})
+    scene = api.services.scene.server.scene
+    assert scene.get_handle_by_name("/plan/live_ara") is None
+    r = api.post(f"/api/v1/plans/{plan['id']}/dispatch", json={"robot": "ara"})
+    assert r.status_code == 201
+    deadline = time.monotonic() + 20
+    while scene.get_handle_by_name("/plan/live_ara") is None and time.monotonic() < deadline:
+        time.sleep(0.05)
+    assert scene.get_handle_by_name("/plan/live_ara") is not None
+    stored = api.get("/api/v1/robots/ara/state").json()["stored_report"]
+    assert stored is not None and len(stored["q_rad"]) == 6
