@@ -12,25 +12,30 @@ reports (§5.2.3), this fails on the I shape (two cross areas make
 ``nm = ns``, so a 3-blob split scores higher) and on trusses, where a
 Gaussian blob cannot follow a bar.
 
-``"default"`` — a deterministic geometric segmentation (no random
+``"default"`` — a deterministic strip-based segmentation (no random
 initialisation at all).  It keeps the seed's idea (§4.1: bars are long in one
 direction, cross areas are where bars meet) but measures it directly instead
 of inferring it from a mixture's neighbour counts:
 
-1. rasterise the points (``grid_m``), close gaps of the sparse far field
-   (radius from the measured point spacing), fill small dropout holes;
-2. for every steel cell, measure the chord length of steel through it in
-   ``n_directions`` directions over [0, π) (exact run lengths per direction,
-   vectorised by sorting cells along rotated lines);
-3. a direction is *long* where the chord is ≥ ``long_factor`` × the cell's
-   shortest chord (its local flange width) and ≥ ``long_factor`` × the median
-   flange width; a cell with two or more separate runs of long directions
-   (or long in every direction) lies on two bars at once: a cross area
-   (for an L corner too, where the seed's neighbour count cannot tell);
-4. cross cells → connected cross areas (tiny specks dropped, a margin
-   dilated so bars meeting at a point are separated); the remaining steel
-   splits into connected bars; bar fragments too small to be a bar are merged
-   into the cross area they touch.
+1. rasterise the points (``grid_m``); close gaps with a radius per point
+   from its local spacing (density falls ~10× with range); fill small
+   enclosed dropout holes; drop specks;
+2. for every steel cell, the chord length of steel through it in
+   ``n_directions`` directions over [0, π) — exact run lengths along naive
+   digital lines, one sort per direction;
+3. a direction is *long* where its chord is ≥ ``long_factor`` × the cell's
+   shortest chord (its flange width) and × the median width; cells with one
+   run of long directions are bar cells with an axis angle (longest chord);
+   4-connected bar cells with agreeing angles form *pieces*;
+4. pieces that are long and span their flange become *lines* (trimmed PCA),
+   largest first; a piece lying inside an accepted strip joins it (or is a
+   fringe artefact of a crossing); near-parallel lines one strip explains are
+   merged;
+5. each line's strip runs along it as far as steel continues; cells on two
+   or more strips are cross areas (an L corner too, which the neighbour count
+   of Eq. 4.1 cannot see); the rest of each strip, split by the cross areas,
+   are the bars; fragments shorter than ``min_bar_length_m`` and other
+   leftovers take the nearest label.
 
 Both return per-point labels (−1 = noise) and a kind per cluster.
 """
