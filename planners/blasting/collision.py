@@ -239,7 +239,8 @@ def spheroid_box_distance(
     to a closest pair; their gap is an upper bound and the separating-plane
     bound ``min_box(n·x) − h_spheroid(n)`` (n along the gap) a lower bound,
     so each pair iterates until the two agree within ``tol`` (or, with
-    ``sign_only``, until the lower bound exceeds ``margin``).  Overlapping (a box
+    ``sign_only``, until the lower bound exceeds ``margin``); the lower
+    bound is returned.  Overlapping (a box
     point inside the spheroid, Eq. 3.14): negative, −(depth of the deepest
     of the box corners, the box centre and that point)."""
     n = S.cf.shape[0]
@@ -282,14 +283,10 @@ def spheroid_box_distance(
         if sign_only:
             done |= lba > margin
         active = active[~done]
-    # unconverged pairs (max_iter) keep the conservative lower bound; in
-    # sign-only mode that lower bound decides (≤ margin: not free)
-    converged = ub - lb <= tol
-    dist = (
-        np.where(lb > margin, lb, np.where(converged, ub, lb))
-        if sign_only
-        else np.where(converged, ub, lb)
-    )
+    # The lower bound is reported (within tol of the distance once
+    # converged; conservative if max_iter stopped the pair), so clearance is
+    # never overstated; in sign-only mode it decides (≤ margin: not free).
+    dist = lb
     if overlap.any():
         k = np.nonzero(overlap)[0]
         Sk = S[k]
