@@ -1,0 +1,894 @@
+"""Inch-worm jump planning for the ARA robot (seed §3.2, §5.2.2, Fig. 3.5/5.4).
+
+Phases (magnet states as (foot 1, foot 2)):
+
+  A  magnet 2 touched                               (untouched, touched)
+  B  foot 1 lifts off and the arm goes to P_conv    anchor foot 2
+  C  foot 1 to the target: RRT-Connect in joint space to a pose hovering
+     ``standoff_m`` above the foothold, then a straight approach to contact
+  D  magnets swap: 1 touched, 2 untouched           (touched, untouched)
+  E  foot 2 lifts off, swings (RRT-Connect) and lands beside foot 1 on the
+     target surface                                 anchor foot 1
+  F  both arrays untouched: mobile configuration    (untouched, untouched)
+
+The seed ran MoveIt's KDL IK and RRTConnect and reports the planner "was not
+robust and needed to redo sometimes".  Robustness here: many IK seeds give
+several goal configurations (all roots of the goal tree), goal biasing, and
+up to ``attempts`` restarts with fresh random streams; every path is
+shortcut-smoothed, then time-parameterised (rest-to-rest trapezoids per
+segment under the joint speed and acceleration limits) and re-checked at
+every output sample (joint limits, speeds, clearance to the scene, self
+clearance).
+
+Collision model: the robot's URDF primitives covered by spheres
+(:mod:`planners.switching.collision`) against the scene points (base frame)
+plus a known patch of the standing surface under the robot (the camera does
+not see it).  The anchored foot is not checked against the scene (it stands
+on it); the moving foot may touch the surface only inside its own footprint
+during lift-off and the final approach ("contact zones").
+"""
+
+from __future__ import annotations
+
+import itertools
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field, replace
+from typing import Any
+
+import numpy as np
+import shapely
+
+from planners.errors import InvalidInputError, MotionPlanningError, UnreachableError
+from planners.switching.collision import PointObstacles, SphereCover, self_pairs, sphere_cover
+from planners.switching.decide import check_rigid
+from planners.switching.rrt import rrt_connect, shortcut
+
+Progress = Callable[[float, str], None]
+_DEBUG = False
+
+
+@dataclass(frozen=True)
+class JumpParams:
+    """Tunables of :func:`plan_inchworm_jump` (all chosen; the seed gives none)."""
+
+    lift_m: float = 0.04  # straight lift-off along the foot normal
+    standoff_m: float = 0.04  # hover height above the target before landing
+    cartesian_steps: int = 6  # waypoints of each straight lift/approach
+    clearance_margin_m: float = 0.01  # required scene clearance (sphere cover)
+    self_margin_m: float = 0.0  # required self clearance (sphere cover)
+    contact_band_m: float = 0.03  # points this close to a contact plane …
+    contact_pad_m: float = 0.04  # … and within the footprint + pad are exempt
+    resolution_rad: float = 0.02  # edge collision-check step (≤ 1.2 cm at 0.6 m)
+    step_rad: float = 0.3  # RRT extension step
+    goal_bias: float = 0.1
+    max_iterations: int = 1500  # per RRT-Connect attempt
+    attempts: int = 4  # RRT-Connect restarts
+    ik_seeds: int = 48
+    max_goals: int = 6  # IK solutions used as goal-tree roots
+    shortcut_iterations: int = 100
+    accel_rad_s2: float = 2.0
+    dt_s: float = 0.02
+    speed_scale: float = 0.9  # plan at 90 % of the joint speed limits
+    standing_patch_m: tuple[tuple[float, float], tuple[float, float]] = ((-0.75, 0.13), (-0.2, 0.2))
+    patch_spacing_m: float = 0.01
+    second_foot_distances_m: tuple[float, ...] = (0.5, 0.42, 0.34, 0.26, 0.22)
+    max_second_foot_candidates: int = 12  # landing spots tried for foot 2
+    second_foot_angles_deg: tuple[float, ...] = tuple(float(a) for a in range(0, 360, 30))
+    use_conv: bool = True  # go through P_conv first (seed); False: plan from lift-off
+    try_flipped: bool = True  # also try each foothold turned 180° about its normal
+    # Also try each foothold slid inwards (towards the plane centroid, −x of
+    # Alg. 2's pose) by these distances when it stays on the seen surface: a
+    # rectangle anchored on an edge where the plane meets another surface
+    # (a wall on a floor) puts the foot against that surface.
+    inward_shifts_m: tuple[float, ...] = (0.0, 0.03, 0.06)
+    seed: int = 0
+
+
+@dataclass
+class JumpRobot:
+    """What the planner needs from a robot (``from_model`` reads a RobotModel).
+
+    ``fk_all(Q (B,n)) → (B,L,4,4)`` link frames in the chain base (L links,
+    first the base foot, last the free foot's sole); ``ik(T, q0, seed) →
+    (K,n)`` distinct solutions; ``ik_track(T (B,4,4) path, q0) → (B,n) | None``
+    follows a Cartesian path from q0.
+    """
+
+    fk_all: Callable[[np.ndarray], np.ndarray]
+    ik: Callable[..., np.ndarray]
+    ik_track: Callable[[np.ndarray, np.ndarray], np.ndarray | None]
+    joint_limits: np.ndarray
+    max_speed: np.ndarray
+    link_names: list[str]
+    cover: SphereCover  # fine cover: scene clearance
+    self_cover: SphereCover  # coarse cover: self clearance (cheaper pairs)
+    foot: tuple[float, float]
+    q_mobile: np.ndarray
+    q_conv: np.ndarray
+    base_foot_links: tuple[int, ...]  # links that move with foot 2 (chain base)
+    end_foot_links: tuple[int, ...]  # links that move with foot 1 (chain end)
+
+    @staticmethod
+    def from_model(model: Any, *, ik_seeds: int = 48, cell_m: float = 0.025) -> JumpRobot:
+        """Adapter for :class:`robots.ara.AraModel` (or any model with
+        ``fk_all``, ``ik_solutions``, ``ik_batch``, ``collision_shapes``,
+        ``link_names``, ``joint_limits``, ``max_speed``, ``q_mobile``,
+        ``q_conv`` and ``params['foot']``)."""
+        names = list(model.link_names)
+
+        def ik(T: np.ndarray, q0: np.ndarray | None = None, seed: int = 0) -> np.ndarray:
+            return model.ik_solutions(T, q0=q0, n_seeds=ik_seeds, seed=seed)
+
+        def ik_track(Ts: np.ndarray, q0: np.ndarray) -> np.ndarray | None:
+            # Follow a Cartesian path, each waypoint seeded by the last.  Near
+            # the flat (mobile) pose a straight lift is nearly singular (only a
+            # sideways fold of joints 3/4 can absorb the arc of joints 2/5), so
+            # intermediate waypoints are accepted within 2 mm / 0.02 rad.
+            out, q = [], np.asarray(q0, float)
+            for T in Ts:
+                sol, _ = model.ik_batch(T, q[None], max_iter=100)
+                E = model.fk(sol[0])
+                pos = float(np.linalg.norm(E[:3, 3] - T[:3, 3]))
+                rot = float(np.arccos(np.clip((np.trace(E[:3, :3].T @ T[:3, :3]) - 1) / 2, -1, 1)))
+                if pos > 2e-3 or rot > 0.02 or np.max(np.abs(sol[0] - q)) > 0.5:
+                    return None
+                q = sol[0]
+                out.append(q)
+            return np.array(out)
+
+        foot = model.params["foot"]
+        return JumpRobot(
+            fk_all=model.fk_all,
+            ik=ik,
+            ik_track=ik_track,
+            joint_limits=np.asarray(model.joint_limits, float),
+            max_speed=np.asarray(model.max_speed, float),
+            link_names=names,
+            cover=sphere_cover(model.collision_shapes, names, cell_m),
+            self_cover=sphere_cover(model.collision_shapes, names, 0.04),
+            foot=(float(foot["length_m"]), float(foot["width_m"])),
+            q_mobile=np.asarray(model.q_mobile, float),
+            q_conv=np.asarray(model.q_conv, float),
+            base_foot_links=(0,),
+            end_foot_links=(len(names) - 2, len(names) - 1),
+        )
+
+
+@dataclass
+class JumpPhase:
+    """One phase of the jump: samples ``[start, stop)`` of the trajectory."""
+
+    name: str
+    description: str
+    anchor: str  # "foot2" | "foot1"
+    magnets: dict[str, str]  # {"foot1": state, "foot2": state} during the phase
+    start: int
+    stop: int
+    t_start_s: float
+    t_end_s: float
+
+
+@dataclass
+class JumpPlan:
+    """Timed joint trajectory of an inch-worm jump, with magnet commands."""
+
+    times: np.ndarray  # (T,)
+    joint_trajectory: np.ndarray  # (T, n)
+    anchor: np.ndarray  # (T,) 0 = foot 2 anchored, 1 = foot 1 anchored
+    clearance: np.ndarray  # (T,) scene clearance of the moving parts (m)
+    self_clearance: np.ndarray  # (T,)
+    phases: list[JumpPhase]
+    magnet_commands: list[dict[str, Any]]  # {"t_s", "foot", "state"}
+    foot1_target: np.ndarray  # 4×4 base frame (as reached by IK)
+    foot1_requested: np.ndarray  # the foothold option that was used
+    foot2_target: np.ndarray  # 4×4 base frame
+    foot2_target_inside: bool  # second footprint inside the seen surface
+    waypoints: list[np.ndarray]  # smoothed joint waypoints per planned phase
+    attempts_used: int
+    planning_time_s: float
+    timings_s: dict[str, float] = field(default_factory=dict)
+
+    def link_frames(self, robot: JumpRobot, stride: int = 1) -> np.ndarray:
+        """World (base-frame) link frames along the trajectory (T', L, 4, 4)."""
+        Q = self.joint_trajectory[::stride]
+        F = robot.fk_all(Q)
+        a = self.anchor[::stride].astype(bool)
+        out = F.copy()
+        if a.any():
+            # Foot 1 anchored at its target: world = W1 · F_end⁻¹ · F.
+            rel = np.linalg.inv(F[a, -1])
+            out[a] = np.einsum("ij,bjk,blkm->blim", self.foot1_target, rel, F[a])
+        return out
+
+    def metrics(self, robot: JumpRobot) -> dict[str, float]:
+        dq = np.diff(self.joint_trajectory, axis=0)
+        dt = np.diff(self.times)[:, None]
+        speed = np.abs(dq) / np.maximum(dt, 1e-12) if len(dq) else np.zeros((1, 1))
+        lo, hi = robot.joint_limits[:, 0], robot.joint_limits[:, 1]
+        return {
+            "duration_s": float(self.times[-1]) if len(self.times) else 0.0,
+            "min_clearance_m": float(self.clearance.min()),
+            "min_self_clearance_m": float(self.self_clearance.min()),
+            "max_speed_ratio": float((speed / robot.max_speed).max()),
+            "max_limit_violation_rad": float(
+                np.maximum(
+                    0, np.maximum(lo - self.joint_trajectory, self.joint_trajectory - hi)
+                ).max()
+            ),
+            "planning_time_s": self.planning_time_s,
+            "attempts_used": float(self.attempts_used),
+            "samples": float(len(self.times)),
+        }
+
+
+# --------------------------------------------------------------------------- helpers
+
+
+def _translate(T: np.ndarray, offset: np.ndarray) -> np.ndarray:
+    out = T.copy()
+    out[:3, 3] = T[:3, 3] + offset
+    return out
+
+
+def _foothold_options(
+    footholds: list[np.ndarray],
+    foot: tuple[float, float],
+    surface: tuple[np.ndarray, np.ndarray, np.ndarray, shapely.Geometry] | None,
+    tolerance: float,
+    params: JumpParams,
+) -> list[np.ndarray]:
+    """Foothold poses to try, in order: each given pose, slid inwards by
+    ``inward_shifts_m`` (kept only when the footprint stays inside the seen
+    surface, if one is given), each also flipped 180° about its normal."""
+    out = []
+    for W in footholds:
+        for shift in params.inward_shifts_m:
+            T = _translate(W, -W[:3, 0] * shift)
+            if shift > 0 and surface is not None:
+                origin, ex, ey, hull = surface
+                c = _footprint(T, foot) - origin
+                if not hull.buffer(tolerance).covers(
+                    shapely.Polygon(np.column_stack([c @ ex, c @ ey]))
+                ):
+                    continue
+            out.append(T)
+            if params.try_flipped:
+                out.append(_flip(T))
+    return out
+
+
+def _flip(T: np.ndarray) -> np.ndarray:
+    """Pose turned 180° about its own z axis."""
+    out = T.copy()
+    out[:3, :2] *= -1.0
+    return out
+
+
+def _cartesian_line(T0: np.ndarray, T1: np.ndarray, n: int) -> np.ndarray:
+    """Poses from T0 to T1 moving the position only (orientation of T1)."""
+    s = np.linspace(0, 1, n + 1)[1:]
+    out = np.repeat(T1[None], n, axis=0)
+    out[:, :3, 3] = T0[:3, 3] + s[:, None] * (T1[:3, 3] - T0[:3, 3])
+    return out
+
+
+def _footprint(T: np.ndarray, foot: tuple[float, float], pad: float = 0.0) -> np.ndarray:
+    """Footprint corners (4, 3) of a foot at sole pose T."""
+    hl, hw = foot[0] / 2 + pad, foot[1] / 2 + pad
+    local = np.array([[hl, hw, 0], [-hl, hw, 0], [-hl, -hw, 0], [hl, -hw, 0]])
+    return local @ T[:3, :3].T + T[:3, 3]
+
+
+def _contact_zone(
+    points: np.ndarray, T: np.ndarray, foot: tuple[float, float], band: float, pad: float
+) -> np.ndarray:
+    """Mask of points near the sole plane of a foot at T, inside footprint + pad."""
+    rel = (points - T[:3, 3]) @ T[:3, :3]
+    return (
+        (np.abs(rel[:, 2]) <= band)
+        & (np.abs(rel[:, 0]) <= foot[0] / 2 + pad)
+        & (np.abs(rel[:, 1]) <= foot[1] / 2 + pad)
+    )
+
+
+def _self_pairs(rob: JumpRobot) -> list[tuple[int, int, bool, np.ndarray, np.ndarray]]:
+    """Self-clearance blocks (link a, link b, fine?, sphere i, sphere j): fine
+    spheres for links two apart in the chain (they sit centimetres from each
+    other), the coarse cover for links further apart."""
+    n = len(rob.link_names)
+    blocks = []
+    for a in range(n):
+        for b in range(a + 2, n):
+            fine = b == a + 2
+            i, j = self_pairs(rob.cover if fine else rob.self_cover, [(a, b)])
+            if len(i):
+                blocks.append((a, b, fine, i, j))
+    return blocks
+
+
+_CAP = 0.1  # clearances above this are only known to be ≥ it (culling bound)
+
+
+class _Checker:
+    """Batched validity of configurations for one phase (anchor + obstacles)."""
+
+    def __init__(
+        self,
+        robot: JumpRobot,
+        anchor: int,
+        anchor_pose: np.ndarray,
+        obstacles: PointObstacles,
+        contact: PointObstacles | None,
+        pairs: list[tuple[int, int, bool, np.ndarray, np.ndarray]],
+        params: JumpParams,
+    ) -> None:
+        self.robot, self.anchor, self.W = robot, anchor, anchor_pose
+        self.obstacles, self.contact, self.pairs, self.params = obstacles, contact, pairs, params
+        cov = robot.cover
+        anchored = robot.base_foot_links if anchor == 0 else robot.end_foot_links
+        moving_foot = robot.end_foot_links if anchor == 0 else robot.base_foot_links
+        self.check = ~np.isin(cov.link, anchored)
+        self.foot = np.isin(cov.link, moving_foot) & self.check
+        self.rest = self.check & ~self.foot
+        n = len(robot.link_names)
+        self.bounds = cov.link_bounds(n)
+        self.self_bounds = robot.self_cover.link_bounds(n)
+
+    def world(self, Q: np.ndarray) -> np.ndarray:
+        F = self.robot.fk_all(np.atleast_2d(Q))
+        if self.anchor == 0:
+            return np.einsum("ij,bljk->blik", self.W, F)
+        rel = np.linalg.inv(F[:, -1])
+        return np.einsum("ij,bjk,blkm->blim", self.W, rel, F)
+
+    def _scene(
+        self, F: np.ndarray, C: np.ndarray, subset: np.ndarray, obs: PointObstacles
+    ) -> np.ndarray:
+        """Min scene clearance over the spheres in ``subset``; links whose
+        bounding sphere is ≥ _CAP away are not queried sphere by sphere."""
+        cov = self.robot.cover
+        if not subset.any():
+            return np.full(len(C), np.inf)
+        bc, br = self.bounds
+        links = np.unique(cov.link[subset])
+        FL = F[:, links]
+        lc = np.einsum("blij,lj->bli", FL[..., :3, :3], bc[links]) + FL[..., :3, 3]
+        lb = obs.clearance(lc, br[links], upper=_CAP)  # (B, nl) lower bounds per link
+        need_link = np.zeros((len(C), len(self.robot.link_names)), dtype=bool)
+        need_link[:, links] = lb < _CAP
+        need = need_link[:, cov.link] & subset[None, :]
+        out = np.full(C.shape[:2], _CAP)
+        if need.any():
+            b_idx, s_idx = np.nonzero(need)
+            out[b_idx, s_idx] = obs.clearance(C[b_idx, s_idx], cov.radius[s_idx], upper=_CAP)
+        return np.where(subset[None, :], out, np.inf).min(axis=1)
+
+    def clearances(self, Q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(scene clearance, self clearance) per configuration; values above
+        0.1 m are lower bounds."""
+        cov = self.robot.cover
+        F = self.world(Q)
+        C = cov.world(F)  # (B, S, 3)
+        scene = self._scene(F, C, self.rest, self.obstacles)
+        obs = self.contact if self.contact is not None else self.obstacles
+        scene = np.minimum(scene, self._scene(F, C, self.foot, obs))
+        selfc = np.full(len(C), np.inf)
+        D = None
+        for a, b, fine, i, j in self.pairs:
+            bc, br = self.bounds if fine else self.self_bounds
+            ca = F[:, a, :3, :3] @ bc[a] + F[:, a, :3, 3]
+            cb = F[:, b, :3, :3] @ bc[b] + F[:, b, :3, 3]
+            bound = np.linalg.norm(ca - cb, axis=1) - br[a] - br[b]
+            close = bound < _CAP
+            selfc = np.minimum(selfc, np.where(close, np.inf, np.maximum(bound, _CAP)))
+            if not close.any():
+                continue
+            if fine:
+                P, r = C[close], cov.radius
+            else:
+                if D is None:
+                    D = self.robot.self_cover.world(F)
+                P, r = D[close], self.robot.self_cover.radius
+            d = np.linalg.norm(P[:, i] - P[:, j], axis=2) - r[i] - r[j]
+            sub = selfc[close]
+            selfc[close] = np.minimum(sub, d.min(axis=1))
+        return scene, selfc
+
+    def valid(self, Q: np.ndarray) -> np.ndarray:
+        Q = np.atleast_2d(Q)
+        lo, hi = self.robot.joint_limits[:, 0], self.robot.joint_limits[:, 1]
+        inside = np.all((lo - 1e-9 <= Q) & (hi + 1e-9 >= Q), axis=1)
+        scene, selfc = self.clearances(Q)
+        return (
+            inside
+            & (scene >= self.params.clearance_margin_m)
+            & (selfc >= self.params.self_margin_m)
+        )
+
+
+def _time_parameterise(
+    waypoints: np.ndarray, vmax: np.ndarray, amax: float, dt: float
+) -> tuple[np.ndarray, np.ndarray]:
+    """Rest-to-rest trapezoidal profile on every segment, synchronised across
+    joints so no joint exceeds its speed ``vmax`` or ``amax``; sampled at dt."""
+    times, qs = [0.0], [waypoints[0]]
+    t0 = 0.0
+    for a, b in itertools.pairwise(waypoints):
+        d = np.abs(b - a)
+        if d.max() < 1e-12:
+            continue
+        # Normalised path s ∈ [0, 1]: joint speed |Δ_i|·ṡ ≤ v_i, accel |Δ_i|·s̈ ≤ a.
+        vs = float(np.min(vmax[d > 0] / d[d > 0]))
+        acc = float(amax / d.max())
+        if vs * vs / acc >= 1.0:  # triangular profile
+            ta = np.sqrt(1.0 / acc)
+            vs, T = acc * ta, 2 * ta
+        else:
+            ta = vs / acc
+            T = 1.0 / vs + ta
+        n = max(1, int(np.ceil(T / dt)))
+        t = np.linspace(0, T, n + 1)[1:]
+        s = np.where(
+            t < ta,
+            0.5 * acc * t**2,
+            np.where(t > T - ta, 1.0 - 0.5 * acc * (T - t) ** 2, 0.5 * acc * ta**2 + vs * (t - ta)),
+        )
+        s = np.clip(s, 0.0, 1.0)
+        qs.extend(a + s[:, None] * (b - a))
+        times.extend(t0 + t)
+        t0 += T
+    return np.array(times), np.array(qs)
+
+
+# --------------------------------------------------------------------------- planner
+
+
+def _plan_free(
+    checker: _Checker,
+    start: np.ndarray,
+    goals: np.ndarray,
+    params: JumpParams,
+    rng: np.random.Generator,
+) -> tuple[np.ndarray | None, int]:
+    """RRT-Connect with restarts, then shortcutting. Returns (path, attempts)."""
+    lo, hi = checker.robot.joint_limits[:, 0], checker.robot.joint_limits[:, 1]
+    for attempt in range(1, int(params.attempts) + 1):
+        path = rrt_connect(
+            start,
+            goals,
+            checker.valid,
+            lower=lo,
+            upper=hi,
+            rng=rng,
+            step=params.step_rad,
+            resolution=params.resolution_rad,
+            goal_bias=params.goal_bias,
+            max_iterations=params.max_iterations,
+        )
+        if path is not None:
+            return (
+                shortcut(
+                    path,
+                    checker.valid,
+                    rng=rng,
+                    iterations=params.shortcut_iterations,
+                    resolution=params.resolution_rad,
+                ),
+                attempt,
+            )
+    return None, int(params.attempts)
+
+
+def _landing_configs(
+    robot: JumpRobot,
+    target_rel: np.ndarray,
+    hover_rel: np.ndarray,
+    checker_free: _Checker,
+    checker_contact: _Checker,
+    params: JumpParams,
+    seed: int,
+    prefer: Callable[[np.ndarray], np.ndarray] | None = None,
+) -> list[tuple[np.ndarray, np.ndarray]]:
+    """(hover config, approach path hover→contact) pairs for a target.
+
+    ``target_rel``/``hover_rel`` are the chain-end poses (in the chain base)
+    at contact and hovering ``standoff_m`` off the surface.  Contact IK
+    solutions are tracked straight back to the hover pose (so the approach is
+    a straight line), and kept when every approach sample is valid and the
+    hover pose is valid for free motion.
+    """
+    sols = robot.ik(target_rel, None, seed)
+    if len(sols) == 0:
+        return []
+    if prefer is not None:
+        sols = sols[np.argsort(prefer(sols), kind="stable")]
+    up = _cartesian_line(target_rel, hover_rel, params.cartesian_steps)
+    out = []
+    for q in sols:
+        track = robot.ik_track(up, q)
+        if track is None:
+            continue
+        approach = np.vstack([track[::-1], q[None]])  # hover → contact
+        if checker_contact.valid(approach).all() and checker_free.valid(track[-1:]).all():
+            out.append((track[-1], approach))
+        if len(out) >= params.max_goals:
+            break
+    return out
+
+
+def _second_foot_candidates(
+    foot1: np.ndarray,
+    foot: tuple[float, float],
+    surface: tuple[np.ndarray, np.ndarray, np.ndarray, shapely.Geometry] | None,
+    params: JumpParams,
+    tolerance: float,
+) -> list[tuple[np.ndarray, bool, float]]:
+    """Foot-2 landing poses beside foot 1 on its surface, best first.
+
+    Candidates lie in foot 1's sole plane at the given distances/bearings,
+    parallel to foot 1.  With a seen ``surface`` (origin, x, y, hull) a
+    candidate is "inside" when its footprint is inside the hull grown by
+    ``tolerance``; inside candidates come first, longer spacing first (a
+    straighter arm), then by inside margin; outside ones by the area they
+    leave the seen surface.
+    """
+    out = []
+    x1, y1 = foot1[:3, 0], foot1[:3, 1]
+    own = None
+    for dist in params.second_foot_distances_m:
+        for ang in params.second_foot_angles_deg:
+            a = np.radians(ang)
+            T = foot1.copy()
+            T[:3, 3] = foot1[:3, 3] + dist * (np.cos(a) * x1 + np.sin(a) * y1)
+            inside, margin = False, -np.inf
+            if surface is not None:
+                origin, ex, ey, hull = surface
+                c = _footprint(T, foot) - origin
+                poly = shapely.Polygon(np.column_stack([c @ ex, c @ ey]))
+                if own is None:
+                    c1 = _footprint(foot1, foot, 0.02) - origin
+                    own = shapely.Polygon(np.column_stack([c1 @ ex, c1 @ ey]))
+                if poly.intersects(own):
+                    continue
+                inside = bool(hull.buffer(tolerance).covers(poly))
+                margin = (
+                    float(shapely.distance(hull.boundary, poly))
+                    if inside
+                    else -float(shapely.area(shapely.difference(poly, hull)))
+                )
+            out.append((T, inside, dist, margin))
+
+    # Inside first (longer spacing = straighter arm, then larger margin);
+    # then the least footprint area off the seen surface (a spot just past
+    # the edge of the view is likelier steel than one far from it).
+    # Outside ones: along foot 1's long axis first (the straight-arm mobile
+    # configuration), then by least footprint area off the seen surface.
+    def key(c: tuple) -> tuple:
+        T, inside, dist, margin = c
+        if inside:
+            return (0, 0, -dist, -margin)
+        axial = abs(float((T[:3, 3] - foot1[:3, 3]) @ x1)) >= 0.99 * dist
+        return (1, 0 if axial else 1, -margin, -dist)
+
+    out.sort(key=key)
+    return [(T, inside, margin) for T, inside, _, margin in out]
+
+
+def plan_inchworm_jump(
+    robot: Any,
+    foothold: np.ndarray,
+    *,
+    obstacles: np.ndarray,
+    base_height: float = 0.0,
+    surface: tuple[np.ndarray, np.ndarray, np.ndarray, shapely.Geometry] | None = None,
+    surface_tolerance_m: float = 0.01,
+    params: JumpParams | dict[str, Any] | None = None,
+    progress: Progress | None = None,
+) -> JumpPlan:
+    """Plan the inch-worm jump (seed §3.2) onto ``foothold``.
+
+    ``robot`` a :class:`JumpRobot` or a RobotModel (adapted by
+    :meth:`JumpRobot.from_model`); ``foothold`` the 4×4 target sole pose of
+    foot 1 in the base frame (z = surface normal towards the robot; Alg. 2's
+    pose); ``obstacles`` (N,3) scene points in the base frame; ``surface`` =
+    (origin, x_axis, y_axis, hull polygon) of the target plane, used to keep
+    the second foot on seen steel.  Raises :class:`UnreachableError` when no
+    IK solution lands foot 1, :class:`MotionPlanningError` when no
+    collision-free path is found within ``params.attempts``.
+    """
+    t_all = time.perf_counter()
+    if params is None:
+        params = JumpParams()
+    elif isinstance(params, dict):
+        params = replace(JumpParams(), **params)
+    rob = (
+        robot
+        if isinstance(robot, JumpRobot)
+        else JumpRobot.from_model(robot, ik_seeds=params.ik_seeds)
+    )
+    fh = np.asarray(foothold, dtype=float)
+    fh = fh[None] if fh.ndim == 2 else fh
+    if fh.ndim != 3 or len(fh) == 0:
+        raise InvalidInputError(
+            f"foothold must be a 4×4 pose or (K, 4, 4) poses, got shape {fh.shape}"
+        )
+    footholds = [check_rigid(T, f"foothold[{k}]") for k, T in enumerate(fh)]
+    pts = np.asarray(obstacles, dtype=float).reshape(-1, 3)
+    if not np.all(np.isfinite(pts)):
+        raise InvalidInputError("obstacles has NaN/inf rows; drop them first")
+    rng = np.random.default_rng(params.seed)
+    timings: dict[str, float] = {}
+
+    # Known standing surface under the robot (the camera cannot see it).
+    (x0, x1), (y0, y1) = params.standing_patch_m
+    gx, gy = np.meshgrid(
+        np.arange(x0, x1 + 1e-9, params.patch_spacing_m),
+        np.arange(y0, y1 + 1e-9, params.patch_spacing_m),
+    )
+    patch = np.column_stack([gx.ravel(), gy.ravel(), np.full(gx.size, float(base_height))])
+    all_pts = np.vstack([pts, patch])
+    full = PointObstacles(all_pts)
+
+    pairs = _self_pairs(rob)
+    q0 = rob.q_mobile.copy()
+    F0 = rob.fk_all(q0[None])[0]
+    foot1_start = F0[-1]  # base frame (foot 2 = identity)
+
+    def zone(T: np.ndarray) -> PointObstacles:
+        keep = ~_contact_zone(all_pts, T, rob.foot, params.contact_band_m, params.contact_pad_m)
+        return PointObstacles(all_pts[keep])
+
+    # ---- phase B/C: anchor foot 2 (chain base, identity pose) --------------
+    t0 = time.perf_counter()
+    free2 = _Checker(rob, 0, np.eye(4), full, None, pairs, params)
+    lift1_zone = _Checker(rob, 0, np.eye(4), full, zone(foot1_start), pairs, params)
+    lift_pose = _translate(foot1_start, foot1_start[:3, 2] * params.lift_m)
+    lift = rob.ik_track(_cartesian_line(foot1_start, lift_pose, params.cartesian_steps), q0)
+    if lift is None or not lift1_zone.valid(lift).all():
+        raise MotionPlanningError("foot 1 cannot lift straight off the standing surface")
+    start_c = lift[-1]
+    seg_b: list[np.ndarray] = [q0[None], lift]
+    attempts = 0
+    if params.use_conv and free2.valid(rob.q_conv[None])[0]:
+        # P_conv (seed §3.2) first; a straight joint move when free, else planned.
+        path_b, used = _plan_free(free2, start_c, rob.q_conv[None], params, rng)
+        attempts += used
+        if path_b is not None:
+            seg_b.append(path_b[1:])
+            start_c = rob.q_conv.copy()
+    if progress:
+        progress(0.1, "foot 1")
+    # Footholds in the caller's order, each also turned 180° about its
+    # normal (the foot rectangle is symmetric): the first one that lands.
+    options = _foothold_options(footholds, rob.foot, surface, surface_tolerance_m, params)
+    timings["ik_foot1"] = timings["rrt_foot1"] = 0.0
+    path_c, W1, goals1, unreachable = None, footholds[0], [], 0
+    for W in options:
+        t0 = time.perf_counter()
+        land1_zone = _Checker(rob, 0, np.eye(4), full, zone(W), pairs, params)
+        hover1 = _translate(W, W[:3, 2] * params.standoff_m)
+        goals1 = _landing_configs(rob, W, hover1, free2, land1_zone, params, params.seed)
+        timings["ik_foot1"] += time.perf_counter() - t0
+        if not goals1:
+            unreachable += 1
+            continue
+        t0 = time.perf_counter()
+        path_c, used = _plan_free(free2, start_c, np.array([g for g, _ in goals1]), params, rng)
+        attempts += used
+        timings["rrt_foot1"] += time.perf_counter() - t0
+        if path_c is not None:
+            W1 = W
+            break
+    if path_c is None:
+        if unreachable == len(options):
+            raise UnreachableError(
+                f"no collision-free IK solution lands foot 1 on any of {len(footholds)} foothold(s) "
+                f"(first at {np.round(footholds[0][:3, 3], 3).tolist()} m in the base frame)"
+            )
+        raise MotionPlanningError(
+            f"RRT-Connect found no collision-free path for foot 1 ({params.attempts} attempts "
+            f"per foothold, {len(options)} foothold poses)"
+        )
+    goal_idx = int(np.argmin([np.abs(path_c[-1] - g).max() for g, _ in goals1]))
+    approach1 = goals1[goal_idx][1]
+    q_land1 = approach1[-1]
+    if progress:
+        progress(0.5, "foot 2")
+
+    # ---- phase E: anchor foot 1 at W1; foot 2 swings ------------------------
+    t0 = time.perf_counter()
+    W1_actual = rob.fk_all(q_land1[None])[0, -1]
+    free1 = _Checker(rob, 1, W1_actual, full, None, pairs, params)
+    foot2_start = np.eye(4)
+    lift2_zone = _Checker(rob, 1, W1_actual, full, zone(foot2_start), pairs, params)
+    # Foot 2 lifts along its own normal: chain-relative target poses.
+    lift2_world = _cartesian_line(
+        foot2_start,
+        _translate(foot2_start, foot2_start[:3, 2] * params.lift_m),
+        params.cartesian_steps,
+    )
+    rel = np.einsum("bij,jk->bik", np.linalg.inv(lift2_world), W1_actual)
+    lift2 = rob.ik_track(rel, q_land1)
+    if lift2 is None or not lift2_zone.valid(lift2).all():
+        if _DEBUG:
+            print("lift2", lift2 is None, None if lift2 is None else lift2_zone.clearances(lift2))
+        raise MotionPlanningError("foot 2 cannot lift straight off the standing surface")
+    cands = _second_foot_candidates(W1_actual, rob.foot, surface, params, surface_tolerance_m)
+    landing2 = None
+    for T2, inside, _ in cands[: params.max_second_foot_candidates]:
+        land2_zone = _Checker(rob, 1, W1_actual, full, zone(T2), pairs, params)
+        target_rel = np.linalg.inv(T2) @ W1_actual
+        # Foot 2 hovers above its spot: in foot 2's frame foot 1 is lower.
+        hover_rel = np.linalg.inv(_translate(T2, T2[:3, 2] * params.standoff_m)) @ W1_actual
+
+        def flatness(S: np.ndarray) -> np.ndarray:
+            # Mobile configuration: prefer the arm flat (joints 2, 5 near 0).
+            return np.abs(S[:, 1]) + np.abs(S[:, 4])
+
+        goals2 = _landing_configs(
+            rob, target_rel, hover_rel, free1, land2_zone, params, params.seed + 1, flatness
+        )
+        if not goals2:
+            if _DEBUG:
+                print("foot2 cand", np.round(T2[:3, 3], 3), inside, "no landing")
+            continue
+        tt = time.perf_counter()
+        path_e, used = _plan_free(free1, lift2[-1], np.array([g for g, _ in goals2]), params, rng)
+        attempts += used
+        if _DEBUG:
+            print(
+                "foot2 cand",
+                np.round(T2[:3, 3], 3),
+                inside,
+                len(goals2),
+                path_e is not None,
+                time.perf_counter() - tt,
+            )
+        if path_e is None:
+            continue
+        gi = int(np.argmin([np.abs(path_e[-1] - g).max() for g, _ in goals2]))
+        landing2 = (T2, inside, path_e, goals2[gi][1])
+        break
+    timings["foot2"] = time.perf_counter() - t0
+    if landing2 is None:
+        raise MotionPlanningError("no collision-free landing found for foot 2 beside foot 1")
+    T2, inside2, path_e, approach2 = landing2
+
+    # ---- assemble, time-parameterise, re-check every sample ------------------
+    t0 = time.perf_counter()
+    vmax = rob.max_speed * params.speed_scale
+    segs = [
+        ("B", "foot 1 lifts off and moves to P_conv", 0, np.vstack(seg_b)),
+        ("C", "foot 1 swings to the target and lands", 0, np.vstack([path_c, approach1])),
+        (
+            "E",
+            "foot 2 lifts off, swings and lands beside foot 1",
+            1,
+            np.vstack([q_land1[None], lift2, path_e, approach2]),
+        ),
+    ]
+    times_all, q_all, anchor_all, phases = [], [], [], []
+    magnets = [
+        {"t_s": 0.0, "foot": "foot2", "state": "touched"},
+    ]
+    t_off, idx = 0.0, 0
+    phases.append(
+        JumpPhase(
+            "A",
+            "magnet 2 touched",
+            "foot2",
+            {"foot1": "untouched", "foot2": "touched"},
+            0,
+            0,
+            0.0,
+            0.0,
+        )
+    )
+    for name, text, anchor, wp in segs:
+        if name == "E":
+            magnets += [
+                {"t_s": t_off, "foot": "foot1", "state": "touched"},
+                {"t_s": t_off, "foot": "foot2", "state": "untouched"},
+            ]
+            phases.append(
+                JumpPhase(
+                    "D",
+                    "magnets swap: 1 touched, 2 untouched",
+                    "foot1",
+                    {"foot1": "touched", "foot2": "untouched"},
+                    idx,
+                    idx,
+                    t_off,
+                    t_off,
+                )
+            )
+        t, q = _time_parameterise(wp, vmax, params.accel_rad_s2, params.dt_s)
+        if times_all:
+            t, q = t[1:], q[1:]  # the first sample repeats the previous end
+        times_all.append(t + t_off)
+        q_all.append(q)
+        anchor_all.append(np.full(len(t), anchor))
+        mags = (
+            {"foot1": "untouched", "foot2": "touched"}
+            if anchor == 0
+            else {"foot1": "touched", "foot2": "untouched"}
+        )
+        phases.append(
+            JumpPhase(
+                name,
+                text,
+                "foot2" if anchor == 0 else "foot1",
+                mags,
+                idx,
+                idx + len(t),
+                float(t_off + t[0]),
+                float(t_off + t[-1]),
+            )
+        )
+        idx += len(t)
+        t_off = float(t_off + t[-1])
+    magnets.append({"t_s": t_off, "foot": "foot1", "state": "untouched"})
+    phases.append(
+        JumpPhase(
+            "F",
+            "both arrays untouched: mobile configuration",
+            "none",
+            {"foot1": "untouched", "foot2": "untouched"},
+            idx,
+            idx,
+            t_off,
+            t_off,
+        )
+    )
+    times = np.concatenate(times_all)
+    Q = np.vstack(q_all)
+    anchor = np.concatenate(anchor_all)
+
+    # Clearance at every sample, with the contact exemptions used in
+    # planning: the moving foot may touch the surface only inside its
+    # footprint, and only while within lift/standoff of that contact.
+    clear = np.empty(len(Q))
+    selfc = np.empty(len(Q))
+    for a_val, W_anchor, start_pose, land_pose in (
+        (0, np.eye(4), foot1_start, W1_actual),
+        (1, W1_actual, foot2_start, T2),
+    ):
+        sel = np.nonzero(anchor == a_val)[0]
+        if len(sel) == 0:
+            continue
+        Qs = Q[sel]
+        chk_full = _Checker(rob, a_val, W_anchor, full, None, pairs, params)
+        c_full, s_all = chk_full.clearances(Qs)
+        Wm = chk_full.world(Qs)
+        foot_pos = Wm[:, -1 if a_val == 0 else 0, :3, 3]
+        near_start = np.linalg.norm(foot_pos - start_pose[:3, 3], axis=1) <= params.lift_m + 1e-3
+        near_land = np.linalg.norm(foot_pos - land_pose[:3, 3], axis=1) <= params.standoff_m + 1e-3
+        c = c_full.copy()
+        for near, pose in ((near_land, land_pose), (near_start, start_pose)):
+            if near.any():
+                chk = _Checker(rob, a_val, W_anchor, full, zone(pose), pairs, params)
+                c[near] = chk.clearances(Qs[near])[0]
+        clear[sel] = c
+        selfc[sel] = s_all
+    timings["time_parameterise"] = time.perf_counter() - t0
+    plan = JumpPlan(
+        times=times,
+        joint_trajectory=Q,
+        anchor=anchor,
+        clearance=clear,
+        self_clearance=selfc,
+        phases=phases,
+        magnet_commands=magnets,
+        foot1_target=W1_actual,
+        foot1_requested=W1,
+        foot2_target=T2,
+        foot2_target_inside=bool(inside2) if surface is not None else False,
+        waypoints=[w for _, _, _, w in segs],
+        attempts_used=attempts,
+        planning_time_s=time.perf_counter() - t_all,
+        timings_s=timings,
+    )
+    if progress:
+        progress(1.0, "done")
+    return plan
