@@ -34,6 +34,7 @@ KIND_MODULES: list[str] = [
     "server.kinds.demo_route",
     "server.kinds.sbg_inspect",
     "server.kinds.ara_navigate",
+    "server.kinds.blast",
 ]
 
 _errors: dict[str, str] = {}

@@ -1,0 +1,194 @@
+"""Scene drawer of ``blast``: the surface outline, the blast discs coloured by
+visiting order with the nozzle path, the obstacles (I-beam boxes, obstacle
+points, the cloud's planes — click a plane's marker to re-plan on it), and
+the DENSO arm animated along the joint trajectory with its nozzle and blast
+cone (the cone shows while the nozzle is open)."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from server.scene.common import (
+    FAIL_RGB,
+    ROUTE_RGB,
+    STEEL_RGB,
+    add_polyline,
+    add_spheres,
+    disc_mesh,
+    label_colors,
+    pose_to_wxyz_position,
+    ramp_colors,
+)
+from server.scene.context import DrawContext
+
+LIFT = 0.003  # overlays this far off the steel, toward the nozzle
+PLAYBACK_SPEEDUP = 4.0
+NOZZLE_M = 0.1
+CONE_RGB = (240, 200, 60)
+
+
+def _rot_z_to(axis: np.ndarray) -> np.ndarray:
+    """A rotation taking +z to ``axis``."""
+    z = np.asarray(axis, dtype=float) / np.linalg.norm(axis)
+    helper = np.array([1.0, 0.0, 0.0]) if abs(z[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
+    x = np.cross(helper, z)
+    x /= np.linalg.norm(x)
+    return np.stack([x, np.cross(z, x), z], axis=1)
+
+
+def _wxyz(R: np.ndarray) -> tuple[float, float, float, float]:
+    T = np.eye(4)
+    T[:3, :3] = R
+    return pose_to_wxyz_position(T)[0]
+
+
+def _cone(r0: float, r1: float, z0: float, z1: float, n: int = 24) -> tuple[np.ndarray, np.ndarray]:
+    """Open truncated cone along +z (vertices, faces)."""
+    a = np.linspace(0, 2 * np.pi, n, endpoint=False)
+    ring0 = np.c_[r0 * np.cos(a), r0 * np.sin(a), np.full(n, z0)]
+    ring1 = np.c_[r1 * np.cos(a), r1 * np.sin(a), np.full(n, z1)]
+    v = np.vstack([ring0, ring1]).astype(np.float32)
+    f = []
+    for i in range(n):
+        j = (i + 1) % n
+        f += [[i, j, n + j], [i, n + j, n + i]]
+    return v, np.asarray(f, dtype=np.uint32)
+
+
+def draw(ctx: DrawContext, plan: Any) -> None:
+    res = plan.result
+    scene, root = ctx.scene, ctx.root
+    surf = res["surface"]
+    n = np.asarray(surf["normal"], dtype=float)
+    base = np.asarray(res["robot_base"], dtype=float)
+    # the side of the plane the robot is on
+    side = 1.0 if (base[:3, 3] - np.asarray(surf["origin"])) @ n >= 0 else -1.0
+    lift = side * n * LIFT
+    add_polyline(
+        scene,
+        f"{root}/surface/outline",
+        np.asarray(surf["outline_world"]) + lift,
+        FAIL_RGB,
+        4.0,
+        True,
+    )
+    for i, h in enumerate(surf.get("holes_world", [])):
+        add_polyline(scene, f"{root}/surface/hole{i}", np.asarray(h) + lift, FAIL_RGB, 3.0, True)
+
+    # discs coloured by visiting order (skipped ones grey) and the nozzle path
+    centers = plan.array("disc_centers")
+    radii = plan.array("disc_radii")
+    order = plan.array("order")
+    rank = np.full(len(centers), -1)
+    rank[order] = np.arange(len(order))
+    cols = np.full((len(centers), 3), 110, dtype=np.uint8)
+    cols[order] = ramp_colors(len(order))
+    verts, faces = disc_mesh(32)
+    q_disc = _wxyz(_rot_z_to(side * n))
+    scene.add_batched_meshes_simple(
+        f"{root}/discs",
+        vertices=verts,
+        faces=faces,
+        batched_wxyzs=np.tile(np.asarray(q_disc, np.float32), (len(centers), 1)),
+        batched_positions=(centers + lift).astype(np.float32),
+        batched_scales=radii.astype(np.float32),
+        batched_colors=cols,
+        batched_opacities=np.full(len(centers), 0.55, np.float32),
+        side="double",
+        lod="off",
+    )
+    if len(order) > 1:
+        add_polyline(scene, f"{root}/nozzle_path", centers[order] + 2 * lift, ROUTE_RGB, 3.0)
+    scene.add_label(
+        f"{root}/labels/start", text="start", position=tuple(centers[order[0]] + 8 * lift)
+    )
+
+    # obstacles
+    for i, b in enumerate(res.get("boxes", [])):
+        scene.add_box(
+            f"{root}/obstacles/box{i}",
+            color=STEEL_RGB,
+            dimensions=tuple(2.0 * np.asarray(b["half"])),
+            position=tuple(b["center"]),
+            opacity=0.3,
+        )
+    if "obstacle_points" in plan.arrays:
+        pts = plan.array("obstacle_points")
+        scene.add_point_cloud(
+            f"{root}/obstacles/points",
+            pts.astype(np.float32),
+            (220, 60, 60),
+            point_size=0.01,
+            precision="float32",
+        )
+    if "cloud_points" in plan.arrays:
+        cp = plan.array("cloud_points")
+        lab = plan.array("cloud_label")
+        scene.add_point_cloud(
+            f"{root}/cloud",
+            cp.astype(np.float32),
+            label_colors(lab),
+            point_size=0.006,
+            precision="float32",
+        )
+        planes = res.get("planes", [])
+        if planes:
+            cent = np.array([pl["centroid"] for pl in planes], dtype=float)
+
+            def pick(i: int) -> None:
+                ctx.propose({"plane_index": int(i)})
+
+            add_spheres(
+                scene,
+                f"{root}/planes",
+                cent,
+                radius=0.03,
+                colors=label_colors(np.arange(len(planes))),
+                on_click=pick,
+            )
+
+    # the arm, its nozzle and the blast cone, animated
+    q = plan.array("q")
+    t = plan.array("times")
+    tip = plan.array("nozzle_tip")
+    axis = plan.array("nozzle_axis")
+    seg = plan.array("segment")
+    spot = plan.array("waypoint_spot")
+    urdf = ctx.add_urdf("denso_vm6083", "robot", root_pose=base)
+    tool = scene.add_frame(f"{root}/tool", show_axes=False)
+    scene.add_cylinder(
+        f"{root}/tool/nozzle",
+        radius=0.012,
+        height=NOZZLE_M,
+        color=(60, 60, 70),
+        position=(0.0, 0.0, NOZZLE_M / 2),
+    )
+    used = res.get("params_used", {})
+    ds = float(used.get("stream_length_mm", 300.0)) / 1000.0
+    r = float(res.get("disc_radius_m", 0.04))
+    cv, cf = _cone(0.0065, r, NOZZLE_M, NOZZLE_M + ds)
+    cone = scene.add_mesh_simple(
+        f"{root}/tool/cone", cv, cf, color=CONE_RGB, opacity=0.35, side="double"
+    )
+    blasting = np.zeros(len(q), dtype=bool)
+    on = False
+    for k in range(len(q)):  # the nozzle is open from the first spot on, except while reconfiguring
+        if seg[k] == 3:
+            on = False
+        if spot[k] >= 0:
+            on = True
+        blasting[k] = on
+    duration = float(t[-1]) if len(t) > 1 else 1.0
+
+    def update(t_play: float) -> None:
+        i = int(np.clip(np.searchsorted(t, t_play * PLAYBACK_SPEEDUP), 0, len(q) - 1))
+        urdf.update_cfg(q[i])
+        R = _rot_z_to(axis[i])
+        tool.position = tuple(float(v) for v in tip[i] - NOZZLE_M * axis[i])
+        tool.wxyz = _wxyz(R)
+        cone.visible = bool(blasting[i])
+
+    update(0.0)
+    ctx.animate(max(duration / PLAYBACK_SPEEDUP, 1.0), update)

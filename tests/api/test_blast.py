@@ -1,0 +1,116 @@
+"""``blast`` through the REST API and the scene."""
+
+from __future__ import annotations
+
+import socket
+import time
+
+import numpy as np
+
+
+def free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def test_defaults_plan_the_seed_surface_1(api) -> None:
+    plan = api.wait(api.submit("blast")["id"], timeout=240)
+    assert plan["state"] == "planned", plan.get("error")
+    checks = {c["name"]: c for c in plan["checks"]}
+    assert set(checks) >= {
+        "coverage",
+        "overspray",
+        "joint_limits",
+        "joint_speed",
+        "clearance",
+        "ik_residual",
+        "command_program",
+    }
+    assert all(c["passed"] for c in checks.values()), [
+        c["message"] for c in checks.values() if not c["passed"]
+    ]
+    m = plan["metrics"]
+    assert m["coverage_pct"] >= 99.0 and m["overspray_pct"] <= 0.5
+    assert m["max_joint_speed_deg_s"] <= 30.0 + 1e-6
+    assert m["min_clearance_mm"] > 0
+    assert m["disc_radius_mm"] == 40.0
+    for key in (
+        "distance_m",
+        "turns",
+        "objective_eq34",
+        "distance_per_lower_bound",
+        "trajectory_duration_s",
+    ):
+        assert key in m
+    res = plan["result"]
+    assert np.allclose(res["surface"]["origin"], [0.5, 0.5, 1.7])
+    assert len(res["boxes"]) == 7  # deck + two I-beams of three plates
+    titles = [p["title"] for p in res["plots"]]
+    assert any("clearance" in t for t in titles) and any("joint angles" in t for t in titles)
+    r = api.get(f"/api/v1/plans/{plan['id']}/arrays/q")
+    assert r.status_code == 200
+
+
+def test_plane_picked_from_a_cloud(api) -> None:
+    r = api.post("/api/v1/clouds", json={"sample": "blast_under_deck"})
+    assert r.status_code == 201, r.text
+    cloud = r.json()["id"]
+    plan = api.wait(api.submit("blast", {"cloud_id": cloud, "plane_index": 0})["id"], timeout=240)
+    assert plan["state"] in ("planned", "rejected"), plan.get("error")
+    res = plan["result"]
+    # the largest plane is the rusted patch on the roof (Surface 1), normal toward the robot
+    assert abs(res["surface"]["normal"][2]) > 0.99 and res["surface"]["normal"][2] < 0
+    assert 0.15 < res["surface"]["area_m2"] < 0.2
+    assert len(res["planes"]) >= 3
+    checks = {c["name"]: c for c in plan["checks"]}
+    assert checks["clearance"]["passed"] and checks["joint_speed"]["passed"]
+    r = api.post(
+        "/api/v1/plans", json={"kind": "blast", "params": {"cloud_id": cloud, "plane_index": 99}}
+    )
+    if r.status_code == 202:  # the index is checked when the plan runs
+        bad = api.wait(r.json()["id"])
+        assert bad["state"] == "failed" and "plane_index" in (bad.get("error") or "")
+
+
+def test_bad_params_are_refused(api) -> None:
+    for params, word in (
+        ({"stream_length_mm": 600}, "100–500"),
+        ({"seed_surface": 4}, "seed_surface"),
+        (
+            {
+                "polygon": {
+                    "origin_m": [0, 0, 1],
+                    "normal": [0, 0, 1],
+                    "boundary_m": [[0, 0], [1, 1], [2, 2]],
+                }
+            },
+            "area",
+        ),
+        ({"nozzle": "huge"}, "nozzle"),
+    ):
+        r = api.post("/api/v1/plans", json={"kind": "blast", "params": params})
+        assert r.status_code == 422, (params, r.text)
+        assert word in r.text, (word, r.text)
+
+
+def test_scene_draws_surface_discs_obstacles_and_animated_arm(make_api) -> None:
+    sapi = make_api(scene_port=free_port())
+    pid = sapi.wait(sapi.submit("blast", {"seed_surface": 3})["id"], timeout=240)["id"]
+    r = sapi.post("/api/v1/scene/show", json={"plan_id": pid})
+    assert r.status_code == 200 and r.json()["shown"] == pid
+    scene = sapi.services.scene.server.scene
+    for name in (
+        "/plan/surface/outline",
+        "/plan/discs",
+        "/plan/nozzle_path",
+        "/plan/obstacles/box0",
+        "/plan/robot",
+        "/plan/tool",
+        "/plan/tool/cone",
+    ):
+        assert scene.get_handle_by_name(name) is not None, name
+    tool = scene.get_handle_by_name("/plan/tool")
+    p0 = np.array(tool.position)
+    time.sleep(0.6)
+    assert not np.allclose(np.array(tool.position), p0)
