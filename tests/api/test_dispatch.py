@@ -169,3 +169,20 @@ def test_server_restart_mid_run_resumes_without_loss(make_api, tmp_path) -> None
     assert check_exactly_once(emulator.execution_log(), done["run_id"], done["total"]) == []
     assert second.services.store.list_acks(eid) == list(range(done["total"]))
     emulator.close()
+
+
+def test_estop_while_reconnecting_reaches_the_robot_when_it_returns(dapi) -> None:
+    eng = dapi.services.dispatch
+    emulator = eng._robots["ara"].emulator
+    dapi.put("/api/v1/robots/ara/connection", "admin", json={"url": "socket://127.0.0.1:9"})
+    assert not eng.wait_connected("ara", 0.5)
+    r = dapi.post("/api/v1/robots/ara/estop")
+    assert r.status_code == 200 and r.json()["errors"] == []
+    assert dapi.get("/api/v1/robots/ara/state").json()["estop_latched"]
+    n = len(emulator.stop_events())
+    # The robot comes back: the latched E-stop is delivered first.
+    dapi.put("/api/v1/robots/ara/connection", "admin", json={"url": emulator.url})
+    _wait(lambda: len(emulator.stop_events()) > n, 10, "E-stop delivered on reconnect")
+    assert emulator.stop_events()[-1].reason == "estop"
+    # Other robots were not stopped by a per-robot E-stop.
+    assert not dapi.get("/api/v1/robots/cmbot/state").json()["estop_latched"]
