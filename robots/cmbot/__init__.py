@@ -1,0 +1,287 @@
+"""CMBOT: 5-DoF biped climbing mechanism + 7-DoF redundant arm (seed 002 §2–§3).
+
+``load()`` returns :class:`CmbotModel`, whose default chain is the 7-DoF arm
+J6…J12: ``fk(q)`` is the tool point Q (seed Eq. 12) in the arm base frame (6)
+and ``jacobian(q)`` its 6×7 geometric Jacobian ``[v; ω]`` (seed Eq. 13).
+``model.climber`` is the 5-DoF climbing chain J1…J5 from the stance (rear)
+foot sole B to the swing (front) foot sole P (seed Eq. 1) with the closed-form
+φy = 0 inverse kinematics of Eq. 8.  Both chains are read from ``cmbot.urdf``
+(generated from ``params.toml`` by :mod:`robots.cmbot.urdf`).
+"""
+
+from __future__ import annotations
+
+import xml.etree.ElementTree as ET
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from robots.kinematics import pose_error, solve_ik_dls
+from robots.model import RobotModel, read_params
+
+HERE = Path(__file__).resolve().parent
+URDF_PATH = HERE / "cmbot.urdf"
+PARAMS_PATH = HERE / "params.toml"
+
+ARM_JOINTS = [f"J{i}" for i in range(6, 13)]
+CLIMB_JOINTS = [f"J{i}" for i in range(1, 6)]
+
+
+def _rpy_matrix(r: float, p: float, y: float) -> np.ndarray:
+    cr, sr, cp, sp, cy, sy = np.cos(r), np.sin(r), np.cos(p), np.sin(p), np.cos(y), np.sin(y)
+    return np.array(
+        [
+            [cy * cp, cy * sp * sr - sy * cr, cy * sp * cr + sy * sr],
+            [sy * cp, sy * sp * sr + cy * cr, sy * sp * cr - cy * sr],
+            [-sp, cp * sr, cp * cr],
+        ]
+    )
+
+
+def _origin(elem: ET.Element | None) -> np.ndarray:
+    T = np.eye(4)
+    if elem is not None:
+        T[:3, 3] = [float(v) for v in elem.get("xyz", "0 0 0").split()]
+        T[:3, :3] = _rpy_matrix(*[float(v) for v in elem.get("rpy", "0 0 0").split()])
+    return T
+
+
+def rz(theta: np.ndarray) -> np.ndarray:
+    """Batched rotation about z: (…,) → (…,4,4)."""
+    theta = np.asarray(theta, dtype=float)
+    c, s = np.cos(theta), np.sin(theta)
+    T = np.zeros((*theta.shape, 4, 4))
+    T[..., 0, 0] = c
+    T[..., 0, 1] = -s
+    T[..., 1, 0] = s
+    T[..., 1, 1] = c
+    T[..., 2, 2] = 1.0
+    T[..., 3, 3] = 1.0
+    return T
+
+
+@dataclass
+class UrdfJoint:
+    name: str
+    kind: str
+    parent: str
+    child: str
+    origin: np.ndarray
+    lower: float = 0.0
+    upper: float = 0.0
+    velocity: float = 0.0
+
+
+@dataclass(frozen=True)
+class CollisionBox:
+    """A URDF collision primitive as an oriented box in its link frame:
+    ``half`` extents along the columns of ``origin[:3, :3]`` (a cylinder of
+    radius r and length L becomes half extents (r, r, L/2))."""
+
+    link: str
+    half: np.ndarray
+    origin: np.ndarray
+
+
+def read_collision_boxes(path: Path) -> dict[str, list[CollisionBox]]:
+    """Collision primitives of every link, as boxes (cylinders by their bounding box)."""
+    root = ET.parse(path).getroot()
+    out: dict[str, list[CollisionBox]] = {}
+    for link in root.findall("link"):
+        name = link.get("name")
+        for col in link.findall("collision"):
+            geom = col.find("geometry")
+            T = _origin(col.find("origin"))
+            box, cyl = geom.find("box"), geom.find("cylinder")
+            if box is not None:
+                half = np.array([float(v) for v in box.get("size").split()]) / 2
+            elif cyl is not None:
+                r, L = float(cyl.get("radius")), float(cyl.get("length"))
+                half = np.array([r, r, L / 2])
+            else:
+                continue
+            out.setdefault(name, []).append(CollisionBox(name, half, T))
+    return out
+
+
+def read_urdf(path: Path) -> tuple[dict[str, UrdfJoint], dict[str, tuple[float, np.ndarray]]]:
+    """Joints by name and inertial ``(mass, com)`` by link name."""
+    root = ET.parse(path).getroot()
+    joints: dict[str, UrdfJoint] = {}
+    for j in root.findall("joint"):
+        lim = j.find("limit")
+        axis = j.find("axis")
+        if axis is not None and axis.get("xyz", "0 0 1").split() != ["0", "0", "1"]:
+            raise ValueError(f"cmbot.urdf: joint {j.get('name')} must turn about z (D-H frames)")
+        joints[j.get("name")] = UrdfJoint(
+            name=j.get("name"),
+            kind=j.get("type"),
+            parent=j.find("parent").get("link"),
+            child=j.find("child").get("link"),
+            origin=_origin(j.find("origin")),
+            lower=float(lim.get("lower")) if lim is not None else 0.0,
+            upper=float(lim.get("upper")) if lim is not None else 0.0,
+            velocity=float(lim.get("velocity")) if lim is not None else 0.0,
+        )
+    masses: dict[str, tuple[float, np.ndarray]] = {}
+    for link in root.findall("link"):
+        inertial = link.find("inertial")
+        if inertial is not None:
+            m = float(inertial.find("mass").get("value"))
+            masses[link.get("name")] = (m, _origin(inertial.find("origin"))[:3, 3])
+    return joints, masses
+
+
+@dataclass
+class CmbotChain(RobotModel):
+    """Serial chain of z-axis revolute joints read from the URDF.
+
+    ``link_frames(q)`` (…,n+2,4,4): the chain base, the n joint (URDF link)
+    frames and the end link; ``fk(q)`` the end link; ``jacobian(q)`` its 6×n
+    geometric Jacobian ``[v; ω]`` in the chain base frame (batched).
+    """
+
+    joint_origins: np.ndarray = field(default_factory=lambda: np.zeros((0, 4, 4)))
+    end_offset: np.ndarray = field(default_factory=lambda: np.eye(4))
+    link_names: list[str] = field(default_factory=list)
+    max_speed: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    link_masses: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    link_coms: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
+
+    def link_frames(self, q: np.ndarray) -> np.ndarray:
+        q = np.asarray(q, dtype=float)
+        if q.shape[-1] != self.dof:
+            raise ValueError(f"{self.name}: expected {self.dof} joint values, got shape {q.shape}")
+        out = np.empty((*q.shape[:-1], self.dof + 2, 4, 4))
+        out[..., 0, :, :] = np.eye(4)
+        for i in range(self.dof):
+            out[..., i + 1, :, :] = out[..., i, :, :] @ self.joint_origins[i] @ rz(q[..., i])
+        out[..., -1, :, :] = out[..., -2, :, :] @ self.end_offset
+        return out
+
+    def fk(self, q: np.ndarray, link: str | None = None) -> np.ndarray:
+        frames = self.link_frames(q)
+        if link is None:
+            return frames[..., -1, :, :]
+        try:
+            return frames[..., self.link_names.index(link), :, :]
+        except ValueError:
+            raise ValueError(
+                f"unknown link {link!r} for {self.name}; known: {self.link_names}"
+            ) from None
+
+    def jacobian(self, q: np.ndarray) -> np.ndarray:
+        frames = self.link_frames(q)
+        z = frames[..., 1:-1, :3, 2]
+        o = frames[..., 1:-1, :3, 3]
+        p = frames[..., -1, None, :3, 3]
+        J = np.concatenate([np.cross(z, p - o), z], axis=-1)  # (…,n,6)
+        return np.swapaxes(J, -1, -2)
+
+
+@dataclass
+class ClimberModel(CmbotChain):
+    """J1…J5 from the rear-foot sole (B) to the front-foot sole (P); closed-form IK."""
+
+    l1: float = 0.0
+    l2: float = 0.0
+    base_mass: tuple[float, np.ndarray] = (0.0, np.zeros(3))
+    end_mass: tuple[float, np.ndarray] = (0.0, np.zeros(3))
+
+    def ik(self, T: np.ndarray, q0: np.ndarray | None = None) -> np.ndarray | None:
+        """Seed Eq. 8 (corrected): the knee-up solution for a sole pose with φy = 0
+        (sole parallel to B's sole), else ``None``."""
+        from planners.cmbot.climbing_kinematics import climber_ik_batch
+
+        T = np.asarray(T, dtype=float)
+        if abs(T[2, 2] - 1.0) > 1e-9:  # only yaw is reachable with φy = 0
+            return None
+        phi_z = float(np.arctan2(T[1, 0], T[0, 0]))
+        q, ok = climber_ik_batch(T[:3, 3], phi_z, self.l1, self.l2, self.joint_limits)
+        return q if bool(ok) else None
+
+
+@dataclass
+class CmbotModel(CmbotChain):
+    """The 7-DoF arm (default chain, base frame (6)) plus the climbing chain and
+    everything the planners need: the mount on link2, speeds, masses."""
+
+    climber: ClimberModel | None = None
+    arm_mount: np.ndarray = field(default_factory=lambda: np.eye(4))
+    urdf_joint_names: list[str] = field(default_factory=list)
+    base_mass: tuple[float, np.ndarray] = (0.0, np.zeros(3))
+    collision_boxes: dict[str, list[CollisionBox]] = field(default_factory=dict)
+
+    @property
+    def total_mass(self) -> float:
+        """Robot mass [kg] from the URDF inertials (payload excluded)."""
+        assert self.climber is not None
+        c = self.climber
+        return float(
+            self.link_masses.sum()
+            + self.base_mass[0]
+            + c.link_masses.sum()
+            + c.base_mass[0]
+            + c.end_mass[0]
+        )
+
+    def ik(self, T: np.ndarray, q0: np.ndarray | None = None) -> np.ndarray | None:
+        """Damped-least-squares IK of the tool pose (7-DoF: the solution nearest ``q0``)."""
+        q = solve_ik_dls(self, np.asarray(T, dtype=float), q0, restarts=24)
+        if q is None:
+            return None
+        err = pose_error(np.asarray(T, dtype=float), self.fk(q))
+        return q if np.linalg.norm(err[:3]) < 1e-6 and np.linalg.norm(err[3:]) < 1e-6 else None
+
+
+def _chain(
+    joints: dict[str, UrdfJoint],
+    masses: dict[str, tuple[float, np.ndarray]],
+    names: list[str],
+    end_joint: str,
+) -> dict[str, Any]:
+    js = [joints[n] for n in names]
+    end = joints[end_joint]
+    return {
+        "joint_names": names,
+        "joint_limits": np.array([[j.lower, j.upper] for j in js]),
+        "joint_origins": np.array([j.origin for j in js]),
+        "end_offset": end.origin,
+        "link_names": [js[0].parent, *[j.child for j in js], end.child],
+        "max_speed": np.array([j.velocity for j in js]),
+        "link_masses": np.array([masses.get(j.child, (0.0, None))[0] for j in js]),
+        "link_coms": np.array([masses.get(j.child, (0.0, np.zeros(3)))[1] for j in js]),
+    }
+
+
+def load() -> CmbotModel:
+    """The CMBOT model from ``cmbot.urdf`` and ``params.toml``."""
+    params = read_params(PARAMS_PATH)
+    joints, masses = read_urdf(URDF_PATH)
+    c = params["climber"]
+    cl = _chain(joints, masses, CLIMB_JOINTS, "foot_front_fixed")
+    climber = ClimberModel(
+        name="cmbot.climber",
+        urdf_path=URDF_PATH,
+        params=params,
+        l1=c["l1"],
+        l2=c["l2"],
+        base_mass=masses["foot_rear"],
+        end_mass=masses["foot_front"],
+        **cl,
+    )
+    arm = _chain(joints, masses, ARM_JOINTS, "tool_fixed")
+    model = CmbotModel(
+        name="cmbot",
+        urdf_path=URDF_PATH,
+        params=params,
+        climber=climber,
+        arm_mount=joints["arm_mount"].origin,
+        urdf_joint_names=[*CLIMB_JOINTS, *ARM_JOINTS],
+        base_mass=masses["arm_base"],
+        collision_boxes=read_collision_boxes(URDF_PATH),
+        **arm,
+    )
+    return model
