@@ -1,0 +1,434 @@
+"""The simulation gate: every CMBOT motion is replayed at fine time steps
+before it may be approved (seed §4: "the movement must be checked by the
+simulation system before the robot starts to work").
+
+The planned joint trajectory is interpolated (monotone cubic, no overshoot)
+at ``substeps`` points per planning step and re-evaluated from scratch:
+joint limits, joint speeds, foothold placement, the flip moment against the
+magnet's holding moment (Eq. 9), clearance of the arm's covering spheres to
+the environment and to its own links, tool tracking against Eq. 21–26 and the
+static joint torques with the payload.  Every failed check lists where and
+when it failed.
+"""
+
+from __future__ import annotations
+
+import itertools
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from scipy.interpolate import CubicSpline, PchipInterpolator
+
+from planners.cmbot.arm import ArmKinematics
+from planners.cmbot.distance import Cuboid, boxes_arrays, sphere_box_exact
+from planners.cmbot.experiment import ClearanceFilter, TestTrajectory
+from planners.cmbot.gait import GaitTrajectory, flip_moments
+from planners.cmbot.guardrail import Guardrail
+from planners.cmbot.scene import arm_base_pose, climber_box_arrays
+
+
+@dataclass(frozen=True)
+class Violation:
+    """One failed sample: check name, time [s], measured value, limit, where."""
+
+    check: str
+    t_s: float
+    value: float
+    limit: float
+    where: str
+
+
+@dataclass(frozen=True)
+class GateCheck:
+    """Outcome of one check over the whole motion (worst value vs limit)."""
+
+    name: str
+    passed: bool
+    value: float
+    limit: float
+    message: str
+
+
+@dataclass
+class GateReport:
+    """All checks of one simulated motion and the first violations of each."""
+
+    checks: list[GateCheck] = field(default_factory=list)
+    violations: list[Violation] = field(default_factory=list)
+    dt_s: float = 0.0
+    samples: int = 0
+
+    @property
+    def passed(self) -> bool:
+        return all(c.passed for c in self.checks)
+
+    def failed(self) -> list[GateCheck]:
+        return [c for c in self.checks if not c.passed]
+
+    def summary(self) -> str:
+        if self.passed:
+            return f"all {len(self.checks)} checks passed over {self.samples} samples at {self.dt_s * 1e3:.1f} ms"
+        return "; ".join(c.message for c in self.failed())
+
+
+def _record(
+    report: GateReport,
+    name: str,
+    values: np.ndarray,
+    limit: float,
+    times: np.ndarray,
+    where: Callable[[int], str],
+    what: str,
+    unit: str,
+    upper: bool = True,
+    max_list: int = 5,
+) -> None:
+    """Add a check ``values ≤ limit`` (``upper``) or ``values ≥ limit`` with its
+    violations; ``where(k)`` describes sample k (called only for reported samples)."""
+    values = np.asarray(values, dtype=float)
+    bad = values > limit if upper else values < limit
+    worst = (
+        float(np.nanmax(values) if upper else np.nanmin(values)) if values.size else float("nan")
+    )
+    k = int(np.nanargmax(values) if upper else np.nanargmin(values)) if values.size else 0
+    passed = not bool(np.any(bad))
+    rel = ("≤" if passed else ">") if upper else ("≥" if passed else "<")
+    msg = f"{what}: worst {worst:.4g} {unit} {rel} {limit:.4g} {unit}"
+    if not passed:
+        msg += f" at t = {times[k]:.3f} s ({where(k)})"
+    report.checks.append(GateCheck(name, passed, worst, float(limit), msg))
+    for i in np.flatnonzero(bad)[:max_list]:
+        report.violations.append(
+            Violation(name, float(times[i]), float(values[i]), float(limit), where(int(i)))
+        )
+
+
+def _resample(
+    times: np.ndarray, values: np.ndarray, substeps: int, smooth: bool = False
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Cubic resampling: fine times, values, derivatives.  Monotone (PCHIP, no
+    overshoot at the holds of a gait) or, with ``smooth``, a C² cubic spline."""
+    t = np.asarray(times, dtype=float)
+    keep = np.concatenate([[True], np.diff(t) > 1e-12])
+    t, v = t[keep], np.asarray(values, dtype=float)[keep]
+    if len(t) < 2:
+        return t, v, np.zeros_like(v)
+    fine = np.concatenate(
+        [np.linspace(a, b, substeps, endpoint=False) for a, b in itertools.pairwise(t)] + [t[-1:]]
+    )
+    f = CubicSpline(t, v, axis=0) if smooth else PchipInterpolator(t, v, axis=0)
+    return fine, f(fine), f.derivative()(fine)
+
+
+def min_clearance(
+    centers: np.ndarray,
+    radii: np.ndarray,
+    boxes: tuple[np.ndarray, np.ndarray, np.ndarray],
+    *,
+    mask: np.ndarray | None = None,
+    cap: float = 1.0,
+    chunk: int = 500,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Per time step: the smallest sphere–box distance (capped at ``cap``), and
+    which sphere and box give it.  ``boxes`` centres/rotations may carry the
+    time axis.  Boxes whose bounding-sphere lower bound exceeds ``cap`` over a
+    whole chunk are skipped (they cannot be the minimum below the cap)."""
+    bc, bh, bR = boxes
+    T = len(centers)
+    circum = np.linalg.norm(bh, axis=-1)
+    out = np.full(T, cap)
+    sph = np.zeros(T, dtype=int)
+    box = np.zeros(T, dtype=int)
+    batched = bc.ndim == 3
+    for a in range(0, T, chunk):
+        b = min(a + chunk, T)
+        C = centers[a:b]
+        bcc = bc[a:b] if batched else bc[None]
+        lb = (
+            np.linalg.norm(C[:, :, None, :] - bcc[:, None, :, :], axis=-1)
+            - radii[None, :, None]
+            - circum
+        )
+        if mask is not None:
+            lb = np.where(mask[None], lb, np.inf)
+        near = np.flatnonzero(lb.min(axis=(0, 1)) <= cap)
+        if not len(near):
+            continue
+        sub = (
+            bcc[:, near] if batched else bc[near],
+            bh[near],
+            bR[a:b][:, near] if batched else bR[near],
+        )
+        d, _ = sphere_box_exact(C, radii, sub, directions=False)
+        if mask is not None:
+            d = np.where(mask[None][:, :, near], d, np.inf)
+        flat = d.reshape(b - a, -1)
+        kk = flat.argmin(axis=1)
+        out[a:b] = np.minimum(flat[np.arange(b - a), kk], cap)
+        sph[a:b] = kk // len(near)
+        box[a:b] = near[kk % len(near)]
+    return out, sph, box
+
+
+def _limit_checks(
+    report: GateReport,
+    names: list[str],
+    t: np.ndarray,
+    q: np.ndarray,
+    qd: np.ndarray,
+    limits: np.ndarray,
+    vmax: np.ndarray,
+) -> None:
+    over = np.maximum(limits[:, 0] - q, q - limits[:, 1])  # > 0 outside
+    j = np.argmax(over, axis=1)
+    _record(
+        report,
+        "joint_limits",
+        np.degrees(over.max(axis=1)),
+        1e-6,
+        t,
+        lambda k: f"{names[j[k]]} at {np.degrees(q[k, j[k]]):.2f}°",
+        "joint beyond its limit",
+        "deg",
+    )
+    ratio = np.abs(qd) / vmax
+    js = np.argmax(ratio, axis=1)
+    _record(
+        report,
+        "joint_speeds",
+        ratio.max(axis=1),
+        1.0 + 1e-6,
+        t,
+        lambda k: (
+            f"{names[js[k]]} at {np.degrees(abs(qd[k, js[k]])):.1f}°/s of {np.degrees(vmax[js[k]]):.0f}°/s"
+        ),
+        "joint speed / limit",
+        "",
+    )
+
+
+def simulate_climb(
+    model: Any,
+    guardrail: Guardrail,
+    traj: GaitTrajectory,
+    *,
+    substeps: int = 2,
+    arm_clearance_m: float = 0.05,
+) -> GateReport:
+    """Replay a climbing trajectory finely and check it (seed §4 simulation system).
+
+    Checks: joint limits and speeds (J1…J12), holding soles on valid
+    footholds and on the bar, swing sole never below the bar top, flip
+    moment about the holding sole ≤ the magnet's holding moment (single
+    support), folded-arm spheres clear of the guardrail and of the climbing
+    mechanism.
+    """
+    c = model.params["climber"]
+    rep = GateReport()
+    t, q, qd = _resample(traj.times, traj.q, substeps)
+    _, rear, _ = _resample(traj.times, traj.rear, substeps)
+    _, front, _ = _resample(traj.times, traj.front, substeps)
+    idx = np.clip(np.searchsorted(traj.times, t, side="right") - 1, 0, len(traj.times) - 1)
+    sup = traj.support[idx]
+    rep.dt_s = float(np.median(np.diff(t))) if len(t) > 1 else 0.0
+    rep.samples = len(t)
+    names = list(model.urdf_joint_names)
+    limits = np.vstack([model.climber.joint_limits, model.joint_limits])
+    vmax = np.concatenate([model.climber.max_speed, model.max_speed])
+    _limit_checks(rep, names, t, q, qd, limits, vmax)
+    # Footholds: a holding sole sits on the bar top (z = 0) on a valid foothold.
+    L = c["foot_length_m"]
+    hold_rear = sup != 2
+    hold_front = sup != 1
+    bad = np.zeros(len(t))
+    where = ["" for _ in t]
+    for holds, pos, name in ((hold_rear, rear, "rear"), (hold_front, front, "front")):
+        ok = guardrail.valid_foothold(pos[:, 0], L) & (np.abs(pos[:, 2]) < 1e-6)
+        viol = holds & ~ok
+        for k in np.flatnonzero(viol):
+            bad[k] = 1.0
+            where[k] = (
+                f"{name} sole at x = {pos[k, 0]:.3f} m: {guardrail.why_invalid(pos[k, 0], L) or 'off the bar top'}"
+            )
+    _record(
+        rep,
+        "foot_placement",
+        bad,
+        0.0,
+        t,
+        lambda k: where[k],
+        "holding soles off a valid foothold (count)",
+        "",
+    )
+    swing_z = np.where(sup == 1, front[:, 2], np.where(sup == 2, rear[:, 2], 0.0))
+    _record(
+        rep,
+        "swing_above_bar",
+        swing_z,
+        -1e-9,
+        t,
+        lambda k: f"swing sole z = {swing_z[k] * 1e3:.2f} mm",
+        "swing sole height above the bar top",
+        "m",
+        upper=False,
+    )
+    # Flip moment (Eq. 9) at the fine steps, single support only.
+    arm = ArmKinematics.from_model(model)
+    M, _ = flip_moments(model, arm, traj, t, q, rear, front, sup)
+    hold = c["foot_length_m"] / 2 * model.params["magnet"]["holding_force_N"]
+    My = np.where(sup > 0, np.abs(M[:, 1]), 0.0)
+    _record(
+        rep,
+        "flip_torque",
+        My,
+        hold,
+        t,
+        lambda k: f"about the {'rear' if sup[k] == 1 else 'front'} sole",
+        "|flip moment| about the holding sole",
+        "N·m",
+    )
+    # Clearance of the folded arm: guardrail (≥ arm_clearance_m) and own climbing links (≥ 0).
+    T_wr = np.broadcast_to(np.eye(4), (len(t), 4, 4)).copy()
+    T_wr[:, :3, 3] = rear
+    T_wk = arm_base_pose(model, q[:, :5], T_wr)
+    centers = (
+        np.einsum("tij,tsj->tsi", T_wk[:, :3, :3], arm.sphere_centers(arm.frames(q[:, 5:])))
+        + T_wk[:, None, :3, 3]
+    )
+    lo = float(min(rear[:, 0].min(), front[:, 0].min())) - 3.0
+    hi = float(max(rear[:, 0].max(), front[:, 0].max())) + 3.0
+    env = guardrail.boxes(lo, hi)
+    dmin, si, bi = min_clearance(centers, arm.spheres.radius, boxes_arrays(env), cap=1.0)
+    _record(
+        rep,
+        "arm_env_clearance",
+        dmin,
+        arm_clearance_m,
+        t,
+        lambda k: f"arm sphere {si[k]} ↔ {env[bi[k]].name}",
+        "folded-arm clearance to the guardrail",
+        "m",
+        upper=False,
+    )
+    body = arm.spheres.body >= 1
+    bc, bh, bR, bnames = climber_box_arrays(model, q[:, :5], T_wr)
+    self_d, _, kk = min_clearance(centers[:, body], arm.spheres.radius[body], (bc, bh, bR), cap=1.0)
+    _record(
+        rep,
+        "self_clearance",
+        self_d,
+        0.0,
+        t,
+        lambda k: f"arm ↔ {bnames[kk[k]]}",
+        "folded arm to the climbing mechanism",
+        "m",
+        upper=False,
+    )
+    return rep
+
+
+def simulate_arm(
+    arm: ArmKinematics,
+    boxes: list[Cuboid],
+    traj: TestTrajectory,
+    times: np.ndarray,
+    q: np.ndarray,
+    *,
+    gravity: np.ndarray,
+    payload_kg: float = 0.0,
+    torque_limit_Nm: float = 150.0,
+    min_clearance_m: float = 0.05,
+    self_clearance_m: float = 0.02,
+    tracking_tol_m: float = 1e-3,
+    orientation_tol_rad: float = np.radians(0.1),
+    substeps: int = 4,
+    check_payload: bool = True,
+    pair_filter: ClearanceFilter | None = None,
+    clearance_cap_m: float = 1.0,
+) -> GateReport:
+    """Replay an arm motion finely and check it against Eq. 21–26 and the scene."""
+    rep = GateReport()
+    t, qf, qd = _resample(times, q, substeps, smooth=True)
+    rep.dt_s = float(np.median(np.diff(t))) if len(t) > 1 else 0.0
+    rep.samples = len(t)
+    names = [f"J{i}" for i in range(6, 13)]
+    _limit_checks(rep, names, t, qf, qd, arm.limits, arm.max_speed)
+    F = arm.frames(qf)
+    pos_d, R_d = traj.poses(t)
+    perr = np.linalg.norm(F[:, -1, :3, 3] - pos_d, axis=1)
+    _record(
+        rep,
+        "tracking",
+        perr * 1e3,
+        tracking_tol_m * 1e3,
+        t,
+        lambda k: f"tool at {np.round(F[k, -1, :3, 3] * 1e3, 1).tolist()} mm in (6)",
+        "tool position error",
+        "mm",
+    )
+    E = R_d @ np.swapaxes(F[:, -1, :3, :3], -1, -2)
+    rerr = np.arccos(np.clip((np.trace(E, axis1=1, axis2=2) - 1.0) / 2.0, -1.0, 1.0))
+    _record(
+        rep,
+        "orientation",
+        np.degrees(rerr),
+        np.degrees(orientation_tol_rad),
+        t,
+        lambda k: "tool orientation",
+        "tool orientation error",
+        "deg",
+    )
+    centers = arm.sphere_centers(F)
+    flt = pair_filter or ClearanceFilter()
+    mask = flt.mask(arm.spheres.body, boxes)
+    clear, si, bi = min_clearance(
+        centers, arm.spheres.radius, boxes_arrays(boxes), mask=mask, cap=clearance_cap_m
+    )
+    _record(
+        rep,
+        "clearance",
+        clear,
+        min_clearance_m,
+        t,
+        lambda k: f"sphere {si[k]} on frame {arm.spheres.frame[si[k]]} ↔ {boxes[bi[k]].name}",
+        "arm clearance to obstacles",
+        "m",
+        upper=False,
+    )
+    b = arm.spheres.body
+    pairs = np.abs(b[:, None] - b[None, :]) >= 2
+    iu = np.argwhere(np.triu(pairs))
+    r = arm.spheres.radius
+    ds = (
+        np.linalg.norm(centers[:, iu[:, 0]] - centers[:, iu[:, 1]], axis=-1)
+        - r[iu[:, 0]]
+        - r[iu[:, 1]]
+    )
+    ks = ds.argmin(axis=1)
+    _record(
+        rep,
+        "self_clearance",
+        ds[np.arange(len(t)), ks],
+        self_clearance_m,
+        t,
+        lambda k: f"spheres {iu[ks[k], 0]} ↔ {iu[ks[k], 1]}",
+        "arm self-clearance",
+        "m",
+        upper=False,
+    )
+    if check_payload:
+        tau = np.abs(arm.gravity_torques(qf, gravity, payload_kg))
+        jt = tau.argmax(axis=1)
+        _record(
+            rep,
+            "joint_torque",
+            tau.max(axis=1),
+            torque_limit_Nm,
+            t,
+            lambda k: f"{names[jt[k]]} with {payload_kg:g} kg at the tool",
+            "static joint torque",
+            "N·m",
+        )
+    return rep
