@@ -10,6 +10,7 @@ from planners.switching.availability import (
     PlaneFrame,
     RectangleCandidate,
     area_check,
+    exact_foot_placements,
     height_check,
 )
 from planners.switching.decide import (
@@ -32,5 +33,6 @@ __all__ = [
     "check_rigid",
     "decide_mode",
     "evaluate_planes",
+    "exact_foot_placements",
     "height_check",
 ]

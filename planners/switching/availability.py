@@ -223,3 +223,47 @@ def height_check(
     dz = float(centroid_base[2] - base_height)
     angle = float(np.degrees(np.arccos(np.clip(abs(normal_base[2]), 0.0, 1.0))))
     return (abs(dz) <= tolerance_m and angle <= parallel_tolerance_deg), dz, angle
+
+
+def exact_foot_placements(
+    hull: shapely.Geometry,
+    foot: tuple[float, float],
+    *,
+    spacing_m: float = 0.02,
+    n_angles: int = 12,
+    tolerance_m: float = 0.0,
+) -> tuple[int, np.ndarray | None]:
+    """Brute-force, independent of Alg. 2: how many foot rectangles (l × w),
+    centred on a ``spacing_m`` grid over the hull's bounds and turned through
+    ``n_angles`` headings in [0, π), lie inside ``hull`` (grown by
+    ``tolerance_m``).  Returns (count, (x, y, heading) of the placement
+    deepest inside, or None).  All rectangles are tested in one vectorised
+    shapely call."""
+    if hull.is_empty:
+        return 0, None
+    x0, y0, x1, y1 = hull.bounds
+    xs = np.arange(x0, x1 + 1e-9, spacing_m)
+    ys = np.arange(y0, y1 + 1e-9, spacing_m)
+    gx, gy = np.meshgrid(xs, ys)
+    centres = np.column_stack([gx.ravel(), gy.ravel()])
+    centres = centres[shapely.contains_xy(hull, centres[:, 0], centres[:, 1])]
+    if len(centres) == 0:
+        return 0, None
+    ang = np.arange(n_angles) * np.pi / n_angles
+    hl, hw = foot[0] / 2, foot[1] / 2
+    local = np.array([[hl, hw], [-hl, hw], [-hl, -hw], [hl, -hw], [hl, hw]])
+    c, s = np.cos(ang), np.sin(ang)
+    rot = np.stack([np.stack([c, -s], -1), np.stack([s, c], -1)], -2)  # (A,2,2)
+    corners = np.einsum("aij,kj->aki", rot, local)  # (A,5,2)
+    rings = centres[:, None, None, :] + corners[None]  # (C,A,5,2)
+    polys = shapely.polygons(rings.reshape(-1, 5, 2))
+    region = hull.buffer(tolerance_m) if tolerance_m > 0 else hull
+    shapely.prepare(region)
+    ok = shapely.covers(region, polys)
+    if not ok.any():
+        return 0, None
+    idx = np.nonzero(ok)[0]
+    depth = shapely.distance(region.boundary, polys[idx])
+    best = int(idx[int(np.argmax(depth))])
+    ci, ai = divmod(best, n_angles)
+    return int(ok.sum()), np.array([centres[ci, 0], centres[ci, 1], ang[ai]])

@@ -65,6 +65,7 @@ class JumpParams:
     max_iterations: int = 1500  # per RRT-Connect attempt
     attempts: int = 4  # RRT-Connect restarts
     ik_seeds: int = 48
+    ik_retries: int = 3  # fresh seed batches when a target has no usable IK solution
     max_goals: int = 6  # IK solutions used as goal-tree roots
     shortcut_iterations: int = 100
     accel_rad_s2: float = 2.0
@@ -489,6 +490,7 @@ def _landing_configs(
     params: JumpParams,
     seed: int,
     prefer: Callable[[np.ndarray], np.ndarray] | None = None,
+    post: Callable[[np.ndarray], bool] | None = None,
 ) -> list[tuple[np.ndarray, np.ndarray]]:
     """(hover config, approach path hover→contact) pairs for a target.
 
@@ -498,21 +500,29 @@ def _landing_configs(
     a straight line), and kept when every approach sample is valid and the
     hover pose is valid for free motion.
     """
-    sols = robot.ik(target_rel, None, seed)
-    if len(sols) == 0:
-        return []
-    if prefer is not None:
-        sols = sols[np.argsort(prefer(sols), kind="stable")]
+    out: list[tuple[np.ndarray, np.ndarray]] = []
     up = _cartesian_line(target_rel, hover_rel, params.cartesian_steps)
-    out = []
-    for q in sols:
-        track = robot.ik_track(up, q)
-        if track is None:
+    # IK retries: a fresh batch of random seeds while nothing usable is found.
+    for retry in range(int(params.ik_retries)):
+        sols = robot.ik(target_rel, None, seed + 1000 * retry)
+        if len(sols) == 0:
             continue
-        approach = np.vstack([track[::-1], q[None]])  # hover → contact
-        if checker_contact.valid(approach).all() and checker_free.valid(track[-1:]).all():
-            out.append((track[-1], approach))
-        if len(out) >= params.max_goals:
+        if prefer is not None:
+            sols = sols[np.argsort(prefer(sols), kind="stable")]
+        for q in sols:
+            track = robot.ik_track(up, q)
+            if track is None:
+                continue
+            approach = np.vstack([track[::-1], q[None]])  # hover → contact
+            if (
+                checker_contact.valid(approach).all()
+                and checker_free.valid(track[-1:]).all()
+                and (post is None or post(q))
+            ):
+                out.append((track[-1], approach))
+            if len(out) >= params.max_goals:
+                return out
+        if out:
             break
     return out
 
@@ -662,13 +672,41 @@ def plan_inchworm_jump(
     # Footholds in the caller's order, each also turned 180° about its
     # normal (the foot rectangle is symmetric): the first one that lands.
     options = _foothold_options(footholds, rob.foot, surface, surface_tolerance_m, params)
+    foot2_start = np.eye(4)
+    zone2_start = zone(foot2_start)
+    lift2_world = _cartesian_line(
+        foot2_start,
+        _translate(foot2_start, foot2_start[:3, 2] * params.lift_m),
+        params.cartesian_steps,
+    )
+
+    def lift2_from(q_contact: np.ndarray) -> np.ndarray | None:
+        """Foot 2's straight lift-off once foot 1 stands at FK(q_contact);
+        a foot-1 landing from which foot 2 cannot lift is useless."""
+        W = rob.fk_all(q_contact[None])[0, -1]
+        rel = np.einsum("bij,jk->bik", np.linalg.inv(lift2_world), W)
+        track = rob.ik_track(rel, q_contact)
+        if track is None:
+            return None
+        chk = _Checker(rob, 1, W, full, zone2_start, pairs, params)
+        return track if chk.valid(track).all() else None
+
     timings["ik_foot1"] = timings["rrt_foot1"] = 0.0
     path_c, W1, goals1, unreachable = None, footholds[0], [], 0
     for W in options:
         t0 = time.perf_counter()
         land1_zone = _Checker(rob, 0, np.eye(4), full, zone(W), pairs, params)
         hover1 = _translate(W, W[:3, 2] * params.standoff_m)
-        goals1 = _landing_configs(rob, W, hover1, free2, land1_zone, params, params.seed)
+        goals1 = _landing_configs(
+            rob,
+            W,
+            hover1,
+            free2,
+            land1_zone,
+            params,
+            params.seed,
+            post=lambda q: lift2_from(q) is not None,
+        )
         timings["ik_foot1"] += time.perf_counter() - t0
         if not goals1:
             unreachable += 1
@@ -700,19 +738,8 @@ def plan_inchworm_jump(
     t0 = time.perf_counter()
     W1_actual = rob.fk_all(q_land1[None])[0, -1]
     free1 = _Checker(rob, 1, W1_actual, full, None, pairs, params)
-    foot2_start = np.eye(4)
-    lift2_zone = _Checker(rob, 1, W1_actual, full, zone(foot2_start), pairs, params)
-    # Foot 2 lifts along its own normal: chain-relative target poses.
-    lift2_world = _cartesian_line(
-        foot2_start,
-        _translate(foot2_start, foot2_start[:3, 2] * params.lift_m),
-        params.cartesian_steps,
-    )
-    rel = np.einsum("bij,jk->bik", np.linalg.inv(lift2_world), W1_actual)
-    lift2 = rob.ik_track(rel, q_land1)
-    if lift2 is None or not lift2_zone.valid(lift2).all():
-        if _DEBUG:
-            print("lift2", lift2 is None, None if lift2 is None else lift2_zone.clearances(lift2))
+    lift2 = lift2_from(q_land1)
+    if lift2 is None:  # pragma: no cover - landings are filtered on this
         raise MotionPlanningError("foot 2 cannot lift straight off the standing surface")
     cands = _second_foot_candidates(W1_actual, rob.foot, surface, params, surface_tolerance_m)
     landing2 = None

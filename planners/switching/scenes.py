@@ -174,7 +174,7 @@ def _narrow(rng: np.random.Generator) -> tuple[list[SceneSurface], list, str, st
     # The outline was picked by a seeded random search over pentagons for one
     # where that holds for every noise seed 0-7 (tests check 0-4).
     plate = shapely.Polygon(
-        [(0.621, -0.022), (0.476, 0.101), (0.33, -0.022), (0.381, -0.17), (0.492, -0.188)]
+        [(0.55, 0.07), (0.35, 0.02), (0.32, -0.15), (0.52, -0.19), (0.54, -0.16)]
     )
     surfaces = [_standing(0.12), _horizontal("plate", -0.05, plate)]
     return (

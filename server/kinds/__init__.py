@@ -35,6 +35,7 @@ KIND_MODULES: list[str] = [
     "server.kinds.sbg_inspect",
     "server.kinds.ara_navigate",
     "server.kinds.blast",
+    "server.kinds.ara_switch",
 ]
 
 _errors: dict[str, str] = {}
