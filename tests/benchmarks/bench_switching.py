@@ -96,7 +96,7 @@ def landing_exists(T: np.ndarray, pts: np.ndarray) -> bool:
     """Reachable = some collision-free landing of foot 1 exists: 256 IK seeds,
     both headings, contact and straight approach valid (independent of the
     planner's 48-seed search)."""
-    p = JumpParams()
+    p = JumpParams(max_goals=1, ik_retries=1)  # one valid landing is enough
     g = np.arange(-0.75, 0.13 + 1e-9, 0.01)
     gx, gy = np.meshgrid(g, np.arange(-0.2, 0.2 + 1e-9, 0.01))
     allp = np.vstack([pts, np.column_stack([gx.ravel(), gy.ravel(), np.zeros(gx.size)])])

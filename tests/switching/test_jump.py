@@ -3,6 +3,8 @@ checks, verified independently of the planner's own bookkeeping."""
 
 from __future__ import annotations
 
+import itertools
+
 import numpy as np
 import pytest
 from hypothesis import given, settings
@@ -61,7 +63,7 @@ def test_trajectory_respects_limits_and_speeds(step_down):
 
 
 def test_feet_reach_their_targets(step_down):
-    _, d, plan = step_down
+    _, _, plan = step_down
     Q = plan.joint_trajectory
     c = next(p for p in plan.phases if p.name == "C")
     # End of C: foot 1 (chain end) at the foothold, in the base frame.
@@ -148,7 +150,7 @@ def test_rrt_connect_and_shortcut_on_a_wall_with_a_gap():
     np.testing.assert_allclose(path[-1], [0.8, -0.8])
     short = shortcut(path, valid, rng=rng, iterations=200, resolution=0.01)
     for P in (path, short):
-        for a, b in zip(P[:-1], P[1:], strict=True):
+        for a, b in itertools.pairwise(P):
             assert valid(interpolate(a, b, 0.01)).all()
     assert (
         np.linalg.norm(np.diff(short, axis=0), axis=1).sum()
