@@ -3,12 +3,17 @@
 Alg. 5, PIBC Alg. 6 + RRT; see docs/navigation.md).
 
 The cloud is a stored one (``cloud_id``) or a synthetic sample structure
-(``sample``: cross, t, l, k, i, warren, pratt).  The robot footprint defaults
-to the ARA's ``[mobile_footprint]`` in robots/ara/params.toml.  Note: that
-footprint (0.68 × 0.16 m) is wider than the samples' 60–150 mm flanges, so
-with the defaults every per-edge path fails and the plan is rejected by its
-``paths_found`` check with a message saying so; pass a smaller footprint to
-plan a robot that fits.
+(``sample``: cross, t, l, k, i, warren, pratt).
+
+Which points must stay on steel (Alg. 6's projected robot points) is the
+``footprint`` choice.  ``contact_patch`` (default): the magnetic-wheel
+contact patch of the driving foot, 0.08 × 0.025 m (chosen; the trailing foot
+follows the same track) — the part that must grip the flange, and one that
+fits the samples' 60–150 mm flanges.  ``mobile_body``: the whole mobile-mode
+body rectangle of robots/ara/params.toml ``[mobile_footprint]`` (0.68 ×
+0.16 m), which no 60–150 mm flange can carry, so such plans are rejected by
+their ``paths_found`` check — the honest answer for a robot that must not
+overhang.  Explicit ``footprint_*_m`` values override both.
 """
 
 from __future__ import annotations
@@ -52,8 +57,13 @@ class AraNavigateParams(BaseModel):
         description="boundary check: exact ray-bracket test or the seed's Alg. 6 as printed",
     )
     plan_paths: bool = Field(True, description="plan the per-edge RRT-Connect robot paths")
+    footprint: Literal["contact_patch", "mobile_body"] = Field(
+        "contact_patch",
+        description="points that must stay on steel: the driving foot's wheel contact patch "
+        "or the whole mobile-mode body ([mobile_footprint])",
+    )
     footprint_length_m: float | None = Field(
-        None, gt=0, description="robot footprint length (None: ARA [mobile_footprint])"
+        None, gt=0, description="robot footprint length (None: from `footprint`)"
     )
     footprint_width_m: float | None = Field(
         None, gt=0, description="robot footprint width (None: ARA [mobile_footprint])"
@@ -70,10 +80,18 @@ def validate(p: AraNavigateParams) -> None:
         raise InvalidInputError(f"unknown sample {p.sample!r}; samples: {', '.join(SHAPES)}")
 
 
+#: The driving foot's magnetic-wheel contact patch (chosen; see the module doc).
+CONTACT_PATCH = {"length_m": 0.08, "width_m": 0.025, "center_x_m": 0.0, "center_y_m": 0.0}
+
+
 def _footprint(p: AraNavigateParams) -> dict[str, float]:
     from robots import load_robot
 
-    fp = load_robot("ara").params["mobile_footprint"]
+    fp = (
+        load_robot("ara").params["mobile_footprint"]
+        if p.footprint == "mobile_body"
+        else CONTACT_PATCH
+    )
     return {
         "footprint_length_m": float(p.footprint_length_m or fp["length_m"]),
         "footprint_width_m": float(p.footprint_width_m or fp["width_m"]),
@@ -269,6 +287,98 @@ def run(p: AraNavigateParams, ctx: JobContext) -> KindOutput:
     )
 
 
+#: Wheel-command constants (chosen: slow inspection speed, servo-class turn rate).
+DRIVE_SPEED_M_S = 0.05
+TURN_RATE_RAD_S = 0.5
+
+
+def compile_program(plan: Any) -> list[dict[str, Any]]:
+    """Differential-drive wheel commands along the route.
+
+    The ARA's wheels cannot slide sideways as the (x, y, yaw) per-edge paths
+    may, so the program drives the route's graph edges — which follow each
+    bar's centre line (Alg. 4) — straight, turns in place only at vertices
+    and by at most 90° (a U-turn at a bar end is driven as a reversal).  The
+    motion the wheels will really make is replayed here, and every sampled
+    pose — including each in-place turn — must keep the footprint on steel
+    (exact ray casting on the cluster boundaries); if not, compilation fails
+    and the plan's ``command_program`` check says where.
+    """
+    from robots import load_robot
+    from server.kinds.programs import as_dicts, differential_drive
+
+    frame = plan.result["frame"]
+    origin, e1, e2 = (np.asarray(frame[k], dtype=float) for k in ("origin", "e1", "e2"))
+    pos = {n["id"]: np.asarray(n["pos"], dtype=float) for n in plan.result["graph"]["nodes"]}
+    walk = plan.result["route"]["vertices"]
+    if len(walk) < 2:
+        raise ValueError("the route has no edges, so there is nothing to drive")
+    xyz = np.array([pos[v] for v in walk])
+    xy = np.stack([(xyz - origin) @ e1, (xyz - origin) @ e2], axis=1)
+    first = xy[1] - xy[0]
+    heading0 = float(np.arctan2(first[1], first[0]))  # start facing along the first bar
+    track = float(load_robot("ara").params["foot"]["wheel_track_m"])
+    cmds = differential_drive(
+        xy,
+        track_m=track,
+        speed_m_s=DRIVE_SPEED_M_S,
+        turn_rate_rad_s=TURN_RATE_RAD_S,
+        heading_rad=heading0,
+        allow_reverse=True,
+    )
+    fp = plan.result["footprint"]
+    foot = footprint_points(
+        fp["length_m"],
+        fp["width_m"],
+        center_x_m=fp["center_x_m"],
+        center_y_m=fp["center_y_m"],
+        spacing_m=0.01,
+    )
+    polys = [
+        np.stack([(b - origin) @ e1, (b - origin) @ e2], axis=1)
+        for b in (np.asarray(c["boundary"], dtype=float) for c in plan.result["clusters"])
+    ]
+    poses = replay_differential_drive(xy[0], heading0, cmds, track)
+    pts = project_footprint(poses, foot)
+    flat = pts.reshape(-1, 2)
+    on = np.zeros(len(flat), dtype=bool)
+    for poly in polys:
+        on |= point_in_polygon(flat, poly)
+    ok = on.reshape(pts.shape[:2]).all(axis=1)
+    if not ok.all():
+        bad = poses[int(np.argmin(ok))]
+        raise ValueError(
+            f"{int((~ok).sum())} of {len(ok)} poses the wheels will drive put the footprint "
+            f"off the steel (first at x={bad[0]:.3f} m, y={bad[1]:.3f} m, "
+            f"yaw={np.degrees(bad[2]):.0f}°): an in-place turn or a straight run that the "
+            "holonomic path avoided"
+        )
+    return as_dicts(cmds)
+
+
+def replay_differential_drive(
+    xy0: np.ndarray, heading: float, cmds: list[Any], track_m: float, step_m: float = 0.01
+) -> np.ndarray:
+    """(P,3) poses sampled along what the wheel commands make the robot do."""
+    from robots.protocol.commands import WheelSpeeds
+
+    x, y, th = float(xy0[0]), float(xy0[1]), heading
+    out = [(x, y, th)]
+    for c in cmds:
+        if not isinstance(c, WheelSpeeds):
+            continue
+        vl, vr = c.speeds_m_s[0], c.speeds_m_s[1]
+        v, w = (vl + vr) / 2.0, (vr - vl) / track_m
+        n = max(1, int(np.ceil(max(abs(v) * c.duration_s / step_m, abs(w) * c.duration_s / 0.05))))
+        dt = c.duration_s / n
+        for _ in range(n):
+            th += w * dt
+            x += v * np.cos(th) * dt
+            y += v * np.sin(th) * dt
+            out.append((x, y, th))
+    return np.array(out)
+
+
 def _draw(ctx: Any, plan: Any) -> None:
     from server.scene.ara_navigate import draw
 
@@ -285,4 +395,5 @@ KIND = PlanKind(
     robot="ara",
     samples=dict(SAMPLES),
     draw=_draw,
+    compile=compile_program,
 )

@@ -23,6 +23,7 @@ def differential_drive(
     turn_rate_rad_s: float,
     heading_rad: float = 0.0,
     min_step_m: float = 1e-4,
+    allow_reverse: bool = False,
 ) -> list[Command]:
     """Turn-in-place then drive-straight wheel commands along a polyline.
 
@@ -30,12 +31,23 @@ def differential_drive(
     facing ``heading_rad``.  Each straight piece is one ``WheelSpeeds`` of
     equal left/right speed; each heading change an in-place turn with wheel
     speeds ``∓ω·B/2`` (differential drive kinematics).  Consecutive pieces in
-    the same direction merge into one command.
+    the same direction merge into one command.  With ``allow_reverse`` a piece
+    pointing more than 90° away from the heading is driven backwards, so the
+    robot never turns more than 90° in place (a U-turn at a bar end becomes a
+    reversal: no sweep beyond the flange).
     """
     xy = np.asarray(xy, dtype=float).reshape(-1, 2)
     cmds: list[Command] = []
     heading = float(heading_rad)
-    run = 0.0
+    run, direction = 0.0, 1.0
+
+    def flush() -> None:
+        nonlocal run
+        if run > 0:
+            v = direction * speed_m_s
+            cmds.append(WheelSpeeds((v, v), run / speed_m_s))
+            run = 0.0
+
     for a, b in itertools.pairwise(xy):
         d = b - a
         length = float(np.hypot(*d))
@@ -43,16 +55,19 @@ def differential_drive(
             continue
         target = float(np.arctan2(d[1], d[0]))
         turn = (target - heading + np.pi) % (2 * np.pi) - np.pi
-        if abs(turn) > np.radians(0.5):
-            if run > 0:
-                cmds.append(WheelSpeeds((speed_m_s, speed_m_s), run / speed_m_s))
-                run = 0.0
-            w = float(np.sign(turn) * turn_rate_rad_s * track_m / 2.0)
-            cmds.append(WheelSpeeds((-w, w), abs(turn) / turn_rate_rad_s))
-            heading = target
+        sense = 1.0
+        if allow_reverse and abs(turn) > np.pi / 2:
+            sense = -1.0
+            turn = (turn + 2 * np.pi) % (2 * np.pi) - np.pi  # face away, drive backwards
+        if abs(turn) > np.radians(0.5) or sense != direction:
+            flush()
+            if abs(turn) > np.radians(0.5):
+                w = float(np.sign(turn) * turn_rate_rad_s * track_m / 2.0)
+                cmds.append(WheelSpeeds((-w, w), abs(turn) / turn_rate_rad_s))
+                heading = (heading + turn + np.pi) % (2 * np.pi) - np.pi
+            direction = sense
         run += length
-    if run > 0:
-        cmds.append(WheelSpeeds((speed_m_s, speed_m_s), run / speed_m_s))
+    flush()
     cmds.append(Stop())
     return cmds
 
