@@ -157,27 +157,20 @@ class JobRunner:
         assert self._executor is not None, "JobRunner.start() was not called"
         with self._lock:
             self._cancel[plan_id] = False
+            args = (
+                execute_job,
+                plan.kind,
+                plan.params,
+                plan_id,
+                str(self.store.arrays.path("clouds")),
+                self._queue,
+                self._cancel,
+            )
             try:
-                fut = self._executor.submit(
-                    execute_job,
-                    plan.kind,
-                    plan.params,
-                    plan_id,
-                    str(self.store.arrays.path("clouds")),
-                    self._queue,
-                    self._cancel,
-                )
-            except BrokenProcessPool:
+                fut = self._executor.submit(*args)
+            except BrokenProcessPool:  # a crashed worker broke the pool: replace it once
                 self._executor = self._new_executor()
-                fut = self._executor.submit(
-                    execute_job,
-                    plan.kind,
-                    plan.params,
-                    plan_id,
-                    str(self.store.arrays.path("clouds")),
-                    self._queue,
-                    self._cancel,
-                )
+                fut = self._executor.submit(*args)
             self._futures[plan_id] = fut
         fut.add_done_callback(lambda f, pid=plan_id: self._finish(pid, f))
 
