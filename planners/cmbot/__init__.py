@@ -9,7 +9,7 @@ model from ``robots.load_robot("cmbot")``.
 
 from planners.cmbot.avoidance import AvoidanceParams
 from planners.cmbot.climb import SEED_CLIMB_GOAL_X, SEED_CLIMB_START_X, ClimbPlan, plan_climb
-from planners.cmbot.experiment import ExperimentParams, TestTrajectory
+from planners.cmbot.experiment import ExperimentParams, Section4Trajectory
 from planners.cmbot.gait import GaitParams
 from planners.cmbot.guardrail import Guardrail, GuardrailParams, make_guardrail, seed_guardrail
 from planners.cmbot.manipulation import SEED_WORK_REAR_X, ManipulationPlan, plan_manipulation
@@ -27,7 +27,7 @@ __all__ = [
     "Guardrail",
     "GuardrailParams",
     "ManipulationPlan",
-    "TestTrajectory",
+    "Section4Trajectory",
     "make_guardrail",
     "plan_climb",
     "plan_manipulation",

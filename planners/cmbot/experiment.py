@@ -37,7 +37,7 @@ ANGULAR_UNITS = {"mrad": 1e-3, "deg": np.pi / 180.0, "rad": 1.0}
 
 
 @dataclass(frozen=True)
-class TestTrajectory:
+class Section4Trajectory:
     """Seed §4: start pose (mm, deg) in (6), duration, switch time and unit reading."""
 
     start_mm_deg: tuple[float, float, float, float, float, float] = (
@@ -120,7 +120,7 @@ class TestTrajectory:
 
 
 @functools.lru_cache(maxsize=16)
-def _rotation_track(traj: TestTrajectory, step_s: float) -> tuple[np.ndarray, Rotation]:
+def _rotation_track(traj: Section4Trajectory, step_s: float) -> tuple[np.ndarray, Rotation]:
     """Orientation of the tool on a uniform grid over the whole trajectory (cached)."""
     n = max(int(np.ceil(traj.duration_s / step_s)), 1)
     grid = np.linspace(0.0, traj.duration_s, n + 1)
@@ -211,7 +211,7 @@ def pair_distances(
 def track(
     arm: ArmKinematics,
     boxes: list[Cuboid],
-    traj: TestTrajectory,
+    traj: Section4Trajectory,
     q0: np.ndarray,
     *,
     avoidance: AvoidanceParams | None,
@@ -315,24 +315,27 @@ class ExperimentParams:
     v_max; ``min_clearance_m`` the clearance the simulation gate requires.
     Eq. 15's escape speed is zero at d_s, so an approaching sphere always
     dips below d_s before it is pushed back: the required clearance must lie
-    below d_s, never at it.  ``q_ready_deg`` picks the redundant arm's start
+    below d_s, never at it.  ``payload_kg`` is the tool carried in the
+    experiment (chosen: nozzle or laser head); the 5 kg design payload is
+    checked over the workspace cuboid (:mod:`planners.cmbot.indicators`).
+    ``q_ready_deg`` picks the redundant arm's start
     configuration (the seed gives only the tool pose): the IK solution reached
     from this posture (elbow low, below the top bar).
     """
 
-    trajectory: TestTrajectory = field(default_factory=TestTrajectory)
+    trajectory: Section4Trajectory = field(default_factory=Section4Trajectory)
     avoidance: AvoidanceParams = field(
         default_factory=lambda: AvoidanceParams(d_s=0.15, v_max=0.3, damping=0.02)
     )
     min_clearance_m: float = 0.05
     dt_s: float = 0.01
     gain: float = 10.0
-    payload_kg: float = 5.0
+    payload_kg: float = 2.0
     q_ready_deg: tuple[float, ...] = (90.0, 45.0, 50.0, -85.0, 0.0, -15.0, 180.0)
 
 
 def start_configuration(
-    model: Any, traj: TestTrajectory, q_ready_deg: tuple[float, ...]
+    model: Any, traj: Section4Trajectory, q_ready_deg: tuple[float, ...]
 ) -> np.ndarray:
     """IK of the start pose from the ready posture (damped least squares, no restarts)."""
     from robots.kinematics import solve_ik_dls

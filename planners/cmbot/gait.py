@@ -5,8 +5,9 @@ forward) and a contraction phase (front foot holds, the rear foot follows).
 Footholds are searched on a grid along the top bar: every sole lies wholly on
 one bar segment and off every post joint, the two soles stay between the
 closest and farthest distances the chain reaches with φy = 0, and no swing is
-longer than the step limit S.  A* over stances (fewest phases; heuristic:
-remaining distance of each foot / S) finds the walk or proves there is none.
+longer than the step limit S.  Weighted A* over stances (phases, plus a
+penalty on stances wider than the plain gait; heuristic: remaining distance
+of each foot / S) finds the walk or proves there is none.
 
 Each phase is then timed — counterweight swing of the folded arm with both
 feet held, limiting-plate release, magnet off, the Eq. 11 compound-cycloid
@@ -36,6 +37,10 @@ from planners.cmbot.foot_trajectory import compound_cycloid, smooth_blend
 from planners.cmbot.guardrail import Guardrail
 from planners.cmbot.scene import arm_base_pose
 from planners.errors import InfeasibleError, InvalidInputError, UnreachableError
+
+#: Weight on the A* heuristic (> 1: weighted A*, at most this factor above the
+#: fewest phases, far fewer states expanded on long walks).
+H_WEIGHT = 1.5
 
 #: Largest angular acceleration [rad/s²] the counterweight swing may demand of J6 (chosen).
 ARM_SWING_ACC = 4.0
@@ -154,18 +159,30 @@ def plan_footholds(
     valid = guardrail.valid_foothold(sign * us, L)
     snap = 1e-9
 
+    # Runs of consecutive valid grid positions: their ends are the footholds
+    # that matter (right before a gap or post); with the farthest reachable one
+    # and the goal they keep the search small without losing feasibility in
+    # practice.
+    edges = np.diff(np.concatenate([[0], valid.astype(int), [0]]))
+    run_lo = np.flatnonzero(edges == 1)
+    run_hi = np.flatnonzero(edges == -1) - 1
+
     def cands(a: float, b: float, target: float) -> list[float]:
-        """Valid positions in (a, b], farthest first, with ``target`` first when inside."""
-        i0 = int(np.floor((a - lo) / grid)) + 1
-        i1 = int(np.floor((b + snap - lo) / grid))
-        out = [
-            float(us[i])
-            for i in range(min(i1, n - 1), max(i0, 0) - 1, -1)
-            if valid[i] and us[i] > a + snap
-        ]
+        """Candidate footholds in (a, b], farthest first, ``target`` first when inside."""
+        i0 = max(int(np.floor((a + snap - lo) / grid)) + 1, 0)
+        i1 = min(int(np.floor((b + snap - lo) / grid)), n - 1)
+        out: set[int] = set()
+        if i1 >= i0:
+            k = np.searchsorted(run_lo, i1, side="right") - 1  # last run starting ≤ i1
+            while k >= 0 and run_hi[k] >= i0:
+                hi_i = min(run_hi[k], i1)
+                lo_i = max(run_lo[k], i0)
+                out.update({hi_i, lo_i, (hi_i + lo_i) // 2})
+                k -= 1
+        c = sorted((float(us[i]) for i in out if us[i] > a + snap), reverse=True)
         if a + snap < target <= b + snap:
-            out = [target, *[u for u in out if u < target - snap]]
-        return out
+            c = [target, *[u for u in c if abs(u - target) > snap]]
+        return c
 
     def h(trail: float, lead: float) -> int:
         # each phase moves one foot by at most S: admissible lower bound on the phases left
@@ -215,7 +232,7 @@ def plan_footholds(
             if g2 < best_g.get(k2, np.inf) - 1e-12:
                 best_g[k2] = g2
                 parent[k2] = (key, move, (tr_, ld_))
-                heapq.heappush(heap, (g2 + h(tr_, ld_), -(tr_ + ld_), g2, tr_, ld_))
+                heapq.heappush(heap, (g2 + H_WEIGHT * h(tr_, ld_), -(tr_ + ld_), g2, tr_, ld_))
     x_block = sign * blocked_at
     near_gap = [g for g in guardrail.gaps if abs((g[0] + g[1]) / 2 - x_block) < lim.d_max + 0.5]
     hint = ""

@@ -28,7 +28,7 @@ class GuardrailParams:
     post_width_m: float = 0.063
     post_keepout_m: float = 0.02  # a foot keeps this far from a post's top joint
     rail_height_m: float = 1.35  # bar top above the walkway
-    mid_rail_drop_m: float = 0.55  # round-steel middle rail below the bar top
+    mid_rail_drop_m: float | None = 0.55  # round-steel middle rail below the bar top (None: none)
     rod_half_m: float = 0.0125  # Ø25 mm round steel
     bracket_drop_m: float = 0.60  # bracket leaves the post this far below the bar top
     bracket_reach_m: float = 0.45  # … and meets the walkway bracket this far outboard
@@ -113,10 +113,11 @@ class Guardrail:
             if b <= a:
                 continue
             out.append(Cuboid.from_bounds([a, -bw, -bd], [b, bw, 0.0], f"bar{i}", "guardrail"))
-            z = -p.mid_rail_drop_m
-            out.append(
-                Cuboid.from_bounds([a, -r, z - r], [b, r, z + r], f"mid_rail{i}", "guardrail")
-            )
+            if p.mid_rail_drop_m is not None:
+                z = -p.mid_rail_drop_m
+                out.append(
+                    Cuboid.from_bounds([a, -r, z - r], [b, r, z + r], f"mid_rail{i}", "guardrail")
+                )
         for i, xp in enumerate(self.posts):
             if not (x_lo - 0.5 <= xp <= x_hi + 0.5):
                 continue

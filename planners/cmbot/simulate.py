@@ -23,7 +23,7 @@ from scipy.interpolate import CubicSpline, PchipInterpolator
 
 from planners.cmbot.arm import ArmKinematics
 from planners.cmbot.distance import Cuboid, boxes_arrays, sphere_box_exact
-from planners.cmbot.experiment import ClearanceFilter, TestTrajectory
+from planners.cmbot.experiment import ClearanceFilter, Section4Trajectory
 from planners.cmbot.gait import GaitTrajectory, flip_moments
 from planners.cmbot.guardrail import Guardrail
 from planners.cmbot.scene import arm_base_pose, climber_box_arrays
@@ -106,20 +106,38 @@ def _record(
 
 
 def _resample(
-    times: np.ndarray, values: np.ndarray, substeps: int, smooth: bool = False
+    times: np.ndarray,
+    values: np.ndarray,
+    substeps: int,
+    smooth: bool = False,
+    breaks: tuple[float, ...] = (),
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Cubic resampling: fine times, values, derivatives.  Monotone (PCHIP, no
-    overshoot at the holds of a gait) or, with ``smooth``, a C² cubic spline."""
+    overshoot at the holds of a gait) or, with ``smooth``, C² cubic splines
+    fitted separately between ``breaks`` (times where the commanded velocity
+    jumps, so a spline must not ring across them)."""
     t = np.asarray(times, dtype=float)
     keep = np.concatenate([[True], np.diff(t) > 1e-12])
     t, v = t[keep], np.asarray(values, dtype=float)[keep]
     if len(t) < 2:
         return t, v, np.zeros_like(v)
-    fine = np.concatenate(
-        [np.linspace(a, b, substeps, endpoint=False) for a, b in itertools.pairwise(t)] + [t[-1:]]
-    )
-    f = CubicSpline(t, v, axis=0) if smooth else PchipInterpolator(t, v, axis=0)
-    return fine, f(fine), f.derivative()(fine)
+    cuts = [0, *[int(np.searchsorted(t, b)) for b in breaks if t[0] < b < t[-1]], len(t) - 1]
+    T_out, V_out, D_out = [], [], []
+    for i, (a, b) in enumerate(itertools.pairwise(cuts)):
+        ts, vs = t[a : b + 1], v[a : b + 1]
+        fine = np.concatenate(
+            [np.linspace(x, y, substeps, endpoint=False) for x, y in itertools.pairwise(ts)]
+        )
+        if i == len(cuts) - 2:
+            fine = np.concatenate([fine, ts[-1:]])
+        if smooth and len(ts) >= 4:
+            f = CubicSpline(ts, vs, axis=0)
+        else:
+            f = PchipInterpolator(ts, vs, axis=0)
+        T_out.append(fine)
+        V_out.append(f(fine))
+        D_out.append(f.derivative()(fine))
+    return np.concatenate(T_out), np.concatenate(V_out), np.concatenate(D_out)
 
 
 def min_clearance(
@@ -332,7 +350,7 @@ def simulate_climb(
 def simulate_arm(
     arm: ArmKinematics,
     boxes: list[Cuboid],
-    traj: TestTrajectory,
+    traj: Section4Trajectory,
     times: np.ndarray,
     q: np.ndarray,
     *,
@@ -350,7 +368,7 @@ def simulate_arm(
 ) -> GateReport:
     """Replay an arm motion finely and check it against Eq. 21–26 and the scene."""
     rep = GateReport()
-    t, qf, qd = _resample(times, q, substeps, smooth=True)
+    t, qf, qd = _resample(times, q, substeps, smooth=True, breaks=(traj.switch_s,))
     rep.dt_s = float(np.median(np.diff(t))) if len(t) > 1 else 0.0
     rep.samples = len(t)
     names = [f"J{i}" for i in range(6, 13)]
