@@ -94,8 +94,8 @@ def test_clearance_matches_brute_force(step_down):
     away = (np.linalg.norm(pos - starts, axis=1) > 0.041) & (
         np.linalg.norm(pos - ends, axis=1) > 0.041
     )
-    free = np.nonzero(away)[0][::5]
-    assert len(free) > 50
+    free = np.nonzero(away)[0][::8]
+    assert len(free) > 40
     for k in free:
         anchored = (
             (0,) if plan.anchor[k] == 0 else (len(ROB.link_names) - 2, len(ROB.link_names) - 1)
