@@ -36,6 +36,8 @@ KIND_MODULES: list[str] = [
     "server.kinds.ara_navigate",
     "server.kinds.blast",
     "server.kinds.ara_switch",
+    "server.kinds.cmbot_climb",
+    "server.kinds.cmbot_manipulate",
 ]
 
 _errors: dict[str, str] = {}

@@ -1,0 +1,248 @@
+"""``cmbot.manipulate``: CMBOT's 7-DoF arm tracks a maintenance trajectory
+while avoiding the guardrail, its brackets and its own climbing mechanism
+(seed 002 §3.2, Eq. 12–20, and the §4 experiment, Eq. 21–26).
+
+The tool follows the seed's 20 s test trajectory from (0, 820, −2790 mm,
+0°, 0°, −90°) in frame (6) with the gradient-projection solution and the
+escape velocities of covering spheres against cuboids (GJK distances).  The
+simulation gate replays the motion at fine steps — tracking, joint limits
+and speeds, clearance to the environment and to itself, static joint torques
+— and a failed check rejects the plan.  When the arm would pass too close,
+the plan proposes the nearest base position along the guardrail for which
+the whole motion passes (the seed's remedy).  See docs/cmbot.md.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any, Literal
+
+import numpy as np
+from pydantic import BaseModel, Field
+
+from planners.cmbot import (
+    SEED_WORK_REAR_X,
+    AvoidanceParams,
+    ExperimentParams,
+    Section4Trajectory,
+    plan_manipulation,
+)
+from planners.cmbot.scene import work_stance
+from planners.errors import InvalidInputError
+from server.kinds.base import Check, JobContext, KindOutput, PlanKind
+from server.kinds.cmbot_climb import (
+    GuardrailSpec,
+    boxes_result,
+    clean,
+    gate_checks,
+    guardrail_result,
+    thin,
+)
+
+ROBOT = "cmbot"
+
+
+class CmbotManipulateParams(BaseModel):
+    """Work stance, trajectory reading, avoidance and gate limits of one arm motion."""
+
+    guardrail: GuardrailSpec = Field(default_factory=GuardrailSpec, description="the guardrail")
+    rear_foot_x_m: float = Field(
+        SEED_WORK_REAR_X, description="rear sole of the work stance, metres"
+    )
+    start_mm_deg: tuple[float, float, float, float, float, float] = Field(
+        (0.0, 820.0, -2790.0, 0.0, 0.0, -90.0),
+        description="tool start pose in frame (6): x, y, z in mm, roll, pitch, yaw in deg (seed §4)",
+    )
+    angular_unit: Literal["mrad", "deg"] = Field(
+        "mrad", description="unit of Eq. 24–26 (mrad/s: consistent reading; deg/s: as printed)"
+    )
+    avoidance: bool = Field(True, description="add the escape term of Eq. 15–20")
+    compare_without_avoidance: bool = Field(
+        True, description="also simulate the motion without the escape term (console plot)"
+    )
+    d_s_m: float = Field(0.15, gt=0, le=1.0, description="Eq. 15 safety threshold d_s")
+    v_max_m_s: float = Field(0.3, gt=0, le=2.0, description="Eq. 15 maximum escape speed")
+    min_clearance_m: float = Field(
+        0.05, ge=0, description="check: clearance the gate requires (< d_s, docs/cmbot.md)"
+    )
+    payload_kg: float = Field(2.0, ge=0, le=10.0, description="tool mass at Q for the torque check")
+    dt_s: float = Field(0.01, gt=0.001, le=0.05, description="control step of the tracking loop")
+    relocate: bool = Field(True, description="propose the nearest passing base when a check fails")
+    max_shift_m: float = Field(0.5, ge=0, le=3.0, description="farthest base shift tried")
+    shift_step_m: float = Field(0.1, gt=0.01, le=1.0, description="base shift step")
+
+
+def _params(p: CmbotManipulateParams) -> ExperimentParams:
+    return ExperimentParams(
+        trajectory=Section4Trajectory(
+            start_mm_deg=tuple(p.start_mm_deg), angular_unit=p.angular_unit
+        ),
+        avoidance=AvoidanceParams(d_s=p.d_s_m, v_max=p.v_max_m_s),
+        min_clearance_m=p.min_clearance_m,
+        dt_s=p.dt_s,
+        payload_kg=p.payload_kg,
+    )
+
+
+def validate(p: CmbotManipulateParams) -> None:
+    """Cheap: the work stance must stand on valid footholds (HTTP 422 if not)."""
+    from robots import load_robot
+
+    g = p.guardrail.build()
+    c = load_robot(ROBOT).params["climber"]
+    for x in (p.rear_foot_x_m, p.rear_foot_x_m + c["work_foot_distance_m"]):
+        why = g.why_invalid(x, c["foot_length_m"])
+        if why:
+            raise InvalidInputError(
+                f"rear_foot_x_m = {p.rear_foot_x_m} m is not a valid work stance: {why}"
+            )
+
+
+def run(p: CmbotManipulateParams, ctx: JobContext) -> KindOutput:
+    from robots import load_robot
+
+    model = load_robot(ROBOT)
+    g = p.guardrail.build()
+    plan = plan_manipulation(
+        model,
+        guardrail=g,
+        rear_foot_x=p.rear_foot_x_m,
+        params=_params(p),
+        avoidance=p.avoidance,
+        compare=p.compare_without_avoidance,
+        relocate=p.relocate,
+        max_shift_m=p.max_shift_m,
+        shift_step_m=p.shift_step_m,
+        progress=ctx.progress,
+    )
+    run_ = plan.run
+    ctx.progress(0.97, "storing")
+    k = thin(len(run_.times))
+    label = "with avoidance" if p.avoidance else "without avoidance"
+    series = {label: run_.clearance[k].tolist()}
+    if plan.comparison is not None:
+        other = "without avoidance" if p.avoidance else "with avoidance"
+        series[other] = plan.comparison.clearance[k].tolist()
+    series["required clearance"] = [p.min_clearance_m] * len(k)
+    series["Eq. 15 d_s"] = [p.d_s_m] * len(k)
+    plots = [
+        {
+            "title": "minimum clearance of the arm's spheres to the cuboids",
+            "x": run_.times[k].tolist(),
+            "x_label": "s",
+            "y_label": "m",
+            "series": series,
+        },
+        {
+            "title": "tool tracking error",
+            "x": run_.times[k].tolist(),
+            "x_label": "s",
+            "y_label": "mm",
+            "series": {label: (run_.pos_error[k] * 1e3).tolist()},
+        },
+        {
+            "title": "arm joints J6–J12",
+            "x": run_.times[k].tolist(),
+            "x_label": "s",
+            "y_label": "deg",
+            "series": {f"J{j + 6}": np.degrees(run_.q[k, j]).tolist() for j in range(7)},
+        },
+    ]
+    checks = gate_checks(plan.gate)
+    prop = plan.proposal
+    proposal: dict[str, Any] | None = None
+    if prop is not None:
+        proposal = {
+            "rear_foot_x_m": prop.rear_foot_x,
+            "shift_m": prop.shift_m,
+            "tried": [{"rear_foot_x_m": x, "outcome": s} for x, s in prop.tried],
+        }
+        msg = (
+            f"the motion passes every check with the rear sole at {prop.rear_foot_x:.3f} m "
+            f"(shift {prop.shift_m:+.3f} m): re-plan there"
+            if prop.rear_foot_x is not None
+            else f"no base position within ±{p.max_shift_m} m passes every check"
+        )
+        checks.append(
+            Check(
+                name="base_position", passed=False, value=prop.rear_foot_x, limit=None, message=msg
+            )
+        )
+    result = {
+        "guardrail": guardrail_result(g),
+        "rear_foot_x_m": plan.rear_foot_x,
+        "T_world_base": plan.scene.T_world_base.tolist(),
+        "q_climb": work_stance(model).tolist(),
+        "boxes_base_frame": boxes_result(plan.scene.boxes),
+        "q_start_deg": np.degrees(plan.q_start).tolist(),
+        "proposal": proposal,
+        "violations": [vars(v) for v in plan.gate.violations],
+        "comparison_violations": [vars(v) for v in plan.comparison_gate.violations]
+        if plan.comparison_gate
+        else [],
+        "gate": {
+            "dt_s": plan.gate.dt_s,
+            "samples": plan.gate.samples,
+            "summary": plan.gate.summary(),
+        },
+        "comparison_gate": plan.comparison_gate.summary() if plan.comparison_gate else None,
+        "plots": plots,
+        "joint_names": [f"J{i}" for i in range(6, 13)],
+    }
+    arrays = {
+        "times": run_.times,
+        "q": run_.q,
+        "tool_pos": run_.tool_pos,
+        "desired_pos": run_.desired_pos,
+        "clearance": run_.clearance,
+        "pos_error": run_.pos_error,
+    }
+    if plan.comparison is not None:
+        arrays["q_compare"] = plan.comparison.q
+        arrays["clearance_compare"] = plan.comparison.clearance
+    metrics = {k2: float(v) for k2, v in plan.metrics.items() if math.isfinite(v)}
+    return KindOutput(result=clean(result), arrays=arrays, checks=checks, metrics=metrics)
+
+
+def compile_program(plan: Any) -> list[dict[str, Any]]:
+    """Timed way-points of J6…J12 every 0.1 s; the nozzle works on the straight
+    line of Eq. 21–26 (t ≥ 5 s) and closes at the end."""
+    from robots.protocol.commands import JointMove, Nozzle, Stop
+
+    t = plan.array("times")
+    q = plan.array("q")
+    idx = np.unique(
+        np.r_[np.arange(0, len(t), max(1, round(0.1 / max(t[1] - t[0], 1e-6)))), len(t) - 1]
+    )
+    cmds: list[Any] = []
+    on = False
+    prev = 0.0
+    for i in idx:
+        if not on and t[i] >= 5.0:
+            cmds.append(Nozzle(True))
+            on = True
+        cmds.append(JointMove(tuple(float(v) for v in q[i]), float(t[i] - prev) if cmds else 0.0))
+        prev = float(t[i])
+    if on:
+        cmds.append(Nozzle(False))
+    cmds.append(Stop())
+    return [c.to_dict() for c in cmds]
+
+
+def _draw(ctx: Any, plan: Any) -> None:
+    from server.scene.cmbot import draw_manipulate
+
+    draw_manipulate(ctx, plan)
+
+
+KIND = PlanKind(
+    name="cmbot.manipulate",
+    title="CMBOT: arm maintenance motion with obstacle avoidance",
+    description=__doc__ or "",
+    params_model=CmbotManipulateParams,
+    run=run,
+    validate=validate,
+    draw=_draw,
+    robot=ROBOT,
+    compile=compile_program,
+)
