@@ -38,6 +38,13 @@ class RobotModel:
     def dof(self) -> int:
         return len(self.joint_names)
 
+    @property
+    def dispatch_joint_limits(self) -> np.ndarray:
+        """Limits of every joint a command program drives, in wire order
+        (the robot's hardware, which may be more than the kinematic chain of
+        ``fk``; CMBOT sends its 5 climbing and 7 arm joints together)."""
+        return self.joint_limits
+
     def within_limits(self, q: np.ndarray, tol: float = 1e-9) -> bool:
         q = np.asarray(q, dtype=float)
         lo, hi = self.joint_limits[:, 0], self.joint_limits[:, 1]

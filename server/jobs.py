@@ -361,7 +361,7 @@ def compile_program(
         program = Program.from_dicts(dicts, robot=kind.robot)
         problems = []
         if kind.robot is not None:
-            problems = program.check_joint_limits(load_robot(kind.robot).joint_limits)
+            problems = program.check_joint_limits(load_robot(kind.robot).dispatch_joint_limits)
     except (CommandError, ValueError, KeyError) as exc:
         return None, {
             "name": "command_program",

@@ -215,6 +215,29 @@ class CmbotModel(CmbotChain):
     collision_boxes: dict[str, list[CollisionBox]] = field(default_factory=dict)
 
     @property
+    def dispatch_joint_limits(self) -> np.ndarray:
+        """J1…J12: the climbing chain, then the arm (the order of ``urdf_joint_names``)."""
+        assert self.climber is not None
+        return np.vstack([self.climber.joint_limits, self.joint_limits])
+
+    def stance_climber_q(self) -> np.ndarray:
+        """J1…J5 with both soles down at the work distance (the manipulation stance)."""
+        from planners.cmbot.climbing_kinematics import climber_ik_batch
+
+        assert self.climber is not None
+        c = self.params["climber"]
+        q, ok = climber_ik_batch(
+            np.array([[c["work_foot_distance_m"], 0.0, 0.0]]),
+            0.0,
+            c["l1"],
+            c["l2"],
+            self.climber.joint_limits,
+        )
+        if not bool(np.all(ok)):
+            raise ValueError("the work stance is outside the climbing chain's joint limits")
+        return np.asarray(q, dtype=float).reshape(-1)[:5]
+
+    @property
     def total_mass(self) -> float:
         """Robot mass [kg] from the URDF inertials (payload excluded)."""
         assert self.climber is not None

@@ -112,7 +112,7 @@ def resolve_profile(name: str, joint_limits: np.ndarray | Sequence | None = None
         return base  # "generic" or a name without a description: the table is all there is
     try:
         model = load_robot(name)
-        lim = np.asarray(model.joint_limits, dtype=float).reshape(-1, 2)
+        lim = np.asarray(model.dispatch_joint_limits, dtype=float).reshape(-1, 2)
         profile = replace(base, joint_limits=lim, source=f"robots.load_robot({name!r})")
         return _hardware_from_params(profile, getattr(model, "params", {}) or {})
     except Exception as exc:  # descriptions are optional here; never fail the emulator

@@ -268,6 +268,46 @@ def run(p: CmbotClimbParams, ctx: JobContext) -> KindOutput:
     return KindOutput(result=clean(result), arrays=arrays, checks=checks, metrics=metrics)
 
 
+#: Protocol channels of the electromagnets and limiting plates (rear = stance 0).
+_CHANNEL = {"rear": 0, "front": 1}
+
+
+def compile_program(plan: Any, sample_s: float = 0.1) -> list[dict[str, Any]]:
+    """The walk as a command program: J1…J12 way-points every ``sample_s``
+    (climbing chain and the counterweight swing of the arm), with each
+    phase's magnet on/off and limiting-plate seize/release commands inserted
+    at their times — after the last way-point reached by then, so a magnet
+    lets go only once the other foot holds.  Foot lift/touch-down are the
+    way-points themselves; range-finder checks run on the robot."""
+    from robots.protocol.commands import JointMove, LimitingPlate, SetMagnet, Stop
+
+    t = plan.array("times")
+    q = plan.array("q")
+    step = max(1, round(sample_s / max(float(np.median(np.diff(t))), 1e-6))) if len(t) > 1 else 1
+    idx = np.unique(np.r_[np.arange(0, len(t), step), len(t) - 1])
+    events = []
+    for ph in plan.result["phases"]:
+        for c in ph["commands"]:
+            dev, _, side = c["device"].partition("_")
+            if dev == "magnet":
+                events.append((c["t_s"], SetMagnet(_CHANNEL[side], c["action"] == "on")))
+            elif dev == "plate":
+                events.append((c["t_s"], LimitingPlate(_CHANNEL[side], c["action"] == "seize")))
+    events.sort(key=lambda e: e[0])
+    cmds: list[Any] = []
+    k_ev = 0
+    prev = float(t[idx[0]])
+    for n, i in enumerate(idx):
+        cmds.append(JointMove(tuple(float(v) for v in q[i]), 0.0 if n == 0 else float(t[i] - prev)))
+        prev = float(t[i])
+        next_t = float(t[idx[n + 1]]) if n + 1 < len(idx) else np.inf
+        while k_ev < len(events) and events[k_ev][0] < next_t:
+            cmds.append(events[k_ev][1])
+            k_ev += 1
+    cmds.append(Stop())
+    return [c.to_dict() for c in cmds]
+
+
 def _draw(ctx: Any, plan: Any) -> None:
     from server.scene.cmbot import draw_climb
 
@@ -282,5 +322,6 @@ KIND = PlanKind(
     run=run,
     validate=validate,
     draw=_draw,
-    robot=None,  # 12-joint programs: see docs/cmbot.md (dispatch of climbs is not wired yet)
+    robot="cmbot",
+    compile=compile_program,
 )

@@ -205,12 +205,16 @@ def run(p: CmbotManipulateParams, ctx: JobContext) -> KindOutput:
 
 
 def compile_program(plan: Any) -> list[dict[str, Any]]:
-    """Timed way-points of J6…J12 every 0.1 s; the nozzle works on the straight
-    line of Eq. 21–26 (t ≥ 5 s) and closes at the end."""
+    """Timed way-points of J1…J12 every 0.1 s (the climbing joints J1…J5 held
+    in the work stance, the arm J6…J12 as simulated); the nozzle works on the
+    straight line of Eq. 21–26 (t ≥ 5 s) and closes at the end."""
+    from robots import load_robot
     from robots.protocol.commands import JointMove, Nozzle, Stop
 
     t = plan.array("times")
-    q = plan.array("q")
+    arm = plan.array("q")
+    stance = load_robot("cmbot").stance_climber_q()
+    q = np.hstack([np.tile(stance, (len(arm), 1)), arm])
     idx = np.unique(
         np.r_[np.arange(0, len(t), max(1, round(0.1 / max(t[1] - t[0], 1e-6)))), len(t) - 1]
     )

@@ -28,8 +28,8 @@ import httpx
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
 
-from tests.conftest import make_settings  # noqa: E402
-from tests.support.live import free_port, live_server  # noqa: E402
+from tests.conftest import make_settings
+from tests.support.live import free_port, live_server
 
 
 def main() -> int:
