@@ -358,6 +358,8 @@ def compile_program(
     view = _ResultView(plan.id, plan.kind, "planning", plan.params, result, metrics, checks, arrays)
     try:
         dicts = kind.compile(view)
+        if dicts is None:  # the result has nothing for the robot to do
+            return None, None
         program = Program.from_dicts(dicts, robot=kind.robot)
         problems = []
         if kind.robot is not None:

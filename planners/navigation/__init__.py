@@ -28,9 +28,23 @@ import numpy as np
 from planners.errors import EmptyInputError, InvalidInputError, UnknownVertexError
 from planners.navigation.boundaries import Cluster, cluster_geometry
 from planners.navigation.graph import build_graph, default_endpoints
-from planners.navigation.pibc import PIBC_METHODS, BoundarySet, footprint_points, poses_valid
+from planners.navigation.pibc import (
+    PIBC_METHODS,
+    BoundarySet,
+    footprint_points,
+    poses_valid,
+    rectangles_on_steel,
+    steel_union,
+)
 from planners.navigation.preprocess import PlaneFrame, preprocess
-from planners.navigation.rrt import EdgePath, EdgePlanner, corridor_sampler, settle_pose, wrap
+from planners.navigation.rrt import (
+    DiffDrivePlanner,
+    EdgePath,
+    EdgePlanner,
+    corridor_sampler,
+    settle_pose,
+    wrap,
+)
 from planners.navigation.segmentation import borders, segment_default, segment_thesis
 from planners.vocpp import METHODS as ROUTE_METHODS
 from planners.vocpp import Route, plan_route
@@ -45,6 +59,7 @@ __all__ = [
 ]
 
 SEGMENTATION_METHODS = ("default", "thesis")
+MOTION_MODELS = ("differential", "holonomic")
 Progress = Callable[[float, str], None]
 
 
@@ -85,14 +100,21 @@ class NavigationParams:
     footprint_center_x_m: float = -0.25
     footprint_center_y_m: float = 0.0
     footprint_spacing_m: float = 0.04
+    # Clearance kept around the footprint while planning (the final check uses
+    # the footprint itself), so poses do not graze a boundary.
+    footprint_margin_m: float = 0.001
     # PIBC (Alg. 6): "angular" (exact for star-shaped boundaries) or "thesis".
     pibc_method: str = "angular"
     pibc_n_centres: int = 0  # 0 = every boundary near the edge
     pibc_m_closest: int = 3
-    # Per-edge RRT-Connect and smoothing.
+    # Per-edge RRT-Connect and smoothing.  "differential": turns in place and
+    # straight drives only (the ARA's wheels); "holonomic": any (x, y, yaw)
+    # motion, the seed's RRT (the wheels cannot slide sideways: not drivable).
     plan_paths: bool = True
+    motion_model: str = "differential"
     rrt_step_m: float = 0.08
     rrt_resolution_m: float = 0.01
+    turn_resolution_rad: float = 0.05
     rrt_max_iterations: int = 1500
     shortcut_rounds: int = 60
     seed: int = 0
@@ -107,6 +129,14 @@ class NavigationParams:
             raise InvalidInputError(
                 f"route_method must be one of {ROUTE_METHODS}, got {self.route_method!r}"
             )
+        if self.motion_model not in MOTION_MODELS:
+            raise InvalidInputError(
+                f"motion_model must be one of {MOTION_MODELS}, got {self.motion_model!r}"
+            )
+        if not (np.isfinite(self.turn_resolution_rad) and 0 < self.turn_resolution_rad <= 0.5):
+            raise InvalidInputError(
+                f"turn_resolution_rad must be in (0, 0.5], got {self.turn_resolution_rad!r}"
+            )
         if self.pibc_method not in PIBC_METHODS:
             raise InvalidInputError(
                 f"pibc_method must be one of {PIBC_METHODS}, got {self.pibc_method!r}"
@@ -120,10 +150,16 @@ class NavigationParams:
                 not in (
                     "footprint_center_x_m",
                     "footprint_center_y_m",
+                    "footprint_margin_m",
                 )
                 and (not isinstance(v, int | float) or not np.isfinite(v) or v <= 0)
             ):
                 raise InvalidInputError(f"{f.name} must be a positive number of metres, got {v!r}")
+        if not (np.isfinite(self.footprint_margin_m) and self.footprint_margin_m >= 0):
+            raise InvalidInputError(
+                f"footprint_margin_m must be a non-negative number of metres, "
+                f"got {self.footprint_margin_m!r}"
+            )
         if self.thesis_clusters_min < 1 or self.thesis_clusters_max < self.thesis_clusters_min:
             raise InvalidInputError(
                 "thesis_clusters_min/max must satisfy 1 <= min <= max, got "
@@ -214,9 +250,12 @@ def _edge_paths(
     p: NavigationParams,
     progress: Progress | None,
 ) -> list[EdgePath]:
+    """One on-steel robot path per route edge (seed §4.3: "the motion path for
+    one edge each time"), continuous from edge to edge."""
+    m = p.footprint_margin_m
     foot = footprint_points(
-        p.footprint_length_m,
-        p.footprint_width_m,
+        p.footprint_length_m + 2 * m,
+        p.footprint_width_m + 2 * m,
         center_x_m=p.footprint_center_x_m,
         center_y_m=p.footprint_center_y_m,
         spacing_m=p.footprint_spacing_m,
@@ -231,10 +270,14 @@ def _edge_paths(
         ]
     )
     full = BoundarySet([c.centre for c in clusters], [c.boundary for c in clusters])
+    steel = steel_union([c.boundary for c in clusters])
+    rect = (p.footprint_length_m + 2 * m, p.footprint_width_m + 2 * m)
+    cx, cy = p.footprint_center_x_m, p.footprint_center_y_m
     rng = np.random.default_rng(p.seed)
     out: list[EdgePath] = []
     prev: np.ndarray | None = None
     n_edges = len(route.edges)
+    size = f"{p.footprint_length_m:g} × {p.footprint_width_m:g} m footprint"
     for k, (u, v, _key) in enumerate(route.edges):
         a = np.asarray(g.nodes[u]["pos2d"], dtype=float)
         b = np.asarray(g.nodes[v]["pos2d"], dtype=float)
@@ -250,9 +293,15 @@ def _edge_paths(
         n_c = p.pibc_n_centres if p.pibc_n_centres > 0 else len(bset)
 
         def valid(poses: np.ndarray, bset: BoundarySet = bset, n_c: int = n_c) -> np.ndarray:
-            return poses_valid(
+            # Alg. 6 on the footprint's points, then, for the poses it passes,
+            # the whole (margin-grown) rectangle inside the union of the
+            # boundaries, so no pose straddles a gap between two of them.
+            ok = poses_valid(
                 poses, foot, bset, method=p.pibc_method, n_centres=n_c, m_closest=p.pibc_m_closest
             )
+            if ok.any():
+                ok[ok] = rectangles_on_steel(poses[ok], steel, *rect, center_x_m=cx, center_y_m=cy)
+            return ok
 
         yaw = float(np.arctan2(*(b - a)[::-1])) if np.hypot(*(b - a)) > 1e-9 else 0.0
         start = prev if prev is not None else settle_pose(a, b, yaw, valid)
@@ -270,40 +319,68 @@ def _edge_paths(
                     int(v),
                     np.zeros((0, 3)),
                     False,
-                    f"no pose near the {which} of edge ({u}, {v}) keeps the "
-                    f"{p.footprint_length_m:g} × {p.footprint_width_m:g} m footprint on steel",
+                    f"no pose near the {which} of edge ({u}, {v}) keeps the {size} on steel",
                 )
             )
             prev = None
         else:
-            planner = EdgePlanner(
-                valid,
-                yaw_radius_m=0.5 * p.footprint_length_m,
-                step_m=p.rrt_step_m,
-                resolution_m=p.rrt_resolution_m,
-                max_iterations=p.rrt_max_iterations,
-                shortcut_rounds=p.shortcut_rounds,
-            )
+            planner: EdgePlanner | DiffDrivePlanner
+            if p.motion_model == "differential":
+                planner = DiffDrivePlanner(
+                    valid,
+                    yaw_radius_m=0.5 * p.footprint_length_m,
+                    step_m=p.rrt_step_m,
+                    resolution_m=p.rrt_resolution_m,
+                    turn_resolution_rad=p.turn_resolution_rad,
+                    max_iterations=p.rrt_max_iterations,
+                    shortcut_rounds=p.shortcut_rounds,
+                )
+            else:
+                planner = EdgePlanner(
+                    valid,
+                    yaw_radius_m=0.5 * p.footprint_length_m,
+                    step_m=p.rrt_step_m,
+                    resolution_m=p.rrt_resolution_m,
+                    max_iterations=p.rrt_max_iterations,
+                    shortcut_rounds=p.shortcut_rounds,
+                )
             sampler = corridor_sampler(
                 a, b, rng, lateral_sigma_m=0.03, margin_m=0.5 * p.footprint_length_m
             )
-            path, iters = planner.plan(start, goal, sampler)
-            if path is None:
+            if isinstance(planner, DiffDrivePlanner):
+                # Turns happen at the vertex the edge leaves (the route
+                # changes bars there): search turning points around it.
+                path, iters = planner.plan(
+                    start,
+                    goal,
+                    sampler,
+                    turn_centre=a,
+                    turn_radius_m=0.5 * p.footprint_length_m + 0.02,
+                )
+            else:
+                path, iters = planner.plan(start, goal, sampler)
+            dense = None if path is None else planner.densify(planner.shortcut(path, rng))
+            if dense is None or not np.all(valid(dense)):
+                what = (
+                    "a differential-drive path (turns in place, straight drives)"
+                    if p.motion_model == "differential"
+                    else "a path"
+                )
                 out.append(
                     EdgePath(
                         int(u),
                         int(v),
                         np.zeros((0, 3)),
                         False,
-                        f"RRT-Connect found no on-steel path for edge ({u}, {v}) in {iters} iterations",
+                        f"RRT-Connect found no on-steel {what} for edge ({u}, {v}) in "
+                        f"{iters} iterations: the {size} cannot make this turn here",
                         iters,
                     )
                 )
                 prev = None
             else:
-                path = planner.densify(planner.shortcut(path, rng))
-                out.append(EdgePath(int(u), int(v), path, True, "", iters))
-                prev = path[-1]
+                out.append(EdgePath(int(u), int(v), dense, True, "", iters))
+                prev = dense[-1]
         if progress is not None:
             progress(0.75 + 0.24 * (k + 1) / max(n_edges, 1), f"path {k + 1}/{n_edges}")
     return out
@@ -387,7 +464,14 @@ def plan_navigation(
 
     t = time.perf_counter()
     stage(0.4, "boundaries")
-    clusters = cluster_geometry(uv, seg.labels, seg.kinds, brs, sliding_factor_m=p.sliding_factor_m)
+    clusters = cluster_geometry(
+        uv,
+        seg.labels,
+        seg.kinds,
+        brs,
+        sliding_factor_m=p.sliding_factor_m,
+        polygons="strips" if p.segmentation == "default" else "stars",
+    )
     timings["boundaries_s"] = time.perf_counter() - t
 
     t = time.perf_counter()

@@ -10,7 +10,18 @@ factor αs.  Two choices beyond the seed, both for the boundary check (Alg. 6):
 * the boundary points are ordered by angle about the cluster centre into a
   polygon.  The polygon is then star-shaped about the centre by construction,
   which is what the centre-based test of Alg. 6 assumes (bars are convex,
-  crossings star-shaped about their centre).
+  crossings star-shaped about their centre);
+* a bar is sliced in its own principal frame (Alg. 1's "planes" are the
+  bar's axis and its normal, so every slice cuts straight across the bar or
+  along it), and its points are ordered by angle in that frame scaled to a
+  square (s / length, t / width).  Ordering a long, thin bar's points by
+  their plain angle about the centre interleaves the far end's top-edge,
+  bottom-edge and end-cap points (their angles differ by less than the
+  noise), which drew spikes deep into the bar — the wheel patch could not
+  drive straight along a bar whose boundary crossed its centre line.  A
+  linear map with a positive determinant keeps the cyclic order of
+  directions about the centre, so the polygon is still star-shaped about the
+  centre in plane coordinates and Alg. 6's angular test stays exact.
 """
 
 from __future__ import annotations
@@ -19,6 +30,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.spatial import ConvexHull, QhullError
 
 from planners.navigation.segmentation import Border
 from planners.pointcloud import ncbe_boundary
@@ -62,6 +74,9 @@ def star_polygon(points: np.ndarray, centre: np.ndarray) -> np.ndarray:
     return poly[keep]
 
 
+POLYGON_METHODS = ("strips", "stars")
+
+
 def cluster_geometry(
     uv: np.ndarray,
     labels: np.ndarray,
@@ -69,8 +84,18 @@ def cluster_geometry(
     borders: Sequence[Border],
     *,
     sliding_factor_m: float = 0.02,
+    polygons: str = "strips",
 ) -> list[Cluster]:
-    """Geometry of every cluster (loops over clusters, vectorised inside)."""
+    """Geometry of every cluster (loops over clusters, vectorised inside).
+
+    ``polygons``: ``"strips"`` (default segmentation) — a bar's boundary is
+    its s-monotone slice ring (:func:`_bar_polygon`) over its own points and
+    the border points inside its lateral band, a cross area's the convex
+    hull of its own points; ``"stars"`` (the seed's GMM blobs) — NCBE points
+    of own + border points ordered by angle about the centre.
+    """
+    if polygons not in POLYGON_METHODS:
+        raise ValueError(f"polygons must be one of {POLYGON_METHODS}, got {polygons!r}")
     extra: dict[int, list[np.ndarray]] = {k: [] for k in range(len(kinds))}
     for br in borders:
         extra[br.a].append(br.points)
@@ -88,12 +113,26 @@ def cluster_geometry(
         # A deterministic sign for the axis: first non-zero component positive.
         if axis[0] < 0 or (axis[0] == 0 and axis[1] < 0):
             axis = -axis
+        normal = np.array([-axis[1], axis[0]])
         s = (pts - centre) @ axis
-        t = (pts - centre) @ np.array([-axis[1], axis[0]])
+        t = (pts - centre) @ normal
         length = float(np.subtract(*np.percentile(s, [98, 2])))
         width = float(np.subtract(*np.percentile(t, [98, 2])))
         idx = np.unique(np.concatenate([own, *extra[k]])) if extra[k] else own
-        bpts = ncbe_boundary(uv[idx], sliding_factor=sliding_factor_m) if len(idx) >= 3 else uv[idx]
+        if polygons == "strips" and kind == "bar" and len(own) >= 3:
+            # Border points only inside the bar's own lateral band: the ring
+            # reaches into the neighbouring cross area along the strip, never
+            # across the notch between two bars that meet there.
+            tb = (uv[idx] - centre) @ normal
+            band = idx[(tb >= t.min()) & (tb <= t.max())]
+            boundary = _bar_polygon(uv[band], centre, axis, sliding_factor_m)
+        elif polygons == "strips" and len(own) >= 3:
+            boundary = _hull_polygon(pts)
+        else:
+            bpts = (
+                ncbe_boundary(uv[idx], sliding_factor=sliding_factor_m) if len(idx) >= 3 else uv[idx]
+            )
+            boundary = star_polygon(bpts, centre)
         out.append(
             Cluster(
                 id=k,
@@ -103,10 +142,71 @@ def cluster_geometry(
                 axis=axis,
                 length_m=length,
                 width_m=width,
-                boundary=star_polygon(bpts, centre),
+                boundary=boundary,
             )
         )
     return out
+
+
+def _hull_polygon(pts: np.ndarray) -> np.ndarray:
+    """Counter-clockwise convex hull of a cross area's points (the overlap of
+    straight strips is convex; for three or more it is star-shaped about the
+    joint, and the hull adds only the little between the strips' overlaps)."""
+    try:
+        return pts[ConvexHull(pts).vertices]
+    except QhullError:
+        return pts[[int(np.argmin(pts[:, 0])), int(np.argmax(pts[:, 0]))]]
+
+
+def _bar_polygon(
+    pts: np.ndarray,
+    centre: np.ndarray,
+    axis: np.ndarray,
+    sliding_factor_m: float,
+) -> np.ndarray:
+    """NCBE (Alg. 1) of a bar sliced across its own axis, as an s-monotone ring.
+
+    Each slice of width αs across the bar contributes its two furthest points
+    (Alg. 1 line 11), here the points of largest and smallest ``t`` (offset
+    across the axis): the upper chain runs along the bar in ``s``, the lower
+    chain back.  Plane coordinates, counter-clockwise.
+    """
+    normal = np.array([-axis[1], axis[0]])
+    s = (pts - centre) @ axis
+    t = (pts - centre) @ normal
+    sl = np.floor((s - s.min()) / sliding_factor_m).astype(np.int64)
+    order = np.lexsort((t, sl))
+    first = np.ones(len(order), dtype=bool)
+    first[1:] = sl[order][1:] != sl[order][:-1]
+    last = np.ones(len(order), dtype=bool)
+    last[:-1] = first[1:]
+    lower, upper = order[first], order[last]  # per slice, ascending s
+    # End caps: the outward side of the end slices' convex hulls, from one
+    # chain's end to the other's, counter-clockwise.
+    st = np.column_stack([s, t])
+    right = _hull_arc(st, np.nonzero(sl == sl.max())[0], lower[-1], upper[-1])
+    left = _hull_arc(st, np.nonzero(sl == 0)[0], upper[0], lower[0])
+    ring = np.concatenate([lower, right, upper[::-1], left])
+    poly = pts[ring]
+    keep = np.ones(len(poly), dtype=bool)
+    keep[1:] = np.any(np.abs(np.diff(poly, axis=0)) > 1e-12, axis=1)
+    return poly[keep]
+
+
+def _hull_arc(st: np.ndarray, members: np.ndarray, a: int, b: int) -> np.ndarray:
+    """Indices strictly between ``a`` and ``b`` on the counter-clockwise convex
+    hull of ``st[members]`` (empty when degenerate or when a/b are not on it)."""
+    if len(members) < 3:
+        return np.zeros(0, dtype=np.int64)
+    try:
+        hull = members[ConvexHull(st[members]).vertices]  # counter-clockwise
+    except QhullError:
+        return np.zeros(0, dtype=np.int64)
+    ia, ib = np.nonzero(hull == a)[0], np.nonzero(hull == b)[0]
+    if len(ia) == 0 or len(ib) == 0:
+        return np.zeros(0, dtype=np.int64)
+    rolled = np.roll(hull, -int(ia[0]))
+    return rolled[1 : int((ib[0] - ia[0]) % len(hull))]
 
 
 def line_polygon_hits(

@@ -20,8 +20,9 @@ about C, and the radius of the edge between them at that angle.  For a
 polygon star-shaped about C (vertices ordered by angle by
 :func:`planners.navigation.boundaries.star_polygon`, with C inside) this is an
 exact point-in-polygon test, with one ``searchsorted`` per cluster instead of
-an edge loop per point; a boundary whose centre lies outside it (every
-angular gap must be < π) falls back to ray casting.
+an edge loop per point; any other boundary (a bar's s-monotone ring whose
+noisy edge hides part of it from the centre, a bent GMM blob) is tested by
+exact ray casting in its own vertex order (:func:`is_star_about` decides).
 
 :func:`point_in_polygon` is an independent exact even–odd ray-casting test
 used to cross-check both.
@@ -31,6 +32,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 from scipy.spatial import cKDTree
@@ -53,13 +55,32 @@ def point_in_polygon(points: np.ndarray, polygon: np.ndarray) -> np.ndarray:
     return (np.count_nonzero(cond & (x < x_cross), axis=1) % 2).astype(bool)
 
 
+def is_star_about(polygon: np.ndarray, centre: np.ndarray) -> bool:
+    """Whether the ring ``polygon`` (in its vertex order) winds once around
+    ``centre`` with every vertex at a larger angle than the one before (each
+    step turning by less than π one way): then every ray from the centre
+    crosses it exactly once and the angular test is exact."""
+    poly = np.asarray(polygon, dtype=float).reshape(-1, 2)
+    if len(poly) < 3:
+        return False
+    d = poly - np.asarray(centre, dtype=float)
+    ang = np.arctan2(d[:, 1], d[:, 0])
+    step = np.diff(np.append(ang, ang[:1]))
+    step = (step + np.pi) % (2 * np.pi) - np.pi
+    if np.all(step > 0):
+        return bool(abs(step.sum() - 2 * np.pi) < 1e-6)
+    if np.all(step < 0):  # clockwise ring: the same polygon
+        return bool(abs(step.sum() + 2 * np.pi) < 1e-6)
+    return False
+
+
 @dataclass
 class _Star:
     centre: np.ndarray
     ang: np.ndarray  # sorted vertex angles about the centre
     pts: np.ndarray  # vertices in that order
     tree: cKDTree
-    star: bool  # centre strictly inside (every angular gap < π): the ray test is exact
+    star: bool  # star-shaped about the centre (:func:`is_star_about`): the ray test is exact
     lo: np.ndarray  # bounding box of the boundary
     hi: np.ndarray
 
@@ -74,18 +95,19 @@ class BoundarySet:
         for c, poly in zip(centres, polygons, strict=True):
             c = np.asarray(c, dtype=float)
             poly = np.asarray(poly, dtype=float).reshape(-1, 2)
+            star = is_star_about(poly, c)
             d = poly - c
             ang = np.arctan2(d[:, 1], d[:, 0])
-            order = np.argsort(ang, kind="stable")
-            sa = ang[order]
-            gaps = np.diff(np.append(sa, sa[:1] + 2 * np.pi)) if len(sa) else np.array([2 * np.pi])
+            # A polygon star-shaped about c is the same polygon in angle order;
+            # any other keeps its own vertex order (tested by ray casting).
+            order = np.argsort(ang, kind="stable") if star else np.arange(len(poly))
             self.stars.append(
                 _Star(
                     c,
-                    sa,
+                    ang[order],
                     poly[order],
-                    cKDTree(poly),
-                    bool(len(sa) >= 3 and gaps.max() < np.pi),
+                    cKDTree(poly) if len(poly) else cKDTree(c[None]),
+                    star,
                     poly.min(axis=0) if len(poly) else c,
                     poly.max(axis=0) if len(poly) else c,
                 )
@@ -107,8 +129,9 @@ class BoundarySet:
         if k < 3:
             return np.zeros(len(p), dtype=bool)
         if not s.star:
-            # Centre outside its own boundary (a bent GMM blob): no single ray
-            # crossing to compare with; use the exact crossing count instead.
+            # Not star-shaped about its centre (a bar's s-monotone ring, a bent
+            # GMM blob): no single ray crossing to compare with; use the exact
+            # crossing count instead.
             return point_in_polygon(p, s.pts)
         d = p - s.centre
         phi = np.arctan2(d[:, 1], d[:, 0])
@@ -221,3 +244,107 @@ def poses_valid(
         pts.reshape(-1, 2), method=method, n_centres=n_centres, m_closest=m_closest
     )
     return inside.reshape(pts.shape[:2]).all(axis=1)
+
+
+def footprint_corners(
+    poses: np.ndarray,
+    length_m: float,
+    width_m: float,
+    *,
+    center_x_m: float = 0.0,
+    center_y_m: float = 0.0,
+) -> np.ndarray:
+    """(P, 4, 2) corners of the footprint rectangle at each pose, counter-clockwise."""
+    hx, hy = 0.5 * length_m, 0.5 * width_m
+    rect = np.array([[-hx, -hy], [hx, -hy], [hx, hy], [-hx, hy]]) + [center_x_m, center_y_m]
+    return project_footprint(poses, rect)
+
+
+#: Gaps narrower than twice this between boundary polygons are closed (below
+#: the 1 cm voxel grid, a seam between two clusters' rings is not a gap in
+#: the steel).
+STEEL_CLOSING_M = 0.003
+
+
+def steel_union(polygons: Sequence[np.ndarray], *, closing_m: float = STEEL_CLOSING_M) -> Any:
+    """The steel the footprint must stay on: the union of the boundary
+    polygons, morphologically closed by ``closing_m`` (slivers and holes
+    narrower than 2·closing_m filled; convex outlines unchanged), as a
+    prepared shapely geometry."""
+    import shapely
+
+    parts = [shapely.Polygon(p).buffer(0) for p in polygons if len(p) >= 3]
+    steel = shapely.union_all(parts) if parts else shapely.Polygon()
+    if closing_m > 0 and not steel.is_empty:
+        steel = steel.buffer(closing_m, quad_segs=8).buffer(-closing_m, quad_segs=8)
+    shapely.prepare(steel)
+    return steel
+
+
+def rectangles_on_steel(
+    poses: np.ndarray,
+    steel: Any,
+    length_m: float,
+    width_m: float,
+    *,
+    center_x_m: float = 0.0,
+    center_y_m: float = 0.0,
+) -> np.ndarray:
+    """(P,) bool: the whole footprint rectangle at each pose lies inside
+    ``steel`` (a geometry from :func:`steel_union`) — exact, unlike a test of
+    sampled footprint points, which a narrow gap between two boundaries can
+    pass between."""
+    import shapely
+
+    corners = footprint_corners(
+        poses, length_m, width_m, center_x_m=center_x_m, center_y_m=center_y_m
+    )
+    if len(corners) == 0:
+        return np.zeros(0, dtype=bool)
+    return np.asarray(shapely.contains(steel, shapely.polygons(corners)), dtype=bool)
+
+
+def swept_on_steel(
+    poses: np.ndarray,
+    steel: Any,
+    length_m: float,
+    width_m: float,
+    *,
+    center_x_m: float = 0.0,
+    center_y_m: float = 0.0,
+) -> np.ndarray:
+    """(P,) bool: the footprint rectangle at pose k, and the area it sweeps
+    moving from pose k-1 to pose k, lie inside ``steel`` (a shapely geometry
+    from :func:`steel_union`, or the boundary polygons themselves) — an exact
+    geometric test, independent of Alg. 6's sampled footprint points.
+
+    The swept area between consecutive poses is the convex hull of the two
+    rectangles, grown by the sagitta of the arc the farthest corner draws
+    when the yaw changes (every footprint point moves along a chord of the
+    hull, or an arc within that sagitta of it); a straight drive sweeps
+    exactly the hull.  Pose 0 is tested alone.
+    """
+    import shapely
+
+    poses = np.asarray(poses, dtype=float).reshape(-1, 3)
+    if len(poses) == 0:
+        return np.zeros(0, dtype=bool)
+    if not isinstance(steel, shapely.Geometry):
+        steel = steel_union(steel)
+    corners = footprint_corners(
+        poses, length_m, width_m, center_x_m=center_x_m, center_y_m=center_y_m
+    )
+    reach = float(np.max(np.hypot(*(corners[0] - poses[0, :2]).T)))
+    prev = np.concatenate([corners[:1], corners[:-1]], axis=0)
+    hulls = shapely.convex_hull(shapely.multipoints(np.concatenate([prev, corners], axis=1)))
+    dyaw = np.abs(wrap_angle(np.diff(poses[:, 2], prepend=poses[0, 2])))
+    sagitta = reach * (1.0 - np.cos(np.minimum(dyaw, np.pi) / 2.0))
+    turned = sagitta > 1e-12
+    if turned.any():
+        hulls[turned] = shapely.buffer(hulls[turned], sagitta[turned], quad_segs=2)
+    return np.asarray(shapely.contains(steel, hulls), dtype=bool)
+
+
+def wrap_angle(a: np.ndarray | float) -> np.ndarray:
+    """Angle(s) wrapped into [-π, π)."""
+    return (np.asarray(a) + np.pi) % (2 * np.pi) - np.pi

@@ -254,3 +254,354 @@ def settle_pose(
     first = np.where(ok.any(axis=0))[0][0]  # nearest position with any valid yaw
     k = int(np.argmax(ok[:, first]))  # first yaw in preference order
     return np.array([xy[first, 0], xy[first, 1], yaws[k]])
+
+
+# ------------------------------------------------------------------ differential drive
+def rtr_cost(a: np.ndarray, b: np.ndarray, r: float, allow_reverse: bool = True) -> np.ndarray:
+    """Cost of the cheapest rotate–translate–rotate motion a → b (broadcast over
+    leading axes): distance driven + ``r`` × angle turned in place.
+
+    The translation heading is the direction a → b (forward) or, with
+    ``allow_reverse``, its opposite (driving backwards); both rotations take
+    the short way round.
+    """
+    a = np.asarray(a, dtype=float)
+    b = np.asarray(b, dtype=float)
+    d = b[..., :2] - a[..., :2]
+    dist = np.hypot(d[..., 0], d[..., 1])
+    theta = np.arctan2(d[..., 1], d[..., 0])
+    fwd = np.abs(wrap(theta - a[..., 2])) + np.abs(wrap(b[..., 2] - theta))
+    turn = fwd
+    if allow_reverse:
+        back = np.abs(wrap(theta + np.pi - a[..., 2])) + np.abs(wrap(b[..., 2] - theta - np.pi))
+        turn = np.minimum(fwd, back)
+    pure = np.abs(wrap(b[..., 2] - a[..., 2]))
+    return np.where(dist > 1e-9, dist + r * turn, r * pure)
+
+
+def rtr_waypoints(a: np.ndarray, b: np.ndarray, *, allow_reverse: bool = True) -> list[np.ndarray]:
+    """Candidate rotate–translate–rotate way-point lists a → b, cheapest first.
+
+    Each list starts at ``a`` and ends at ``b``; consecutive way-points
+    differ either in yaw only (a turn in place) or in position only along
+    the shared yaw (a straight drive, forwards or backwards) — the two
+    motions of a differential drive whose wheels turn at opposite or equal
+    speeds.
+    """
+    d = b[:2] - a[:2]
+    dist = float(np.hypot(*d))
+    if dist <= 1e-9:
+        return [[a, np.array([a[0], a[1], b[2]])]]
+    theta = float(np.arctan2(d[1], d[0]))
+    headings = [theta, float(wrap(theta + np.pi))] if allow_reverse else [theta]
+    out = []
+    for h in headings:
+        cost = abs(float(wrap(h - a[2]))) + abs(float(wrap(b[2] - h)))
+        pts = [a]
+        if abs(float(wrap(h - a[2]))) > 1e-12:
+            pts.append(np.array([a[0], a[1], h]))
+        pts.append(np.array([b[0], b[1], h]))
+        if abs(float(wrap(b[2] - h))) > 1e-12:
+            pts.append(np.array([b[0], b[1], b[2]]))
+        out.append((cost, pts))
+    out.sort(key=lambda x: x[0])
+    return [p for _, p in out]
+
+
+def rt_waypoints(
+    a: np.ndarray, xy: np.ndarray, *, allow_reverse: bool = True
+) -> list[list[np.ndarray]]:
+    """Candidate rotate–translate way-point lists from ``a`` to the position
+    ``xy`` (any final yaw), the smaller turn first."""
+    d = xy - a[:2]
+    theta = float(np.arctan2(d[1], d[0]))
+    headings = [theta, float(wrap(theta + np.pi))] if allow_reverse else [theta]
+    headings.sort(key=lambda h: abs(float(wrap(h - a[2]))))
+    out = []
+    for h in headings:
+        pts = [a]
+        if abs(float(wrap(h - a[2]))) > 1e-12:
+            pts.append(np.array([a[0], a[1], h]))
+        pts.append(np.array([xy[0], xy[1], h]))
+        out.append(pts)
+    return out
+
+
+def primitive_poses(
+    a: np.ndarray, b: np.ndarray, *, resolution_m: float, turn_resolution_rad: float
+) -> np.ndarray:
+    """Poses sampled along one differential-drive primitive a → b, ``a``
+    excluded, ``b`` included: a turn in place (short way round, steps of at
+    most ``turn_resolution_rad``) or a straight drive (steps of at most
+    ``resolution_m``).  Raises ``ValueError`` for a pose pair that is neither
+    (a sideways slide)."""
+    d = b[:2] - a[:2]
+    dist = float(np.hypot(*d))
+    dyaw = float(wrap(b[2] - a[2]))
+    if dist <= 1e-9:
+        n = max(1, int(np.ceil(abs(dyaw) / turn_resolution_rad)))
+        t = np.linspace(0.0, 1.0, n + 1)[1:]
+        return np.column_stack(
+            [np.full(n, a[0]), np.full(n, a[1]), wrap(a[2] + t * dyaw)]
+        )
+    if abs(dyaw) > 1e-9 or abs(d[0] * np.sin(a[2]) - d[1] * np.cos(a[2])) > 1e-7:
+        raise ValueError(
+            f"pose ({a[0]:.4f}, {a[1]:.4f}, {np.degrees(a[2]):.1f}°) → "
+            f"({b[0]:.4f}, {b[1]:.4f}, {np.degrees(b[2]):.1f}°) is neither a turn in place "
+            "nor a straight drive along the heading"
+        )
+    n = max(1, int(np.ceil(dist / resolution_m)))
+    t = np.linspace(0.0, 1.0, n + 1)[1:, None]
+    xy = a[:2] + t * d
+    return np.column_stack([xy, np.full(n, a[2])])
+
+
+class DiffDrivePlanner:
+    """RRT-Connect for a differential drive (seed §2.3 RRT, Alg. 6 validity).
+
+    The robot can only turn in place or drive straight along its heading,
+    forwards or backwards (wheel speeds opposite or equal); so every tree
+    edge is one such primitive, and steering from a pose towards a target is
+    rotate → translate (→ rotate onto the target's yaw when it is reached):
+    a zero-radius Reeds–Shepp steering.  The differential drive is
+    small-time locally controllable, so wherever the holonomic planner of
+    :class:`EdgePlanner` finds room to manoeuvre this one can too (by
+    multi-point turns), and its paths need no conversion to be driven.
+
+    Nearest neighbours use the rotate–translate–rotate cost
+    (:func:`rtr_cost`, turning weighted by ``yaw_radius_m`` so a turn costs
+    what the footprint's far end sweeps); motions are checked at
+    ``resolution_m`` along straights and ``turn_resolution_rad`` in turns
+    with one vectorised validity (PIBC) call each; then random shortcuts by
+    rotate–translate–rotate motions.  Deterministic for a given generator.
+    """
+
+    def __init__(
+        self,
+        valid: ValidFn,
+        *,
+        yaw_radius_m: float,
+        step_m: float = 0.08,
+        resolution_m: float = 0.01,
+        turn_resolution_rad: float = 0.05,
+        max_iterations: int = 1500,
+        shortcut_rounds: int = 60,
+        allow_reverse: bool = True,
+    ):
+        self.valid = valid
+        self.r = float(max(yaw_radius_m, 1e-3))
+        self.step = float(step_m)
+        self.res = float(resolution_m)
+        self.turn_res = float(turn_resolution_rad)
+        self.max_iter = int(max_iterations)
+        self.shortcut_rounds = int(shortcut_rounds)
+        self.allow_reverse = bool(allow_reverse)
+
+    # -- motions
+    def dist(self, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+        return rtr_cost(a, b, self.r, self.allow_reverse)
+
+    def _samples(self, way: list[np.ndarray]) -> np.ndarray:
+        return np.vstack(
+            [
+                primitive_poses(p, q, resolution_m=self.res, turn_resolution_rad=self.turn_res)
+                for p, q in itertools.pairwise(way)
+            ]
+        )
+
+    def way_ok(self, way: list[np.ndarray]) -> bool:
+        """Every sampled pose of the primitives along ``way`` is valid."""
+        if len(way) < 2:
+            return True
+        return bool(np.all(self.valid(self._samples(way))))
+
+    def connect_poses(self, a: np.ndarray, b: np.ndarray) -> list[np.ndarray] | None:
+        """The cheapest valid rotate–translate–rotate way-points a → b, or None."""
+        for way in rtr_waypoints(a, b, allow_reverse=self.allow_reverse):
+            if self.way_ok(way):
+                return way
+        return None
+
+    def path_cost(self, path: np.ndarray) -> float:
+        if len(path) < 2:
+            return 0.0
+        d = np.diff(path, axis=0)
+        return float(np.sum(np.hypot(d[:, 0], d[:, 1]) + self.r * np.abs(wrap(d[:, 2]))))
+
+    # -- trees
+    def _extend(self, tree: _Tree, target: np.ndarray) -> tuple[str, int]:
+        i = int(np.argmin(self.dist(tree.q[: tree.n], target)))
+        near = tree.q[i]
+        d = target[:2] - near[:2]
+        dist = float(np.hypot(*d))
+        if dist <= self.step:
+            way = self.connect_poses(near, target)
+            if way is None:
+                return "trapped", i
+            reached = True
+        else:
+            new_xy = near[:2] + d * (self.step / dist)
+            way = None
+            for cand in rt_waypoints(near, new_xy, allow_reverse=self.allow_reverse):
+                if self.way_ok(cand):
+                    way = cand
+                    break
+            if way is None:
+                return "trapped", i
+            reached = False
+        j = i
+        for q in way[1:]:
+            j = tree.add(q, j)
+        return ("reached" if reached else "advanced"), j
+
+    def _connect(self, tree: _Tree, target: np.ndarray) -> tuple[str, int]:
+        status, j = "advanced", -1
+        while status == "advanced":
+            status, j = self._extend(tree, target)
+        return status, j
+
+    def turn_point(
+        self,
+        start: np.ndarray,
+        goal: np.ndarray,
+        centre: np.ndarray,
+        *,
+        radius_m: float,
+        spacing_m: float = 0.005,
+    ) -> list[np.ndarray] | None:
+        """Drive to a turning point near ``centre``, turn in place there, drive
+        on: the cheapest valid such path start → p → goal over a grid of
+        points p within ``radius_m`` of ``centre`` (the vertex where the route
+        changes bars), or ``None``.
+
+        The turn is where a narrow crossing decides feasibility: the whole
+        footprint must stay on steel while it rotates, so the best point is
+        rarely the vertex itself (in an L corner it lies towards the inside
+        of the corner).  All candidate turns are checked in one vectorised
+        validity call; the full paths of those that pass, cheapest first.
+        """
+        n = int(np.ceil(radius_m / spacing_m))
+        g = np.arange(-n, n + 1) * spacing_m
+        gx, gy = np.meshgrid(g, g, indexing="ij")
+        keep = gx**2 + gy**2 <= radius_m**2
+        pts = np.asarray(centre, dtype=float) + np.column_stack([gx[keep], gy[keep]])
+        # Heading in (start → p) and out (p → goal), forwards or backwards,
+        # and the turn between them the short way round.
+        d_in = pts - start[:2]
+        d_out = goal[:2] - pts
+        th_in = np.arctan2(d_in[:, 1], d_in[:, 0])
+        th_out = np.arctan2(d_out[:, 1], d_out[:, 0])
+        flips = [0.0, np.pi] if self.allow_reverse else [0.0]
+        cands = []  # (cost, p index, heading in, heading out)
+        for fi in flips:
+            for fo in flips:
+                h_in = wrap(th_in + fi)
+                h_out = wrap(th_out + fo)
+                cost = (
+                    np.hypot(*d_in.T)
+                    + np.hypot(*d_out.T)
+                    + self.r
+                    * (
+                        np.abs(wrap(h_in - start[2]))
+                        + np.abs(wrap(h_out - h_in))
+                        + np.abs(wrap(goal[2] - h_out))
+                    )
+                )
+                cands.append(np.column_stack([cost, np.arange(len(pts)), h_in, h_out]))
+        c = np.vstack(cands)
+        c = c[np.argsort(c[:, 0], kind="stable")]
+        # Pre-check the turn at p alone (the hard part), all candidates at once.
+        turns = [
+            primitive_poses(
+                np.array([*pts[int(i)], hi]),
+                np.array([*pts[int(i)], ho]),
+                resolution_m=self.res,
+                turn_resolution_rad=self.turn_res,
+            )
+            for _, i, hi, ho in c
+        ]
+        counts = np.array([len(t) for t in turns])
+        ok = self.valid(np.vstack(turns))
+        bad_per = np.add.reduceat(~ok, np.concatenate([[0], np.cumsum(counts)[:-1]]))
+        for _, i, hi, ho in c[bad_per == 0][:64]:
+            p = pts[int(i)]
+            way = [start]
+            if abs(float(wrap(hi - start[2]))) > 1e-12:
+                way.append(np.array([start[0], start[1], hi]))
+            way.append(np.array([p[0], p[1], hi]))
+            if abs(float(wrap(ho - hi))) > 1e-12:
+                way.append(np.array([p[0], p[1], ho]))
+            way.append(np.array([goal[0], goal[1], ho]))
+            if abs(float(wrap(goal[2] - ho))) > 1e-12:
+                way.append(goal.copy())
+            if self.way_ok(way):
+                return way
+        return None
+
+    def plan(
+        self,
+        start: np.ndarray,
+        goal: np.ndarray,
+        sampler: Callable[[], np.ndarray],
+        *,
+        turn_centre: np.ndarray | None = None,
+        turn_radius_m: float = 0.0,
+    ) -> tuple[np.ndarray | None, int]:
+        """Way-points from ``start`` to ``goal`` (both valid) whose consecutive
+        pairs are differential-drive primitives, or ``None``; iterations used.
+
+        Tries, in order: the direct rotate–translate–rotate motion; one turn
+        in place at the best point within ``turn_radius_m`` of
+        ``turn_centre`` (:meth:`turn_point`); RRT-Connect."""
+        direct = self.connect_poses(start, goal)
+        if direct is not None:
+            return np.array(direct), 0
+        if turn_centre is not None and turn_radius_m > 0:
+            way = self.turn_point(start, goal, turn_centre, radius_m=turn_radius_m)
+            if way is not None:
+                return np.array(way), 0
+        ta, tb = _Tree(start, 256), _Tree(goal, 256)
+        a_is_start = True
+        buffer: list[np.ndarray] = []
+        for it in range(1, self.max_iter + 1):
+            if not buffer:
+                batch = np.array([sampler() for _ in range(256)])
+                ok = self.valid(batch)
+                buffer = list(batch[ok][::-1]) if ok.any() else list(batch[:32][::-1])
+            q = buffer.pop()
+            status, ja = self._extend(ta, q)
+            if status != "trapped":
+                status_b, jb = self._connect(tb, ta.q[ja])
+                if status_b == "reached":
+                    pa, pb = ta.path_to_root(ja)[::-1], tb.path_to_root(jb)
+                    path = np.vstack([pa, pb[1:]])
+                    if not a_is_start:
+                        path = path[::-1]
+                    return path, it
+            ta, tb = tb, ta
+            a_is_start = not a_is_start
+        return None, self.max_iter
+
+    def shortcut(self, path: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+        """Random shortcuts: replace way-points i..j by a valid, cheaper
+        rotate–translate–rotate motion."""
+        path = path.copy()
+        for _ in range(self.shortcut_rounds):
+            if len(path) <= 2:
+                break
+            i, j = sorted(rng.choice(len(path), size=2, replace=False))
+            if j - i < 2:
+                continue
+            way = self.connect_poses(path[i], path[j])
+            if way is None:
+                continue
+            if self.path_cost(np.array(way)) < self.path_cost(path[i : j + 1]) - 1e-9:
+                path = np.vstack([path[:i], np.array(way), path[j + 1 :]])
+        return path
+
+    def densify(self, path: np.ndarray) -> np.ndarray:
+        """Every sampled pose of the primitives along ``path`` (the poses the
+        wheels will drive through, at the planner's resolutions)."""
+        if len(path) < 2:
+            return path.copy()
+        return np.vstack([path[:1], self._samples(list(path))])

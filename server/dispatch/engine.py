@@ -217,7 +217,8 @@ class DispatchEngine:
             raise DispatchError(f"plan kind {plan.kind} drives robot {kind.robot!r}, not {robot!r}")
         if not plan.program:
             raise DispatchError(
-                f"plan {plan_id} has no compiled command program (kind {plan.kind} has no compiler)"
+                f"plan {plan_id} has no compiled command program (kind {plan.kind} has no "
+                "compiler, or the plan leaves nothing for the robot to do)"
             )
         try:
             program = Program.from_dicts(plan.program, robot=robot)

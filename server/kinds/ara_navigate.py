@@ -26,7 +26,7 @@ from pydantic import BaseModel, Field
 
 from planners.errors import InvalidInputError
 from planners.navigation import NavigationParams, NavigationResult, plan_navigation
-from planners.navigation.pibc import footprint_points, point_in_polygon, project_footprint
+from planners.navigation.pibc import steel_union, swept_on_steel
 from planners.navigation.synthetic import SAMPLES, SHAPES
 from server.kinds.base import Check, JobContext, KindOutput, PlanKind, check_ge
 
@@ -57,6 +57,12 @@ class AraNavigateParams(BaseModel):
         description="boundary check: exact ray-bracket test or the seed's Alg. 6 as printed",
     )
     plan_paths: bool = Field(True, description="plan the per-edge RRT-Connect robot paths")
+    motion_model: Literal["differential", "holonomic"] = Field(
+        "differential",
+        description="'differential': turns in place and straight drives only, what the ARA's "
+        "wheels can do (the program drives exactly these poses); 'holonomic': the seed's RRT in "
+        "(x, y, yaw), which slides sideways and so cannot be compiled for the wheels",
+    )
     footprint: Literal["contact_patch", "mobile_body"] = Field(
         "contact_patch",
         description="points that must stay on steel: the driving foot's wheel contact patch "
@@ -92,13 +98,18 @@ def _footprint(p: AraNavigateParams) -> dict[str, float]:
         if p.footprint == "mobile_body"
         else CONTACT_PATCH
     )
+    length = float(p.footprint_length_m or fp["length_m"])
+    width = float(p.footprint_width_m or fp["width_m"])
     return {
-        "footprint_length_m": float(p.footprint_length_m or fp["length_m"]),
-        "footprint_width_m": float(p.footprint_width_m or fp["width_m"]),
+        "footprint_length_m": length,
+        "footprint_width_m": width,
         "footprint_center_x_m": float(
             fp["center_x_m"] if p.footprint_center_x_m is None else p.footprint_center_x_m
         ),
         "footprint_center_y_m": float(fp.get("center_y_m", 0.0)),
+        # Alg. 6's projected points: every centimetre, at least four across
+        # the short side (the body's 0.68 × 0.16 m needs no finer than 4 cm).
+        "footprint_spacing_m": float(min(0.04, max(0.01, min(length, width) / 4.0))),
     }
 
 
@@ -110,37 +121,58 @@ def _checks(res: NavigationResult, p: AraNavigateParams) -> tuple[list[Check], d
     checks = [
         check_ge("bars_covered", covered, len(bars), "bars on the route", ""),
     ]
-    # Every planned pose on steel, verified by exact ray casting on the boundary
-    # polygons (independent of the PIBC used while planning).
+    # Every pose the wheels will drive, and the area the footprint sweeps
+    # between consecutive poses, inside the union of the boundary polygons:
+    # an exact geometric test (shapely), independent of the PIBC (Alg. 6)
+    # used while planning and of its footprint margin.
     params = res.params
-    foot = footprint_points(
-        params.footprint_length_m,
-        params.footprint_width_m,
-        center_x_m=params.footprint_center_x_m,
-        center_y_m=params.footprint_center_y_m,
-        spacing_m=params.footprint_spacing_m,
-    )
+    geom = {
+        "length_m": params.footprint_length_m,
+        "width_m": params.footprint_width_m,
+        "center_x_m": params.footprint_center_x_m,
+        "center_y_m": params.footprint_center_y_m,
+    }
+    steel = steel_union([c.boundary for c in res.clusters])
     poses = [e.poses for e in res.edge_paths if len(e.poses)]
+    n_poses = sum(len(x) for x in poses)
     if poses:
-        pts = project_footprint(np.vstack(poses), foot).reshape(-1, 2)
-        inside = np.zeros(len(pts), dtype=bool)
-        for c in res.clusters:
-            if len(c.boundary) >= 3:
-                lo, hi = c.boundary.min(axis=0), c.boundary.max(axis=0)
-                box = np.nonzero(~inside & np.all((pts >= lo) & (pts <= hi), axis=1))[0]
-                inside[box] |= point_in_polygon(pts[box], c.boundary)
-        frac = float(inside.reshape(-1, len(foot)).all(axis=1).mean())
+        swept = np.concatenate([_swept(x, steel, geom) for x in poses])
+        frac = float(swept.mean())
+        first = np.vstack(poses)[int(np.argmin(swept))] if not swept.all() else None
     else:
-        frac = 1.0
+        frac, first = 1.0, None
     checks.append(
         Check(
             name="poses_on_steel",
             passed=frac >= 1.0,
             value=frac,
             limit=1.0,
-            message=f"{frac:.2%} of {sum(len(x) for x in poses)} planned poses keep every footprint point on steel",
+            message=f"{frac:.2%} of {n_poses} driven poses (and the area swept between them) "
+            "keep the footprint on steel"
+            + (
+                ""
+                if first is None
+                else f"; first off at x={first[0]:.3f} m, y={first[1]:.3f} m, "
+                f"yaw={np.degrees(first[2]):.0f}°"
+            ),
         )
     )
+    if poses and p.plan_paths:
+        slide = sum(_sideways_steps(x) for x in poses)
+        checks.append(
+            Check(
+                name="wheel_motion",
+                passed=slide == 0,
+                value=float(slide),
+                limit=0.0,
+                message=(
+                    "every step is a turn in place or a straight drive along the heading"
+                    if slide == 0
+                    else f"{slide} steps slide sideways or turn while driving: the "
+                    f"'{p.motion_model}' paths cannot be driven by the ARA's differential wheels"
+                ),
+            )
+        )
     if p.plan_paths:
         n_ok = sum(e.ok for e in res.edge_paths)
         first_bad = next((e.message for e in res.edge_paths if not e.ok), "")
@@ -168,6 +200,28 @@ def _checks(res: NavigationResult, p: AraNavigateParams) -> tuple[list[Check], d
     return checks, {"bars_covered": float(covered), "poses_on_steel_fraction": frac}
 
 
+def _swept(poses: np.ndarray, steel: Any, geom: dict[str, float]) -> np.ndarray:
+    return swept_on_steel(
+        poses,
+        steel,
+        geom["length_m"],
+        geom["width_m"],
+        center_x_m=geom["center_x_m"],
+        center_y_m=geom["center_y_m"],
+    )
+
+
+def _sideways_steps(poses: np.ndarray, tol_m: float = 1e-5, tol_rad: float = 1e-6) -> int:
+    """Consecutive pose pairs that are neither a turn in place nor a straight
+    drive along the heading (what a differential drive cannot do)."""
+    d = np.diff(poses, axis=0)
+    dist = np.hypot(d[:, 0], d[:, 1])
+    dyaw = np.abs((d[:, 2] + np.pi) % (2 * np.pi) - np.pi)
+    lateral = np.abs(d[:, 0] * np.sin(poses[:-1, 2]) - d[:, 1] * np.cos(poses[:-1, 2]))
+    ok = (dist <= 1e-6) | ((dyaw <= tol_rad) & (lateral <= tol_m))
+    return int((~ok).sum())
+
+
 def run(p: AraNavigateParams, ctx: JobContext) -> KindOutput:
     t0 = time.perf_counter()
     validate(p)
@@ -178,6 +232,7 @@ def run(p: AraNavigateParams, ctx: JobContext) -> KindOutput:
         route_method=p.route_method,
         pibc_method=p.pibc_method,
         plan_paths=p.plan_paths,
+        motion_model=p.motion_model,
         voxel_m=p.voxel_m,
         seed=p.seed,
         **_footprint(p),
@@ -191,6 +246,7 @@ def run(p: AraNavigateParams, ctx: JobContext) -> KindOutput:
         np.vstack([res.frame.lift(e.poses[:, :2]) for e in paths]) if paths else np.zeros((0, 3))
     )
     path_yaw = np.concatenate([e.poses[:, 2] for e in paths]) if paths else np.zeros(0)
+    path_poses = np.vstack([e.poses for e in paths]) if paths else np.zeros((0, 3))
     path_edge = (
         np.concatenate(
             [np.full(len(e.poses), k) for k, e in enumerate(res.edge_paths) if len(e.poses)]
@@ -207,7 +263,17 @@ def run(p: AraNavigateParams, ctx: JobContext) -> KindOutput:
             "e2": frame.e2.tolist(),
             "normal": frame.normal.tolist(),
         },
-        "footprint": {k.removeprefix("footprint_"): v for k, v in _footprint(p).items()},
+        "footprint": {
+            k.removeprefix("footprint_"): v
+            for k, v in _footprint(p).items()
+            if k != "footprint_spacing_m"
+        },
+        "start_pose": (
+            [float(x) for x in res.edge_paths[0].poses[0]]
+            if res.edge_paths and len(res.edge_paths[0].poses)
+            else None
+        ),
+        "motion_model": p.motion_model,
         "clusters": [
             {
                 "id": c.id,
@@ -281,6 +347,7 @@ def run(p: AraNavigateParams, ctx: JobContext) -> KindOutput:
             "path_xyz": path_xyz.astype(np.float64),
             "path_yaw": path_yaw.astype(np.float64),
             "path_edge": path_edge.astype(np.int32),
+            "path_poses": path_poses.astype(np.float64),
         },
         checks=checks,
         metrics=metrics,
@@ -290,93 +357,72 @@ def run(p: AraNavigateParams, ctx: JobContext) -> KindOutput:
 #: Wheel-command constants (chosen: slow inspection speed, servo-class turn rate).
 DRIVE_SPEED_M_S = 0.05
 TURN_RATE_RAD_S = 0.5
+#: How far the replayed wheel motion may end from the planned last pose.
+REPLAY_TOL_M = 1e-3
 
 
 def compile_program(plan: Any) -> list[dict[str, Any]]:
-    """Differential-drive wheel commands along the route.
+    """Differential-drive wheel commands that drive exactly the planned poses.
 
-    The ARA's wheels cannot slide sideways as the (x, y, yaw) per-edge paths
-    may, so the program drives the route's graph edges — which follow each
-    bar's centre line (Alg. 4) — straight, turns in place only at vertices
-    and by at most 90° (a U-turn at a bar end is driven as a reversal).  The
-    motion the wheels will really make is replayed here, and every sampled
-    pose — including each in-place turn — must keep the footprint on steel
-    (exact ray casting on the cluster boundaries); if not, compilation fails
-    and the plan's ``command_program`` check says where.
+    The per-edge paths are planned for the ARA's differential wheels (turns
+    in place and straight drives, forwards or backwards: ``motion_model
+    "differential"``), so the program is those poses turned into commands
+    (:func:`server.kinds.programs.differential_drive_poses`); a path that
+    slides sideways (``"holonomic"``) cannot be compiled and says so.  Then,
+    as an independent final check, the commands are replayed
+    (:func:`server.kinds.programs.replay_wheels`: exact unicycle integration
+    of the quantised wheel speeds and durations, the ARA's wheel track) from
+    the planned start pose, and every replayed pose, with the area swept
+    between consecutive ones, must keep the footprint inside the cluster
+    boundaries (exact, shapely) and the replay must end on the planned last
+    pose; otherwise compilation fails and the plan's ``command_program``
+    check says where.  The operator places the robot at ``result.start_pose``.
     """
     from robots import load_robot
-    from server.kinds.programs import as_dicts, differential_drive
+    from server.kinds.programs import as_dicts, differential_drive_poses, replay_wheels
 
-    frame = plan.result["frame"]
-    origin, e1, e2 = (np.asarray(frame[k], dtype=float) for k in ("origin", "e1", "e2"))
-    pos = {n["id"]: np.asarray(n["pos"], dtype=float) for n in plan.result["graph"]["nodes"]}
-    walk = plan.result["route"]["vertices"]
-    if len(walk) < 2:
-        raise ValueError("the route has no edges, so there is nothing to drive")
-    xyz = np.array([pos[v] for v in walk])
-    xy = np.stack([(xyz - origin) @ e1, (xyz - origin) @ e2], axis=1)
-    first = xy[1] - xy[0]
-    heading0 = float(np.arctan2(first[1], first[0]))  # start facing along the first bar
+    res = plan.result
+    if not res.get("paths") or not all(p_["ok"] for p_ in res["paths"]):
+        bad = next((p_["message"] for p_ in res.get("paths", []) if not p_["ok"]), "")
+        raise ValueError(
+            "no complete on-steel path to drive"
+            + (f" ({bad})" if bad else " (plan_paths was off)")
+        )
+    poses = np.asarray(plan.array("path_poses"), dtype=float).reshape(-1, 3)
+    if len(poses) < 2:
+        raise ValueError("the path has fewer than two poses, so there is nothing to drive")
     track = float(load_robot("ara").params["foot"]["wheel_track_m"])
-    cmds = differential_drive(
-        xy,
-        track_m=track,
-        speed_m_s=DRIVE_SPEED_M_S,
-        turn_rate_rad_s=TURN_RATE_RAD_S,
-        heading_rad=heading0,
-        allow_reverse=True,
-    )
-    fp = plan.result["footprint"]
-    foot = footprint_points(
-        fp["length_m"],
-        fp["width_m"],
-        center_x_m=fp["center_x_m"],
-        center_y_m=fp["center_y_m"],
-        spacing_m=0.01,
-    )
+    try:
+        cmds = differential_drive_poses(
+            poses, track_m=track, speed_m_s=DRIVE_SPEED_M_S, turn_rate_rad_s=TURN_RATE_RAD_S
+        )
+    except ValueError as exc:
+        raise ValueError(
+            f"the '{res.get('motion_model', '?')}' path cannot be driven by the ARA's "
+            f"differential wheels: {exc}"
+        ) from exc
+    frame = res["frame"]
+    origin, e1, e2 = (np.asarray(frame[k], dtype=float) for k in ("origin", "e1", "e2"))
     polys = [
         np.stack([(b - origin) @ e1, (b - origin) @ e2], axis=1)
-        for b in (np.asarray(c["boundary"], dtype=float) for c in plan.result["clusters"])
+        for b in (np.asarray(c["boundary"], dtype=float).reshape(-1, 3) for c in res["clusters"])
     ]
-    poses = replay_differential_drive(xy[0], heading0, cmds, track)
-    pts = project_footprint(poses, foot)
-    flat = pts.reshape(-1, 2)
-    on = np.zeros(len(flat), dtype=bool)
-    for poly in polys:
-        on |= point_in_polygon(flat, poly)
-    ok = on.reshape(pts.shape[:2]).all(axis=1)
+    fp = res["footprint"]
+    geom = {k: float(fp[k]) for k in ("length_m", "width_m", "center_x_m", "center_y_m")}
+    replay = replay_wheels(poses[0], cmds, track_m=track)
+    ok = _swept(replay, steel_union(polys), geom)
     if not ok.all():
-        bad = poses[int(np.argmin(ok))]
+        bad = replay[int(np.argmin(ok))]
         raise ValueError(
-            f"{int((~ok).sum())} of {len(ok)} poses the wheels will drive put the footprint "
-            f"off the steel (first at x={bad[0]:.3f} m, y={bad[1]:.3f} m, "
-            f"yaw={np.degrees(bad[2]):.0f}°): an in-place turn or a straight run that the "
-            "holonomic path avoided"
+            f"{int((~ok).sum())} of {len(ok)} replayed wheel poses put the footprint off the "
+            f"steel (first at x={bad[0]:.3f} m, y={bad[1]:.3f} m, yaw={np.degrees(bad[2]):.0f}°)"
+        )
+    miss = float(np.hypot(*(replay[-1, :2] - poses[-1, :2])))
+    if miss > REPLAY_TOL_M:
+        raise ValueError(
+            f"the replayed wheel motion ends {miss * 1000:.1f} mm from the planned last pose"
         )
     return as_dicts(cmds)
-
-
-def replay_differential_drive(
-    xy0: np.ndarray, heading: float, cmds: list[Any], track_m: float, step_m: float = 0.01
-) -> np.ndarray:
-    """(P,3) poses sampled along what the wheel commands make the robot do."""
-    from robots.protocol.commands import WheelSpeeds
-
-    x, y, th = float(xy0[0]), float(xy0[1]), heading
-    out = [(x, y, th)]
-    for c in cmds:
-        if not isinstance(c, WheelSpeeds):
-            continue
-        vl, vr = c.speeds_m_s[0], c.speeds_m_s[1]
-        v, w = (vl + vr) / 2.0, (vr - vl) / track_m
-        n = max(1, int(np.ceil(max(abs(v) * c.duration_s / step_m, abs(w) * c.duration_s / 0.05))))
-        dt = c.duration_s / n
-        for _ in range(n):
-            th += w * dt
-            x += v * np.cos(th) * dt
-            y += v * np.sin(th) * dt
-            out.append((x, y, th))
-    return np.array(out)
 
 
 def _draw(ctx: Any, plan: Any) -> None:

@@ -301,6 +301,37 @@ def _sample(name: str):
     return make
 
 
+#: Magnet channels of the ARA's two feet on the wire.
+MAGNET_CHANNEL = {"foot1": 0, "foot2": 1}
+
+
+def compile_program(plan: Any, sample_s: float = 0.1) -> list[dict[str, Any]] | None:
+    """The inch-worm jump as a command program: J1…J6 way-points every
+    ``sample_s`` of the timed trajectory (§3.2: magnet 2 touched → Pconv →
+    foot 1 to the target → swap → foot 2 follows → mobile configuration),
+    with each magnet command inserted after the last way-point reached by its
+    time, so a foot is released only after the other one holds.
+
+    ``None`` when there is nothing for the arm to do: in mobile mode the
+    robot keeps driving (no jump), and with mode "none" it must not move.
+    """
+    from robots.protocol.commands import SetMagnet
+    from server.kinds.programs import as_dicts, sampled_joints_with_events
+
+    jump = plan.result.get("jump")
+    if plan.result.get("decision", {}).get("mode") != "inchworm" or not jump:
+        return None
+    events = [
+        (float(c["t_s"]), SetMagnet(MAGNET_CHANNEL[c["foot"]], c["state"] == "touched"))
+        for c in jump["magnet_commands"]
+    ]
+    return as_dicts(
+        sampled_joints_with_events(
+            plan.array("times"), plan.array("joint_trajectory"), events, sample_s=sample_s
+        )
+    )
+
+
 def _draw(ctx: Any, plan: Any) -> None:
     from server.scene.ara_switch import draw
 
@@ -315,6 +346,7 @@ KIND = PlanKind(
     run=run,
     validate=validate,
     robot="ara",
+    compile=compile_program,
     samples={f"{SAMPLE_PREFIX}{name}": _sample(name) for name in SCENES},
     draw=_draw,
 )

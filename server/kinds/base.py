@@ -112,7 +112,9 @@ class PlanKind:
     robot: str | None = None
     samples: Mapping[str, SampleFn] = field(default_factory=dict)
     draw: Callable[[DrawContext, PlanView], None] | None = None
-    compile: Callable[[PlanView], list[dict[str, Any]]] | None = None
+    #: Result → command program dicts; returning None means "nothing for the
+    #: robot to do" (no program, not dispatchable).
+    compile: Callable[[PlanView], list[dict[str, Any]] | None] | None = None
     #: Cheap semantic checks run synchronously at submission; raise a
     #: ``planners.errors.PlannerError`` to refuse the request with HTTP 422.
     validate: Callable[[Any], None] | None = None

@@ -279,12 +279,9 @@ def compile_program(plan: Any, sample_s: float = 0.1) -> list[dict[str, Any]]:
     at their times — after the last way-point reached by then, so a magnet
     lets go only once the other foot holds.  Foot lift/touch-down are the
     way-points themselves; range-finder checks run on the robot."""
-    from robots.protocol.commands import JointMove, LimitingPlate, SetMagnet, Stop
+    from robots.protocol.commands import LimitingPlate, SetMagnet
+    from server.kinds.programs import as_dicts, sampled_joints_with_events
 
-    t = plan.array("times")
-    q = plan.array("q")
-    step = max(1, round(sample_s / max(float(np.median(np.diff(t))), 1e-6))) if len(t) > 1 else 1
-    idx = np.unique(np.r_[np.arange(0, len(t), step), len(t) - 1])
     events = []
     for ph in plan.result["phases"]:
         for c in ph["commands"]:
@@ -293,19 +290,9 @@ def compile_program(plan: Any, sample_s: float = 0.1) -> list[dict[str, Any]]:
                 events.append((c["t_s"], SetMagnet(_CHANNEL[side], c["action"] == "on")))
             elif dev == "plate":
                 events.append((c["t_s"], LimitingPlate(_CHANNEL[side], c["action"] == "seize")))
-    events.sort(key=lambda e: e[0])
-    cmds: list[Any] = []
-    k_ev = 0
-    prev = float(t[idx[0]])
-    for n, i in enumerate(idx):
-        cmds.append(JointMove(tuple(float(v) for v in q[i]), 0.0 if n == 0 else float(t[i] - prev)))
-        prev = float(t[i])
-        next_t = float(t[idx[n + 1]]) if n + 1 < len(idx) else np.inf
-        while k_ev < len(events) and events[k_ev][0] < next_t:
-            cmds.append(events[k_ev][1])
-            k_ev += 1
-    cmds.append(Stop())
-    return [c.to_dict() for c in cmds]
+    return as_dicts(
+        sampled_joints_with_events(plan.array("times"), plan.array("q"), events, sample_s=sample_s)
+    )
 
 
 def _draw(ctx: Any, plan: Any) -> None:

@@ -12,7 +12,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from robots.protocol.commands import Command, LiftArm, Stop, WheelSpeeds
+from robots.protocol.commands import Command, JointMove, LiftArm, Stop, WheelSpeeds
 
 
 def differential_drive(
@@ -72,6 +72,115 @@ def differential_drive(
     return cmds
 
 
+def differential_drive_poses(
+    poses: np.ndarray,
+    *,
+    track_m: float,
+    speed_m_s: float,
+    turn_rate_rad_s: float,
+    position_tol_m: float = 1e-6,
+    lateral_tol_m: float = 1e-5,
+    yaw_tol_rad: float = 1e-6,
+) -> list[Command]:
+    """Wheel commands that drive exactly the pose sequence ``poses``.
+
+    ``poses`` (K,3) = (x, y, yaw) in the robot's surface frame, as planned for
+    a differential drive: each consecutive pair is either a turn in place
+    (same position) or a straight drive along the shared heading, forwards
+    or backwards (same yaw).  A pair that is neither — a sideways slide the
+    wheels cannot make — raises ``ValueError`` naming it.  Runs of the same
+    motion (same turn sense, same drive direction) merge into one command.
+
+    Each command is quantised as the wire carries it (durations in ms,
+    speeds in µm/s): the duration is rounded up to whole milliseconds at the
+    nominal speed and the wheel speed then set so that speed × duration is
+    the planned angle or distance — so a replay of the commands reproduces
+    the planned poses to within µm-level rounding of the speeds, with no
+    drift from rounded durations.
+    """
+    q = np.asarray(poses, dtype=float).reshape(-1, 3)
+    if len(q) < 1:
+        raise ValueError("no poses to drive")
+    d = np.diff(q, axis=0)
+    dist = np.hypot(d[:, 0], d[:, 1])
+    dyaw = (d[:, 2] + np.pi) % (2 * np.pi) - np.pi
+    heading = np.column_stack([np.cos(q[:-1, 2]), np.sin(q[:-1, 2])])
+    along = d[:, 0] * heading[:, 0] + d[:, 1] * heading[:, 1]
+    lateral = np.abs(d[:, 0] * heading[:, 1] - d[:, 1] * heading[:, 0])
+    turn = dist <= position_tol_m
+    drive = ~turn & (np.abs(dyaw) <= yaw_tol_rad) & (lateral <= lateral_tol_m)
+    bad = ~turn & ~drive
+    if bad.any():
+        k = int(np.argmax(bad))
+        raise ValueError(
+            f"poses {k} → {k + 1} move {dist[k] * 1000:.1f} mm with "
+            f"{np.degrees(dyaw[k]):.2f}° of turn and {lateral[k] * 1000:.2f} mm sideways: "
+            "a differential drive can only turn in place or drive along its heading"
+        )
+    # (kind, sign) per step: kind 0 = turn, 1 = drive; zero steps are dropped.
+    kind = np.where(turn, 0, 1)
+    amount = np.where(turn, dyaw, along)
+    moving = np.abs(amount) > np.where(turn, yaw_tol_rad, position_tol_m)
+    cmds: list[Command] = []
+    k = 0
+    steps = np.nonzero(moving)[0]
+    while k < len(steps):
+        i = steps[k]
+        sign = np.sign(amount[i])
+        total = 0.0
+        while k < len(steps) and kind[steps[k]] == kind[i] and np.sign(amount[steps[k]]) == sign:
+            total += float(amount[steps[k]])
+            k += 1
+        if kind[i] == 0:
+            dur = float(np.ceil(abs(total) / turn_rate_rad_s * 1000.0) / 1000.0)
+            w = round(total * track_m / 2.0 / dur, 6)
+            cmds.append(WheelSpeeds((-w, w), dur))
+        else:
+            dur = float(np.ceil(abs(total) / speed_m_s * 1000.0) / 1000.0)
+            v = round(total / dur, 6)
+            cmds.append(WheelSpeeds((v, v), dur))
+    cmds.append(Stop())
+    return cmds
+
+
+def replay_wheels(
+    pose0: np.ndarray,
+    commands: Sequence[Command],
+    *,
+    track_m: float,
+    step_m: float = 0.01,
+    step_rad: float = 0.05,
+) -> np.ndarray:
+    """(P,3) poses of a differential drive replaying ``commands`` from ``pose0``.
+
+    Exact integration of the unicycle model for each ``WheelSpeeds`` command
+    held for its duration (v = (vl + vr)/2, ω = (vr − vl)/B; straight, turn
+    in place or arc), sampled every ``step_m`` of travel and ``step_rad`` of
+    turn; other commands do not move the base.  Independent of how the
+    commands were made: this is what the wheels do.
+    """
+    x, y, th = (float(v) for v in np.asarray(pose0, dtype=float)[:3])
+    out = [np.array([[x, y, th]])]
+    for c in commands:
+        if not isinstance(c, WheelSpeeds) or c.duration_s <= 0:
+            continue
+        vl, vr = float(c.speeds_m_s[0]), float(c.speeds_m_s[1])
+        v, w = (vl + vr) / 2.0, (vr - vl) / track_m
+        n = max(1, int(np.ceil(max(abs(v) * c.duration_s / step_m, abs(w) * c.duration_s / step_rad))))
+        t = np.linspace(0.0, c.duration_s, n + 1)[1:]
+        a = th + w * t
+        if abs(w) > 1e-12:
+            px = x + v / w * (np.sin(a) - np.sin(th))
+            py = y - v / w * (np.cos(a) - np.cos(th))
+        else:
+            px = x + v * t * np.cos(th)
+            py = y + v * t * np.sin(th)
+        seg = np.column_stack([px, py, (a + np.pi) % (2 * np.pi) - np.pi])
+        out.append(seg)
+        x, y, th = float(px[-1]), float(py[-1]), float(a[-1])
+    return np.vstack(out)
+
+
 def sampled_wheels_and_lift(
     t_s: np.ndarray,
     wheels_m_s: np.ndarray,
@@ -113,6 +222,44 @@ def sampled_wheels_and_lift(
         duration += dt_s
     if duration > 0:
         cmds.append(WheelSpeeds(tuple(float(v) for v in current), duration))
+    cmds.append(Stop())
+    return cmds
+
+
+def sampled_joints_with_events(
+    t_s: np.ndarray,
+    q_rad: np.ndarray,
+    events: Sequence[tuple[float, Command]],
+    *,
+    sample_s: float = 0.1,
+) -> list[Command]:
+    """Joint way-points every ``sample_s`` of a timed trajectory, with timed
+    device commands (magnets, plates) inserted in time order.
+
+    ``t_s`` (T,) increasing times, ``q_rad`` (T,J).  The first way-point has
+    duration 0 (move there before the run's clock starts), each later one the
+    time since the previous way-point; the last sample is always kept.  An
+    event at time t goes after the last way-point reached by t (never before
+    it), so e.g. a magnet lets go only once the way-point where the other
+    foot holds has been reached.
+    """
+    t = np.asarray(t_s, dtype=float).reshape(-1)
+    q = np.asarray(q_rad, dtype=float)
+    if len(t) == 0 or q.shape[0] != len(t):
+        raise ValueError(f"trajectory needs matching times and joints, got {len(t)} and {q.shape}")
+    step = max(1, round(sample_s / max(float(np.median(np.diff(t))), 1e-6))) if len(t) > 1 else 1
+    idx = np.unique(np.r_[np.arange(0, len(t), step), len(t) - 1])
+    ev = sorted(events, key=lambda e: e[0])
+    cmds: list[Command] = []
+    k_ev = 0
+    prev = float(t[idx[0]])
+    for n, i in enumerate(idx):
+        cmds.append(JointMove(tuple(float(v) for v in q[i]), 0.0 if n == 0 else float(t[i] - prev)))
+        prev = float(t[i])
+        next_t = float(t[idx[n + 1]]) if n + 1 < len(idx) else np.inf
+        while k_ev < len(ev) and ev[k_ev][0] < next_t:
+            cmds.append(ev[k_ev][1])
+            k_ev += 1
     cmds.append(Stop())
     return cmds
 

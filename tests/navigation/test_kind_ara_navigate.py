@@ -14,17 +14,16 @@ def free_port() -> int:
         return s.getsockname()[1]
 
 
-def test_defaults_plan_the_ara_on_the_cross_sample(api) -> None:
-    """Defaults: the Cross sample with the ARA's own footprint, which does not
-    fit the 60–150 mm flanges: the route is planned, the path check says why
-    the plan cannot be driven."""
+def test_defaults_plan_and_compile_a_wheel_program_on_the_cross_sample(api) -> None:
+    """Defaults: the Cross sample, the driving foot's contact patch, and
+    differential-drive paths (turns in place, straight drives): every check
+    passes, including the compiled wheel program replayed against the steel."""
     plan = api.wait(api.submit("ara.navigate")["id"], timeout=240)
-    assert plan["state"] == "rejected", plan.get("error")
     checks = {c["name"]: c for c in plan["checks"]}
-    assert checks["bars_covered"]["passed"] and checks["route_endpoints"]["passed"]
-    assert checks["poses_on_steel"]["passed"]  # no pose was planned off the steel
-    assert not checks["paths_found"]["passed"]
-    assert "0.68 × 0.16 m footprint" in checks["paths_found"]["message"]
+    assert plan["state"] == "planned", [c["message"] for c in plan["checks"] if not c["passed"]]
+    for name in ("bars_covered", "route_endpoints", "poses_on_steel", "wheel_motion",
+                 "paths_found", "command_program"):
+        assert checks[name]["passed"], (name, checks[name]["message"])
     m = plan["metrics"]
     assert m["cluster_count"] == 5 and m["bar_count"] == 4 and m["cross_count"] == 1
     assert m["route_length_m"] >= m["route_lower_bound_m"] > 0
@@ -32,8 +31,34 @@ def test_defaults_plan_the_ara_on_the_cross_sample(api) -> None:
     for stage in ("preprocess", "segmentation", "boundaries", "graph", "route", "paths"):
         assert f"{stage}_time_s" in m
     res = plan["result"]
-    assert res["footprint"]["length_m"] == 0.68 and res["footprint"]["center_x_m"] == -0.25
+    assert res["footprint"]["length_m"] == 0.08 and res["motion_model"] == "differential"
     assert {c["kind"] for c in res["clusters"]} == {"bar", "cross"}
+    wheels = [c for c in plan["program"] if c["op"] == "wheels"]
+    assert wheels and all(c["speeds_m_s"][0] in (c["speeds_m_s"][1], -c["speeds_m_s"][1])
+                          for c in wheels)  # straight drive or turn in place, never an arc
+
+
+def test_whole_mobile_body_does_not_fit_the_flanges(api) -> None:
+    """The ARA's whole 0.68 x 0.16 m mobile body is wider than the 60-150 mm
+    flanges: the route is planned but the path check says why it cannot be
+    driven, and the plan is rejected."""
+    plan = api.wait(api.submit("ara.navigate", {"footprint": "mobile_body"})["id"], timeout=240)
+    assert plan["state"] == "rejected", plan.get("error")
+    checks = {c["name"]: c for c in plan["checks"]}
+    assert checks["bars_covered"]["passed"] and checks["route_endpoints"]["passed"]
+    assert not checks["paths_found"]["passed"]
+    assert "0.68 × 0.16 m footprint" in checks["paths_found"]["message"]
+    assert plan["result"]["footprint"]["center_x_m"] == -0.25
+
+
+def test_holonomic_paths_cannot_be_compiled_for_the_wheels(api) -> None:
+    """The seed's RRT in (x, y, yaw) slides sideways: the plan says so and is
+    rejected instead of sending wheel commands that would not follow it."""
+    plan = api.wait(api.submit("ara.navigate", {"motion_model": "holonomic"})["id"], timeout=240)
+    checks = {c["name"]: c for c in plan["checks"]}
+    assert plan["state"] == "rejected"
+    assert not checks["wheel_motion"]["passed"]
+    assert "cannot be driven" in checks["wheel_motion"]["message"]
 
 
 def test_small_robot_plan_passes_every_check_and_draws(make_api) -> None:

@@ -39,6 +39,20 @@ def test_defaults_plan_the_perpendicular_slab_experiment(api) -> None:
     assert m["jump_max_speed_ratio"] <= 1.0
     r = api.get(f"/api/v1/plans/{plan['id']}/arrays/joint_trajectory")
     assert r.status_code == 200
+    # The compiled program: J1-J6 way-points with the magnet commands in the
+    # order of the phases; foot 2 lets go only after foot 1 holds.
+    assert checks["command_program"]["passed"]
+    prog = plan["program"]
+    joints = [c for c in prog if c["op"] == "joints"]
+    assert joints and all(len(c["q_rad"]) == 6 for c in joints)
+    q = np.array(api.get(f"/api/v1/plans/{plan['id']}/arrays/joint_trajectory?format=json").json()["data"])
+    np.testing.assert_allclose(joints[0]["q_rad"], q[0])
+    np.testing.assert_allclose(joints[-1]["q_rad"], q[-1])
+    mags = [(c["magnet"], c["touched"]) for c in prog if c["op"] == "magnet"]
+    assert mags == [(1, True), (0, True), (1, False), (0, False)]
+    assert prog[-1]["op"] == "stop"
+    t = np.array(api.get(f"/api/v1/plans/{plan['id']}/arrays/times?format=json").json()["data"])
+    assert abs(sum(c["duration_s"] for c in joints) - (t[-1] - t[0])) < 1e-6
 
 
 def test_sample_clouds_give_their_verdicts(api) -> None:
@@ -49,6 +63,11 @@ def test_sample_clouds_give_their_verdicts(api) -> None:
     assert plan["state"] == "planned", plan.get("error")
     assert plan["result"]["decision"]["mode"] == "mobile"
     assert abs(plan["metrics"]["height_error_m"]) <= 0.005
+    # Mobile: the robot keeps driving, so there is no arm program to dispatch.
+    assert plan["program"] is None and "command_program" not in {c["name"] for c in plan["checks"]}
+    assert api.post(f"/api/v1/plans/{plan['id']}/approve").status_code == 200
+    r = api.post(f"/api/v1/plans/{plan['id']}/dispatch", json={"robot": "ara"})
+    assert r.status_code == 409 and "no compiled command program" in r.json()["detail"]
     # No surface: the robot must not move, so the plan cannot be approved.
     plan = api.wait(api.submit("ara.switch", {"sample": "no_surface"})["id"])
     assert plan["state"] == "rejected"
