@@ -362,9 +362,9 @@ def _edge_paths(
             dense = None if path is None else planner.densify(planner.shortcut(path, rng))
             if dense is None or not np.all(valid(dense)):
                 what = (
-                    "a differential-drive path (turns in place, straight drives)"
+                    "differential-drive path (turns in place, straight drives)"
                     if p.motion_model == "differential"
-                    else "a path"
+                    else "path"
                 )
                 out.append(
                     EdgePath(
@@ -373,7 +373,8 @@ def _edge_paths(
                         np.zeros((0, 3)),
                         False,
                         f"RRT-Connect found no on-steel {what} for edge ({u}, {v}) in "
-                        f"{iters} iterations: the {size} cannot make this turn here",
+                        f"{iters} iterations: the {size} does not fit the steel between its "
+                        "ends (a turn, or a boundary narrower than the footprint)",
                         iters,
                     )
                 )

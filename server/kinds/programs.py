@@ -132,11 +132,11 @@ def differential_drive_poses(
             total += float(amount[steps[k]])
             k += 1
         if kind[i] == 0:
-            dur = float(np.ceil(abs(total) / turn_rate_rad_s * 1000.0) / 1000.0)
+            dur = float(np.ceil(abs(total) / turn_rate_rad_s * 1000.0 - 1e-6) / 1000.0)
             w = round(total * track_m / 2.0 / dur, 6)
             cmds.append(WheelSpeeds((-w, w), dur))
         else:
-            dur = float(np.ceil(abs(total) / speed_m_s * 1000.0) / 1000.0)
+            dur = float(np.ceil(abs(total) / speed_m_s * 1000.0 - 1e-6) / 1000.0)
             v = round(total / dur, 6)
             cmds.append(WheelSpeeds((v, v), dur))
     cmds.append(Stop())
