@@ -22,8 +22,11 @@ import shapely.affinity
 
 from planners.blasting import arm as _arm
 from planners.blasting import coverage as _cov
+from planners.blasting import motion as _motion
 from planners.blasting import sequencing as _seq
+from planners.blasting.bound import pointwise_bound, zero_overspray_reach
 from planners.blasting.collision import Box, Obstacles, Spheroids, clearance
+from planners.blasting.footprint import Cone, ellipse_matrices, exact_ellipse
 from planners.blasting.nozzle import (
     NOZZLES,
     Nozzle,
@@ -52,6 +55,16 @@ FOCI = ((1, 2), (3, 4), (4, -1))  # chosen: upper arm, forearm, wrist + nozzle (
 MAX_TILT_DEG = 45.0  # seed §3.2.1: nozzle 45–90° to the surface
 JUMP_RAD = np.deg2rad(15.0)  # a larger joint change between close way-points is a reconfiguration
 SAFETY_M = 0.002  # chosen: a configuration is free only with this much ellipsoid clearance
+STEP_RAD = np.deg2rad(2.0)  # largest joint step between way-points of a joint-space move
+CLEAR_HORIZON_M = 0.25  # clearances beyond this are kept as lower bounds (enough to certify moves)
+COVERAGE_TARGET = 0.99  # issue 5: coverage ≥ 99 %
+OVERSPRAY_TARGET = 0.005  # issue 5: overspray ≤ 0.5 %
+JOINT_PLANNERS = ("rrt", "none")
+# chosen: RRT-Connect iterations per blocked move and per plan (deterministic
+# budget; an iteration costs ~0.1–0.3 s of clearance evaluations on the
+# 2-core machine); a move not found within it leaves its spot unreached
+RRT_MAX_ITER = 150
+RRT_BUDGET_ITER = 300
 
 
 @dataclass
@@ -69,6 +82,17 @@ class BlastPlan:
     ``waypoint_spot`` (T,) disc id at a spot or −1, ``segment`` (T,) 0 start
     pose, 1 approach, 2 blasting move, 3 reconfiguration; per disc
     ``ik_residual_mm`` and ``ik_residual_deg`` (0 for closed-form solutions).
+
+    Footprints (exact cone–plane sections, :mod:`planners.blasting.footprint`):
+    ``centers`` are their centres; the nozzle axis meets the surface at
+    ``aim_points`` (N,3) / ``aim_points_2d``; ``semi_axes`` (N,2) = (a along
+    ``major_dir_2d``, b) in metres.  ``coverage_reach``: share of the surface
+    discs of the smallest admissible footprint reach without overspray;
+    ``coverage_bound``: certified upper bound on coverage within the 0.5 %
+    overspray target (computed when coverage < 99 %, see
+    :mod:`planners.blasting.bound`).  ``unreached``: disc ids whose pose is
+    free but that no certified joint-space path reaches (also in
+    ``skipped``); ``motion``: joint planner statistics.
     """
 
     radius: float
@@ -103,6 +127,23 @@ class BlastPlan:
     ik_residual_deg: np.ndarray | None = None
     joint_limits: np.ndarray | None = None
     speed_limit_rad_s: float | None = None
+    aim_points: np.ndarray | None = None
+    aim_points_2d: np.ndarray | None = None
+    semi_axes: np.ndarray | None = None
+    major_dir_2d: np.ndarray | None = None
+    coverage_reach: float | None = None
+    coverage_bound: float | None = None
+    min_radius_m: float | None = None
+    unreached: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=int))
+    motion: dict[str, float] = field(default_factory=dict)
+
+    def _coverage_message(self, coverage_min: float) -> str:
+        msg = f"coverage {self.coverage:.2%} (min {coverage_min:.0%})"
+        if self.coverage < coverage_min:
+            extra = _coverage_limit_text(self)
+            if extra:
+                msg += ": " + extra
+        return msg
 
     @property
     def ratio_to_lower_bound(self) -> float:
@@ -143,7 +184,7 @@ class BlastPlan:
         """Plan checks (DESIGN §4) as dicts: name, passed, value, limit, message."""
         out = [
             _check("coverage", self.coverage >= coverage_min, self.coverage, coverage_min,
-                   f"coverage {self.coverage:.2%} (min {coverage_min:.0%})"),
+                   self._coverage_message(coverage_min)),
             _check("overspray", self.overspray <= overspray_max, self.overspray, overspray_max,
                    f"overspray {self.overspray:.3%} of the surface (max {overspray_max:.1%})"),
         ]  # fmt: skip
@@ -165,6 +206,23 @@ class BlastPlan:
                        f"{len(self.skipped)} discs unreachable without collision"),
             ]  # fmt: skip
         return out
+
+
+def _coverage_limit_text(plan: BlastPlan) -> str:
+    parts = []
+    if plan.min_radius_m is not None and plan.coverage_reach is not None:
+        parts.append(
+            f"without overspray footprints ≥ Ø{2000 * plan.min_radius_m:.1f} mm (shortest stream) "
+            f"reach {plan.coverage_reach:.2%} of the surface"
+        )
+    if plan.coverage_bound is not None:
+        parts.append(
+            f"certified: at most {plan.coverage_bound:.2%} is reachable within "
+            f"{OVERSPRAY_TARGET:.1%} overspray (pointwise bound)"
+        )
+    if len(plan.skipped):
+        parts.append(f"{len(plan.skipped)} discs skipped (no collision-free pose or path)")
+    return "; ".join(parts)
 
 
 def _check(name: str, passed: bool, value: Any, limit: Any, message: str) -> dict[str, Any]:
@@ -212,6 +270,7 @@ def plan_blasting(
     approach_waypoints: int = 100,
     start_pose_deg: Sequence[float] = START_POSE_DEG,
     tilt_deg: float | str = "auto",
+    joint_planner: str = "none",
     progress: Callable[[float, str], None] | None = None,
 ) -> BlastPlan:
     """Plan blasting of a planar ``surface`` (DESIGN §5).
@@ -226,6 +285,14 @@ def plan_blasting(
     "denso_vm6083")`` placed with ``with_base``), nozzle on the side of the
     plane where the robot base is; ``obstacles``: :class:`Box` es and (M,3)
     point arrays (world frame, metres).  Deterministic for a given ``seed``.
+    ``joint_planner``: ``"none"`` (default) keeps the clearest via-point
+    move for a transition that is not certified free (the clearance check
+    then fails); ``"rrt"`` plans such moves with RRT-Connect
+    (:mod:`planners.blasting.motion`, budget :data:`RRT_MAX_ITER` per move,
+    :data:`RRT_BUDGET_ITER` per plan) and leaves out spots it cannot reach.
+    Not the default: a spot blasted from a pose with millimetres of
+    clearance traps the search, and every later spot is then tried from it
+    (on Surface 2 with a blocking box: 63 of 66 spots unreached, ~80 s).
     """
     timings: dict[str, float] = {}
     t0 = time.perf_counter()
@@ -234,6 +301,10 @@ def plan_blasting(
     ds = check_stream_length(stream_length_mm)
     if sequencer not in ("default", "ga"):
         raise InvalidInputError(f"sequencer must be 'default' or 'ga', got {sequencer!r}")
+    if joint_planner not in JOINT_PLANNERS:
+        raise InvalidInputError(
+            f"joint_planner must be one of {', '.join(JOINT_PLANNERS)}, got {joint_planner!r}"
+        )
     if editing not in ("improved", "seed", "none"):
         raise InvalidInputError(f"editing must be 'improved', 'seed' or 'none', got {editing!r}")
     if disc_radius_m is not None:
@@ -256,15 +327,20 @@ def plan_blasting(
             f"kp must be {len(FOCI)} numbers > 1 (seed: 1.05, 1.10, 1.10), got {kp}"
         )
     poly = surface.polygon
+    cone = Cone.of(noz, r, ds / 1000.0)
     spacing = np.sqrt(3.0) * r
 
     # -- global nozzle tilt (§3.2.1) ----------------------------------------------------
-    # The seed's surfaces put the wrist centre almost on the J1 axis (shoulder
-    # singularity); tilting every spot's nozzle the same way (45–90° to the
-    # surface is allowed) moves it off.  The footprint becomes an ellipse
-    # stretched 1/cos β along the tilt: coverage is computed in the plane
-    # compressed by cos β along that direction, where it is a disc again
-    # (area ratios, hence coverage and overspray, are unchanged by the map).
+    # The seed's surfaces put the wrist centre almost on the J1 axis
+    # (shoulder singularity); tilting every spot's nozzle the same way (45–90°
+    # to the surface is allowed) moves it off.  The footprint becomes the
+    # exact conic section (footprint.py): an ellipse with semi-axes a (along
+    # the tilt) and b, centred c beyond the point where the axis meets the
+    # surface.  Coverage is planned in the plane compressed by b/a along the
+    # tilt, where every footprint of that tilt is a disc (of radius b at the
+    # nominal stream; all scale with the apex distance); area ratios, hence
+    # coverage and overspray, are unchanged by that map.  Each spot is aimed
+    # c before its footprint centre.
     side = 1.0
     beta, tilt_dir = 0.0, np.array([1.0, 0.0])
     q_start = np.deg2rad(np.asarray(start_pose_deg, dtype=float))
@@ -284,40 +360,50 @@ def plan_blasting(
                 )
     elif tilt_deg not in ("auto", 0, 0.0):
         raise InvalidInputError("tilt_deg needs a robot (it is chosen for reachability)")
-    squeeze = _squeeze_map(beta, tilt_dir)  # plane → footprint-is-a-disc frame
+    L0 = float(cone.length(ds / 1000.0))
+    a0, b0, c0 = (float(v) for v in exact_ellipse(L0, cone.tan_alpha, beta))
+    squeeze = _squeeze_map(b0 / a0, tilt_dir)  # plane → footprint-is-a-disc frame
     unsqueeze = np.linalg.inv(squeeze)
     poly_fp = shapely.affinity.affine_transform(
         poly, [squeeze[0, 0], squeeze[0, 1], squeeze[1, 0], squeeze[1, 1], 0.0, 0.0]
     )
+    rp = b0  # footprint radius in that frame at the nominal stream (= r untilted)
+    rp_small = rp * small_r / r if small_r else None
 
     # -- coverage (§3.2), in the footprint frame --------------------------------------------
     _progress(progress, 0.0, "coverage")
     angle = _lattice_angle(poly_fp)
-    lattice = _cov.hex_lattice(poly_fp, r, angle=angle)
-    lat_cls = _cov.classify(lattice, poly_fp, r)
+    lattice = _cov.hex_lattice(poly_fp, rp, angle=angle)
+    lat_cls = _cov.classify(lattice, poly_fp, rp)
     if editing == "improved":
         ed = _cov.edit_improved(
-            poly_fp, r, lattice=lattice, small_r=small_r, coverage_target=coverage_target,
-            overspray_budget=overspray_budget,
+            poly_fp, rp, lattice=lattice, small_r=rp_small, coverage_target=coverage_target,
+            overspray_budget=overspray_budget, r_min=rp_small,
         )  # fmt: skip
-        c_fp, radii, cls, small = ed.centers, ed.radii, ed.classes, ed.small
+        c_fp, radii, cls = ed.centers, ed.radii, ed.classes
     elif editing == "seed":
-        c_fp, cls = _cov.edit_seed(lattice, poly_fp, r)
-        radii, small = np.full(len(c_fp), r), np.zeros(len(c_fp), dtype=bool)
+        c_fp, cls = _cov.edit_seed(lattice, poly_fp, rp)
+        radii = np.full(len(c_fp), rp)
     else:
         keep = lat_cls != _cov.OUTSIDE
         c_fp, cls = lattice[keep], lat_cls[keep]
-        radii, small = np.full(len(c_fp), r), np.zeros(len(c_fp), dtype=bool)
+        radii = np.full(len(c_fp), rp)
     if len(c_fp) == 0:
         raise InfeasibleError(
             f"no blasting disc of radius {r * 1000:.1f} mm fits the surface (area {surface.area:.4f} m²); "
             "use a smaller nozzle or a shorter stream length"
         )
-    stream = np.where(small, fill_ds or ds, ds)
+    # every footprint of the cone scales with the apex distance L: a disc of
+    # radius ρ in the footprint frame is blasted from L = L0·ρ/rp
+    scale = radii / rp
+    stream = np.clip((L0 * scale - cone.apex_m) * 1000.0, fill_ds or ds, ds)
     m_plan = _cov.measure(poly_fp, c_fp, radii)
     c2 = c_fp @ unsqueeze.T
-    timings["coverage_s"] = time.perf_counter() - t0
     N = len(c2)
+    semi = np.stack([a0 * scale, b0 * scale], axis=1)
+    major = np.repeat(tilt_dir[None], N, axis=0)
+    aim2 = c2 - (c0 * scale)[:, None] * tilt_dir
+    timings["coverage_s"] = time.perf_counter() - t0
     world = surface.to_world(c2)
     tilt = np.full(N, np.degrees(beta))
     params = {
@@ -325,6 +411,9 @@ def plan_blasting(
         "small_radius_m": small_r, "editing": editing, "sequencer": sequencer, "seed": seed,
         "lattice_angle_rad": angle, "turn_threshold_deg": _seq.TURN_THRESHOLD_DEG,
         "tilt_deg": float(np.degrees(beta)), "tilt_direction_2d": tilt_dir.tolist(),
+        "cone_tan_alpha": cone.tan_alpha, "cone_apex_m": cone.apex_m,
+        "footprint_semi_axes_m": [a0, b0], "footprint_center_shift_m": c0,
+        "joint_planner": joint_planner,
     }  # fmt: skip
 
     # -- robot: poses and collision status per spot ---------------------------------------
@@ -336,26 +425,35 @@ def plan_blasting(
     if robot is not None:
         t1 = time.perf_counter()
         _progress(progress, 0.25, "inverse kinematics")
+        n_in = -side * surface.normal
         axis0 = _tilted_axis(surface, side, beta, tilt_dir)
         axes = np.repeat(axis0[None], N, axis=0)  # blast axis into the surface
         standoff = (stream / 1000.0 + nozzle_length_m)[:, None]
-        flange = world - axes * standoff
+        flange = surface.to_world(aim2) - axes * standoff
         Qs, oks = robot.ik_axis(flange, axes, q_start)
         ok_free = _collision_free(robot, Qs, oks, obst, nozzle_length_m, kp)
         # spots with no collision-free closed-form solution: tilt, then Eq. 3.11
         for i in np.nonzero(~ok_free.any(axis=1))[0]:
             tilts = np.arange(5.0, MAX_TILT_DEG - np.degrees(beta) + 1e-9, 5.0)
             cand = _arm.tilted_axes(axes[i], tilts) if len(tilts) else np.zeros((0, 3))
-            fl = world[i] - cand * standoff[i]
+            # exact footprint of each candidate axis, aimed so it stays centred
+            bc = np.arccos(np.clip(cand @ n_in, -1.0, 1.0))
+            e3 = cand - np.cos(bc)[:, None] * n_in
+            e2 = np.stack([e3 @ surface.x_axis, e3 @ surface.y_axis], axis=1)
+            e2 /= np.maximum(np.linalg.norm(e2, axis=1, keepdims=True), 1e-12)
+            ac, bcm, cc = exact_ellipse(L0 * scale[i], cone.tan_alpha, bc)
+            aims = c2[i] - cc[:, None] * e2
+            fl = surface.to_world(aims) - cand * standoff[i]
             Qt, okt = robot.ik_axis(fl, cand, q_start)
             freet = _collision_free(robot, Qt, okt, obst, nozzle_length_m, kp)
             good = np.nonzero(freet.any(axis=1))[0]
             if len(good):
                 j = int(good[0])  # tilts ascend: least extra tilt first
-                axes[i], flange[i] = cand[j], fl[j]
+                axes[i], flange[i], aim2[i] = cand[j], fl[j], aims[j]
                 Qs[i], oks[i], ok_free[i] = Qt[j], okt[j], freet[j]
-                n_in = -side * surface.normal
-                tilt[i] = float(np.degrees(np.arccos(np.clip(cand[j] @ n_in, -1.0, 1.0))))
+                tilt[i] = float(np.degrees(bc[j]))
+                semi[i] = (ac[j], bcm[j])
+                major[i] = e2[j]
                 continue
             if oks[i].any() or okt.any():
                 # reachable, but every configuration penetrates: rejected
@@ -395,10 +493,37 @@ def plan_blasting(
     else:
         sub = _seq.sequence_default(P2, row_pitch=1.5 * r, angles=(angle,), penalty=pen, c=cpen)
     order = idx[sub]
-    st = _seq.stats(P2, sub, spacing, pen, cpen)
     timings["sequencing_s"] = time.perf_counter() - t2
 
-    m_done = m_plan if keep.all() else _cov.measure(poly_fp, c_fp[idx], radii[idx])
+    # -- trajectory (§3.4.1.3, Eq. 3.12–3.13) and clearance (§3.4.2) ----------------------
+    traj = None
+    if robot is not None:
+        t3 = time.perf_counter()
+        _progress(progress, 0.75, "trajectory")
+        traj = _trajectory(
+            robot, order, flange, axes, Qs, oks, q_start, step_m, approach_waypoints, obst,
+            nozzle_length_m, kp, joint_planner, seed,
+        )  # fmt: skip
+        if len(traj.unreached):
+            keep[traj.unreached] = False
+            order = order[~np.isin(order, traj.unreached)]
+
+    # -- results ------------------------------------------------------------------------------
+    pos = {int(d): k for k, d in enumerate(idx)}
+    sub = np.array([pos[int(d)] for d in order], dtype=int)
+    st = _seq.stats(P2, sub, spacing, pen, cpen)
+    per_spot = robot is not None and not np.allclose(tilt[keep], np.degrees(beta))
+    vis = np.nonzero(keep)[0]
+    if per_spot:
+        # some spots carry their own tilt: measure every footprint as it is
+        mats = ellipse_matrices(semi[vis, 0], semi[vis, 1], major[vis])
+        m_done = _cov.measure(poly, c2[vis], semi[vis, 1], mats)
+    else:
+        m_done = m_plan if keep.all() else _cov.measure(poly_fp, c_fp[vis], radii[vis])
+    reach = zero_overspray_reach(poly_fp, float(rp_small or rp))
+    bound_val = None
+    if m_done.coverage < COVERAGE_TARGET and editing == "improved":
+        bound_val = pointwise_bound(poly_fp, float(rp_small or rp), OVERSPRAY_TARGET).coverage_max
     plan = BlastPlan(
         radius=r, centers=world, centers_2d=c2, radii=radii, classes=np.asarray(cls, dtype=np.int8),
         stream_mm=stream, tilt_deg=tilt, order=order, skipped=np.nonzero(~keep)[0],
@@ -406,23 +531,12 @@ def plan_blasting(
         lower_bound_m=st.lower_bound_m, mst_m=st.mst_m, coverage=m_done.coverage,
         overspray=m_done.overspray, coverage_planned=m_plan.coverage,
         overspray_planned=m_plan.overspray, lattice_centers_2d=lattice, lattice_classes=lat_cls,
-        spacing_m=spacing, params=params, timings_s=timings,
+        spacing_m=spacing, params=params, timings_s=timings, aim_points=surface.to_world(aim2),
+        aim_points_2d=aim2, semi_axes=semi, major_dir_2d=major, coverage_reach=reach,
+        coverage_bound=bound_val, min_radius_m=float(rp_small or rp),
     )  # fmt: skip
-
-    # -- trajectory (§3.4.1.3, Eq. 3.12–3.13) and clearance (§3.4.2) ----------------------
-    if robot is not None:
-        t3 = time.perf_counter()
-        _progress(progress, 0.75, "trajectory")
-
-        def clear_fn(qq: np.ndarray) -> np.ndarray:
-            c = _arm.waypoint_clearance(
-                robot, qq, obst, nozzle_length_m, kp, FOCI, sign_only=True, margin=SAFETY_M
-            )
-            return c - SAFETY_M  # > 0: free with the safety margin
-
-        q, seg, spot = _trajectory(
-            robot, order, flange, axes, Qs, oks, q_start, step_m, approach_waypoints, clear_fn
-        )
+    if traj is not None:
+        q, seg, spot = traj.q, traj.segment, traj.spot
         clear = _arm.waypoint_clearance(robot, q, obst, nozzle_length_m, kp, FOCI)
         nominal = np.zeros(len(q) - 1)
         blast = seg[1:] == 2
@@ -438,6 +552,8 @@ def plan_blasting(
         plan.ik_residual_deg = residual_deg
         plan.joint_limits = robot.joint_limits.copy()
         plan.speed_limit_rad_s = v
+        plan.unreached = np.asarray(traj.unreached, dtype=int)
+        plan.motion = traj.stats
         timings["trajectory_s"] = time.perf_counter() - t3
     timings["total_s"] = time.perf_counter() - t0
     _progress(progress, 1.0, "done")
@@ -461,12 +577,12 @@ def _tilted_axis(surface: Surface, side: float, beta: float, direction: np.ndarr
     return np.cos(beta) * (-side * surface.normal) + np.sin(beta) * e
 
 
-def _squeeze_map(beta: float, direction: np.ndarray) -> np.ndarray:
-    """2×2 map compressing the plane by cos β along ``direction``: a tilted
-    footprint (ellipse, semi-axes r/cos β along the tilt and r across; the
-    first-order conic section of a narrow cone) becomes a disc of radius r."""
+def _squeeze_map(ratio: float, direction: np.ndarray) -> np.ndarray:
+    """2×2 map compressing the plane by ``ratio`` (= b/a of the tilted
+    footprint, :func:`planners.blasting.footprint.squeeze_ratio`) along
+    ``direction``: every footprint of that tilt becomes a disc."""
     d = np.asarray(direction, dtype=float) / np.linalg.norm(direction)
-    return np.eye(2) - (1.0 - np.cos(beta)) * np.outer(d, d)
+    return np.eye(2) - (1.0 - float(ratio)) * np.outer(d, d)
 
 
 def _choose_tilt(
@@ -560,20 +676,54 @@ def _penalty_matrix(
     return pen
 
 
+@dataclass
+class _Traj:
+    q: np.ndarray
+    segment: np.ndarray
+    spot: np.ndarray
+    unreached: np.ndarray
+    stats: dict[str, float]
+
+
 def _trajectory(
-    robot, order, flange, axes, Qs, oks, q_start, step_m, approach_waypoints, clear_fn
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    robot, order, flange, axes, Qs, oks, q_start, step_m, approach_waypoints, obst, nozzle_m, kp,
+    joint_planner, seed,
+) -> _Traj:  # fmt: skip
     """Way-points: start pose, ``approach_waypoints`` joint-space points to the
     first spot, then straight moves between spots every ``step_m``.
 
     Branches are chosen by DP over all way-points (least joint change); a
     jump larger than 15° between neighbours becomes a joint-space
     reconfiguration.  Way-points whose ellipsoids penetrate an obstacle are
-    rejected (their state is removed and the DP re-run, up to 4 times), and
-    the approach and reconfigurations try a direct move, then "rotate
-    folded, then extend" and "extend, then rotate" via-points, keeping the
-    first one that is clear (else the clearest; the clearance check then
-    fails and the plan cannot be approved)."""
+    rejected (their state is removed and the DP re-run, up to 4 times).
+    Every move between way-points is then certified free
+    (:func:`planners.blasting.motion.edge_free`, the ellipsoid clearance
+    against a bound on how far the arm moves).  A move that is not: the
+    approach and reconfigurations try a direct move, then "rotate folded,
+    then extend" and "extend, then rotate" via-points; with
+    ``joint_planner="rrt"`` any move still blocked is planned by
+    RRT-Connect in the joint space (shortcut, densified to 2° steps, nozzle
+    off), and a spot that no certified path reaches from the previous one is
+    left out (``unreached``).  With ``joint_planner="none"`` (the earlier
+    behaviour, for comparison) the clearest via-point move is kept even when
+    it penetrates, so the clearance check fails."""
+    rng = np.random.default_rng(seed)
+    w = _motion.displacement_weights(robot, nozzle_m, kp, FOCI)
+    limits = robot.joint_limits
+
+    def clear_val(qq: np.ndarray) -> np.ndarray:
+        qq = np.atleast_2d(qq)
+        if obst.empty:
+            return np.full(len(qq), np.inf)
+        c = _arm.waypoint_clearance(robot, qq, obst, nozzle_m, kp, FOCI, horizon=CLEAR_HORIZON_M)
+        return c - SAFETY_M  # > 0: free with the safety margin
+
+    def clear_sign(qq: np.ndarray) -> np.ndarray:
+        c = _arm.waypoint_clearance(
+            robot, qq, obst, nozzle_m, kp, FOCI, sign_only=True, margin=SAFETY_M
+        )
+        return c - SAFETY_M
+
     # Cartesian way-points between consecutive spots
     P, A, spot = [flange[order[0]]], [axes[order[0]]], [order[0]]
     for a_i, b_i in itertools.pairwise(order):
@@ -598,49 +748,153 @@ def _trajectory(
         Qu, oku, spu = Q[usable], ok[usable], spot[usable]
         br = _arm.choose_branches(Qu, oku, q_start)
         qb = Qu[np.arange(len(Qu)), br]
-        bad = clear_fn(qb) <= 0
+        bad = (clear_sign(qb) <= 0) if not obst.empty else np.zeros(len(qb), dtype=bool)
         bad &= spu < 0  # spots were checked already
         if not bad.any():
             break
         rows = np.nonzero(usable)[0][bad]
         ok[rows, br[bad]] = False
-    Q, ok, spot = Qu, oku, spu
-    approach = _approach(q_start, qb[0], approach_waypoints, clear_fn)
-    out = [q_start[None], approach]
-    seg = [np.array([0]), np.full(len(approach), 1)]
-    sp = [np.array([-1]), np.r_[np.full(len(approach) - 1, -1), spot[0]]]
-    for k in range(1, len(qb)):
-        dq = np.abs(qb[k] - qb[k - 1]).max()
-        if dq > JUMP_RAD:
-            n = max(int(np.ceil(dq / np.deg2rad(2.0))), 2)
-            out.append(_approach(qb[k - 1], qb[k], n, clear_fn))
-            seg.append(np.full(n, 3))
-            sp.append(np.r_[np.full(n - 1, -1), spot[k]])
-        else:
+    spot = spu
+    n_wp = len(qb)
+    c_wp = clear_val(qb)
+    # certify the short blasting moves in one batch
+    step_ok = np.zeros(n_wp, dtype=bool)
+    if n_wp > 1:
+        short = np.abs(np.diff(qb, axis=0)).max(axis=1) <= JUMP_RAD
+        k = np.nonzero(short)[0]
+        if obst.empty:
+            step_ok[k + 1] = True
+        elif len(k):
+            step_ok[k + 1] = _motion.edge_free(
+                qb[k], qb[k + 1], clear_val, w, ca=c_wp[k], cb=c_wp[k + 1]
+            )
+    out = [q_start[None]]
+    seg = [np.array([0])]
+    sp = [np.array([-1])]
+    cur, c_cur, cur_k = q_start, clear_val(q_start)[0], -1
+    reached_first = False
+    unreached: list[int] = []
+    stats = {
+        "rrt_calls": 0, "rrt_failures": 0, "rrt_nodes": 0, "rrt_iterations": 0,
+        "rrt_out_of_budget": 0, "via_moves": 0,
+    }  # fmt: skip
+    skip_to_spot = False
+    for k in range(n_wp):
+        if spot[k] < 0 and (c_wp[k] <= 0 or not reached_first or skip_to_spot):
+            # a penetrating way-point between spots, or one on the way from a
+            # spot that was left out: move past it
+            continue
+        skip_to_spot = False
+        if reached_first and cur_k == k - 1 and step_ok[k]:
             out.append(qb[k][None])
             seg.append(np.array([2]))
             sp.append(np.array([spot[k]]))
-    return np.vstack(out), np.concatenate(seg), np.concatenate(sp)
+            cur, c_cur, cur_k = qb[k], c_wp[k], k
+            continue
+        dq = float(np.abs(qb[k] - cur).max())
+        if reached_first and dq <= JUMP_RAD and (obst.empty or _motion.edge_free(
+                cur[None], qb[k][None], clear_val, w, ca=[c_cur], cb=[c_wp[k]])[0]):  # fmt: skip
+            out.append(qb[k][None])
+            seg.append(np.array([2]))
+            sp.append(np.array([spot[k]]))
+            cur, c_cur, cur_k = qb[k], c_wp[k], k
+            continue
+        m = approach_waypoints if not reached_first else max(int(np.ceil(dq / STEP_RAD)), 2)
+        path = _transition(
+            cur, qb[k], m, clear_val, w, limits, rng, joint_planner, obst.empty, stats,
+            c_cur, c_wp[k],
+        )  # fmt: skip
+        if path is None:
+            if spot[k] >= 0:
+                unreached.append(int(spot[k]))
+                skip_to_spot = True
+            continue
+        out.append(path)
+        seg.append(np.full(len(path), 3 if reached_first else 1))
+        sp.append(np.r_[np.full(len(path) - 1, -1), spot[k]])
+        cur, c_cur, cur_k = qb[k], c_wp[k], k
+        if spot[k] >= 0:
+            reached_first = True
+    if not reached_first:
+        raise InfeasibleError(
+            "no spot can be reached from the start pose on a collision-free path "
+            f"({stats['rrt_calls']} joint-space searches failed)"
+        )
+    return _Traj(
+        np.vstack(out), np.concatenate(seg), np.concatenate(sp),
+        np.asarray(sorted(set(unreached)), dtype=int), stats,
+    )  # fmt: skip
 
 
-def _approach(q0: np.ndarray, q1: np.ndarray, m: int, clear_fn) -> np.ndarray:
-    """m joint-space way-points from q0 to q1 (seed §4.2.4): direct, or via a
-    pose that first turns J1/J4/J5 with the arm folded as in q0 (then
-    extends), or first extends (then turns); the first clear one wins, else
-    the one with the largest minimum clearance."""
+def _resample(path: np.ndarray, m: int) -> np.ndarray:
+    """Exactly ``m`` way-points along the polyline ``path`` (first vertex
+    excluded, last included) that contain every corner, so the way-points
+    trace the certified polyline itself: each of the K segments gets
+    ≥ 1 evenly spaced points, the rest shared by largest remainder in
+    proportion to its largest joint move.  With K > m the corners alone
+    are returned (K points)."""
+    path = np.asarray(path, dtype=float)
+    K = len(path) - 1
+    if K <= 0:
+        return np.repeat(path[-1:], m, axis=0)
+    if m <= K:
+        return path[1:].copy()
+    seglen = np.abs(np.diff(path, axis=0)).max(axis=1)
+    share = (m - K) * seglen / seglen.sum() if seglen.sum() > 0 else np.full(K, (m - K) / K)
+    n = 1 + np.floor(share).astype(int)
+    rest = m - int(n.sum())
+    if rest > 0:
+        n[np.argsort(-(share - np.floor(share)), kind="stable")[:rest]] += 1
+    out = [_arm.joint_path(a, b, int(k)) for a, b, k in zip(path[:-1], path[1:], n, strict=True)]
+    return np.vstack(out)
+
+
+def _transition(
+    q0, q1, m, clear_val, w, limits, rng, joint_planner, free_space, stats, c0, c1
+) -> np.ndarray | None:
+    """Joint-space move q0 → q1 as way-points (q0 excluded): the direct move
+    or a via-point move when certified free, else (``joint_planner="rrt"``)
+    RRT-Connect + shortcut; None when nothing certified is found.  With
+    ``joint_planner="none"`` the clearest via-point move is returned."""
+    direct = _arm.joint_path(q0, q1, m)
+    if free_space:
+        return direct
     vias = [None, np.r_[q1[0], q0[1:3], q1[3:]], np.r_[q0[0], q1[1:3], q0[3:5], q1[5]]]
     best, best_c = None, -np.inf
     for via in vias:
         if via is None:
-            path = _arm.joint_path(q0, q1, m)
+            poly = np.stack([q0, q1])
+            cs = np.array([c0, c1])
         else:
-            d1 = np.abs(via - q0).max()
-            d2 = np.abs(q1 - via).max()
-            m1 = int(np.clip(round(m * d1 / max(d1 + d2, 1e-12)), 1, m - 1))
-            path = np.vstack([_arm.joint_path(q0, via, m1), _arm.joint_path(via, q1, m - m1)])
-        c = float(np.min(clear_fn(path)))
-        if c > 0:
-            return path
-        if c > best_c:
-            best, best_c = path, c
-    return best
+            poly = np.stack([q0, via, q1])
+            cs = np.array([c0, clear_val(via)[0], c1])
+        if cs.min() > 0 and _motion.edge_free(poly[:-1], poly[1:], clear_val, w,
+                                              ca=cs[:-1], cb=cs[1:]).all():  # fmt: skip
+            if via is not None:
+                stats["via_moves"] += 1
+            return direct if via is None else _resample(poly, m)
+        if joint_planner == "none":
+            path = direct if via is None else _resample(poly, m)
+            c = float(np.min(clear_val(path)))
+            if c > best_c:
+                best, best_c = path, c
+    if joint_planner == "none":
+        return best
+    budget = RRT_BUDGET_ITER - stats["rrt_iterations"]
+    if budget <= 0:
+        stats["rrt_out_of_budget"] += 1
+        return None
+    stats["rrt_calls"] += 1
+    res = _motion.rrt_connect(
+        q0, q1, clear_val, limits, w, rng=rng, max_iter=min(RRT_MAX_ITER, budget)
+    )
+    stats["rrt_nodes"] += res.nodes
+    stats["rrt_iterations"] += res.iterations
+    if res.path is None:
+        stats["rrt_failures"] += 1
+        return None
+    path = _motion.shortcut(res.path, clear_val, w, rng=rng)
+    # as many way-points as the move needs at ≤ 2° per step, at least m
+    # (the approach: exactly m = 100 unless the path has more corners)
+    n_dense = len(_motion.densify(path, STEP_RAD))
+    return _resample(path, m) if n_dense <= m else _motion.densify(path, STEP_RAD)

@@ -153,13 +153,29 @@ def _ellipse_closest(
     # on-axis points (y1 = 0) are handled below; keep their iteration finite
     s0 = np.where(y1 > 0, s0, 0.0)
     s1 = np.where(y1 > 0, s1, 1.0)
+    # G(s) = (n0/(s+r0))² + (z1/(s+1))² − 1 is convex and decreasing on the
+    # bracket [s0, s1] (G(s0) ≥ 0 ≥ G(s1)): Newton from the left end moves
+    # monotonically towards the root (never past it in exact arithmetic);
+    # a step leaving the bracket is replaced by bisection, and the loop ends
+    # once every step is at rounding level (≤ _BISECT iterations, the cost
+    # of plain bisection, in the worst case)
+    s = s0.copy()
     for _ in range(_BISECT):
-        s = 0.5 * (s0 + s1)
-        gs = (n0 / (s + r0)) ** 2 + (z1 / (s + 1.0)) ** 2 - 1.0
+        u0 = n0 / (s + r0)
+        u1 = z1 / (s + 1.0)
+        gs = u0 * u0 + u1 * u1 - 1.0
         pos = gs > 0
         s0 = np.where(pos, s, s0)
         s1 = np.where(pos, s1, s)
-    s = 0.5 * (s0 + s1)
+        dg = -2.0 * (u0 * u0 / (s + r0) + u1 * u1 / (s + 1.0))
+        with np.errstate(divide="ignore", invalid="ignore"):
+            sn = s - gs / dg
+        bad = ~np.isfinite(sn) | (sn <= s0) | (sn >= s1)
+        sn = np.where(bad, 0.5 * (s0 + s1), sn)
+        step = np.abs(sn - s)
+        s = sn
+        if not np.any((step > 4e-16 * np.maximum(np.abs(s), 1.0)) & (s1 - s0 > 0)):
+            break
     gx0 = r0 * y0 / (s + r0)
     gx1 = y1 / (s + 1.0)
     # y1 = 0: on the major axis

@@ -129,6 +129,27 @@ def _rings(polygon: BaseGeometry) -> list[np.ndarray]:
     return rings
 
 
+def grid_inside(
+    polygon: BaseGeometry, x0: float, y0: float, h: float, nx: int, ny: int
+) -> np.ndarray:
+    """(ny, nx) mask of the pixel centres ``(x0 + (i + ½)h, y0 + (j + ½)h)``
+    inside ``polygon`` (even–odd scanline over every ring, holes included)."""
+    yc = y0 + (np.arange(ny) + 0.5) * h
+    toggles = np.zeros((ny, nx + 1), dtype=np.int32)
+    for ring in _rings(polygon):
+        a, b = ring[:-1], ring[1:]
+        ya, yb = a[:, 1][None, :], b[:, 1][None, :]
+        Y = yc[:, None]
+        cross = ((ya <= Y) & (yb > Y)) | ((yb <= Y) & (ya > Y))
+        jj, ee = np.nonzero(cross)
+        t = (yc[jj] - a[ee, 1]) / (b[ee, 1] - a[ee, 1])
+        xc = a[ee, 0] + t * (b[ee, 0] - a[ee, 0])
+        # first pixel whose centre lies right of the crossing
+        k = np.clip(np.ceil((xc - x0) / h - 0.5), 0, nx).astype(np.int64)
+        np.add.at(toggles, (jj, k), 1)
+    return (np.cumsum(toggles, axis=1)[:, :nx] % 2).astype(bool)
+
+
 @dataclass
 class Raster:
     """Square pixels of size ``h`` over the polygon's bounds grown by ``pad``;
@@ -156,25 +177,16 @@ class Raster:
             h = float(np.sqrt(w * hh / MAX_PIXELS))
         x0, y0 = minx - pad - shift * h, miny - pad - shift * h
         nx, ny = int(np.ceil(w / h)) + 1, int(np.ceil(hh / h)) + 1
-        yc = y0 + (np.arange(ny) + 0.5) * h
-        toggles = np.zeros((ny, nx + 1), dtype=np.int32)
-        for ring in _rings(polygon):
-            a, b = ring[:-1], ring[1:]
-            ya, yb = a[:, 1][None, :], b[:, 1][None, :]
-            Y = yc[:, None]
-            cross = ((ya <= Y) & (yb > Y)) | ((yb <= Y) & (ya > Y))
-            jj, ee = np.nonzero(cross)
-            t = (yc[jj] - a[ee, 1]) / (b[ee, 1] - a[ee, 1])
-            xc = a[ee, 0] + t * (b[ee, 0] - a[ee, 0])
-            # first pixel whose centre lies right of the crossing
-            k = np.clip(np.ceil((xc - x0) / h - 0.5), 0, nx).astype(np.int64)
-            np.add.at(toggles, (jj, k), 1)
-        inside = (np.cumsum(toggles, axis=1)[:, :nx] % 2).astype(bool)
+        inside = grid_inside(polygon, x0, y0, h, nx, ny)
         return cls(x0, y0, h, nx, ny, inside)
 
-    def disc_pixels(self, centers: np.ndarray, radii: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    def disc_pixels(
+        self, centers: np.ndarray, radii: np.ndarray, mats: np.ndarray | None = None
+    ) -> tuple[np.ndarray, np.ndarray]:
         """Flat pixel indices covered by each disc: (N, W²) with −1 padding, and
-        the disc index of each row.  Pixel centres within the radius count."""
+        the disc index of each row.  Pixel centres within the radius count.
+        With ``mats`` (N,2,2) the footprints are ellipses ``|M (p − c)| ≤ 1``
+        and ``radii`` their semi-major axes (the search window)."""
         centers = np.asarray(centers, dtype=float).reshape(-1, 2)
         radii = np.broadcast_to(np.asarray(radii, dtype=float), (len(centers),))
         if len(centers) == 0:
@@ -189,18 +201,35 @@ class Raster:
         yc = self.y0 + (jj + 0.5) * self.h
         dx = xc - centers[:, 0, None, None]
         dy = yc - centers[:, 1, None, None]
-        ok = (dx * dx + dy * dy <= radii[:, None, None] ** 2) & (ii >= 0) & (ii < self.nx)
-        ok &= (jj >= 0) & (jj < self.ny)
+        if mats is None:
+            ok = dx * dx + dy * dy <= radii[:, None, None] ** 2
+        else:
+            M = np.asarray(mats, dtype=float).reshape(-1, 2, 2)[:, :, :, None, None]
+            u = M[:, 0, 0] * dx + M[:, 0, 1] * dy
+            v = M[:, 1, 0] * dx + M[:, 1, 1] * dy
+            ok = u * u + v * v <= 1.0
+        ok &= (ii >= 0) & (ii < self.nx) & (jj >= 0) & (jj < self.ny)
         idx = np.where(ok, jj * self.nx + ii, -1).reshape(len(centers), -1)
         return idx, np.arange(len(centers))
 
-    def counts(self, centers: np.ndarray, radii: np.ndarray, chunk: int = 4096) -> np.ndarray:
-        """How many discs cover each pixel (flat, ny·nx)."""
+    def counts(
+        self,
+        centers: np.ndarray,
+        radii: np.ndarray,
+        chunk: int | None = None,
+        mats: np.ndarray | None = None,
+    ) -> np.ndarray:
+        """How many discs (or ellipses, see :meth:`disc_pixels`) cover each
+        pixel (flat, ny·nx)."""
         out = np.zeros(self.nx * self.ny, dtype=np.int32)
         centers = np.asarray(centers, dtype=float).reshape(-1, 2)
         radii = np.broadcast_to(np.asarray(radii, dtype=float), (len(centers),))
+        if chunk is None:  # bound the (chunk, W, W) work arrays
+            W = int(np.ceil(2 * float(radii.max()) / self.h)) + 2 if len(radii) else 1
+            chunk = max(1, min(4096, 2_000_000 // (W * W)))
         for s in range(0, len(centers), chunk):
-            idx, _ = self.disc_pixels(centers[s : s + chunk], radii[s : s + chunk])
+            m = None if mats is None else mats[s : s + chunk]
+            idx, _ = self.disc_pixels(centers[s : s + chunk], radii[s : s + chunk], m)
             idx = idx[idx >= 0]
             out += np.bincount(idx, minlength=out.size).astype(np.int32)
         return out
@@ -217,30 +246,41 @@ class CoverageMetrics:
 
 
 def measure(
-    polygon: BaseGeometry, centers: np.ndarray, radii: np.ndarray | float
+    polygon: BaseGeometry,
+    centers: np.ndarray,
+    radii: np.ndarray | float,
+    mats: np.ndarray | None = None,
 ) -> CoverageMetrics:
     """Coverage and overspray of discs on ``polygon`` by rasterising (pixel
     r/12 or finer, capped at :data:`MAX_PIXELS`; raster turned by
-    :data:`METRIC_ANGLE`)."""
+    :data:`METRIC_ANGLE`).  With ``mats`` (N,2,2) the footprints are the
+    ellipses ``|M (p − c)| ≤ 1`` (:func:`planners.blasting.footprint.
+    ellipse_matrices`) and ``radii`` their semi-minor axes."""
     radii = np.broadcast_to(np.asarray(radii, dtype=float), (len(centers),))
     polygon = _rotate(polygon, METRIC_ANGLE)
-    centers = np.asarray(centers, dtype=float).reshape(-1, 2) @ _rot(METRIC_ANGLE).T
-    rmax = float(radii.max()) if len(radii) else 0.0
+    Rm = _rot(METRIC_ANGLE)
+    centers = np.asarray(centers, dtype=float).reshape(-1, 2) @ Rm.T
+    reach = radii
+    if mats is not None:
+        mats = np.asarray(mats, dtype=float).reshape(-1, 2, 2) @ Rm.T  # M·Rᵀ in the turned frame
+        # semi-major = 1 / smallest singular value of M
+        reach = 1.0 / np.linalg.svd(mats, compute_uv=False)[:, -1]
+    rmin_fp = float(radii.max()) if len(radii) else 0.0
     scale = np.sqrt(polygon.area)
-    h = min(METRIC_PIXEL * rmax if rmax > 0 else scale / 600, scale / 600)
+    h = min(METRIC_PIXEL * rmin_fp if rmin_fp > 0 else scale / 600, scale / 600)
     # the raster spans the surface and every disc (overspray far out counts too)
     lo = (
-        np.minimum(np.asarray(polygon.bounds[:2]), (centers - radii[:, None]).min(axis=0))
+        np.minimum(np.asarray(polygon.bounds[:2]), (centers - reach[:, None]).min(axis=0))
         if len(centers)
         else polygon.bounds[:2]
     )
     hi = (
-        np.maximum(np.asarray(polygon.bounds[2:]), (centers + radii[:, None]).max(axis=0))
+        np.maximum(np.asarray(polygon.bounds[2:]), (centers + reach[:, None]).max(axis=0))
         if len(centers)
         else polygon.bounds[2:]
     )
     ras = Raster.of(polygon, h, pad=2 * h, shift=0.37, bounds=(lo[0], lo[1], hi[0], hi[1]))
-    cnt = ras.counts(centers, radii)
+    cnt = ras.counts(centers, reach, mats=mats)
     inside = ras.inside.reshape(-1)
     cov = float(np.count_nonzero((cnt > 0) & inside) / max(np.count_nonzero(inside), 1))
     over = float(np.count_nonzero((cnt > 0) & ~inside) * ras.h**2 / polygon.area)
@@ -333,6 +373,8 @@ def edit_improved(
     coverage_target: float = 0.995,
     overspray_budget: float = 0.004,
     overspray_weight: float = 1.0,
+    fill: bool = True,
+    r_min: float | None = None,
 ) -> EditResult:
     """Our boundary editing (improves §3.2.3).
 
@@ -349,7 +391,14 @@ def edit_improved(
        With ``small_r`` the candidates include discs of that radius too.
     3. Discs whose removal keeps coverage above the target are pruned, those
        adding the least (net of overspray) first.
+    4. With ``fill`` (default) steps 2–3 add only discs without overspray
+       and :func:`planners.blasting.fill.fill_uncovered` then fills the exact
+       uncovered set with discs of any radius in [``r_min``, r] (``r_min``
+       defaults to ``small_r``, else r), spending the overspray budget: the
+       raster cannot see slivers thinner than its pixels, and parts narrower
+       than 2·r_min can only be reached with overspray.
     """
+    coarse_budget = 0.0 if fill else overspray_budget
     if lattice is None:
         lattice = hex_lattice(polygon, r)
     # work in a frame turned by EDIT_ANGLE (raster alignment, see above)
@@ -393,7 +442,7 @@ def edit_improved(
     covered = cnt > 0
     cov_in = int(np.count_nonzero(covered & inside))
     over_px = int(np.count_nonzero(covered & ~inside))
-    budget_px = overspray_budget * polygon.area / h**2
+    budget_px = coarse_budget * polygon.area / h**2
 
     g = r / 5.0
     minx, miny, maxx, maxy = polygon.bounds
@@ -490,6 +539,21 @@ def edit_improved(
                 cnt[ii] -= 1
                 cov_in -= lose
         centers, radii, classes, small = centers[alive], radii[alive], classes[alive], small[alive]
-    return EditResult(
-        centers @ R, radii, classes, small, cov_in / n_in, target if len(cand) else float("nan")
-    )
+    centers = centers @ R
+    edit_cov, edit_target = cov_in / n_in, (target if len(cand) else float("nan"))
+    if fill:
+        from planners.blasting.fill import fill_uncovered
+
+        lo = r_min if r_min is not None else (small_r or r)
+        f = fill_uncovered(
+            _rotate(polygon, -EDIT_ANGLE), centers, radii, r_min=lo, r_max=r,
+            coverage_target=coverage_target, overspray_budget=overspray_budget,
+            overspray_weight=overspray_weight,
+        )  # fmt: skip
+        if len(f.centers):
+            centers = np.concatenate([centers, f.centers])
+            radii = np.concatenate([radii, f.radii])
+            classes = np.concatenate([classes, np.full(len(f.centers), ADDED, dtype=np.int8)])
+            small = np.concatenate([small, f.radii < r * (1 - 1e-9)])
+        edit_cov = f.coverage_after
+    return EditResult(centers, radii, classes, small, edit_cov, edit_target)

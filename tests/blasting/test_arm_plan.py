@@ -73,6 +73,7 @@ def s1_plan():
         disc_radius_m=scenes.DISC_RADIUS_M,
         robot=ROBOT,
         obstacles=scenes.bridge_obstacles(),
+        joint_planner="rrt",
     )
 
 
@@ -91,9 +92,14 @@ def test_surface_1_plan_passes_every_check(s1_plan):
 def test_trajectory_structure_and_nozzle_on_the_spots(s1_plan):
     p = s1_plan
     q = p.joint_trajectory
-    # start pose, then 100 approach way-points ending on the first spot (§4.2.4)
+    # start pose, then exactly 100 approach way-points (§4.2.4; here a
+    # certified via-point move, its corner among them) ending on the first spot
     np.testing.assert_allclose(np.degrees(q[0]), [0, -75, 160, 0, 30, 0])
-    assert (p.segment[1:101] == 1).all() and p.waypoint_spot[100] == p.order[0]
+    assert p.motion["via_moves"] >= 1 and p.motion["rrt_calls"] == 0
+    assert (p.segment[1:101] == 1).all() and p.segment[101] != 1
+    assert (p.waypoint_spot[1:100] == -1).all() and p.waypoint_spot[100] == p.order[0]
+    # every move was certified free, so the sampled clearance is positive too
+    assert p.min_clearance_m > 0 and not len(p.unreached)
     assert (q[:, 5] == 0).all()  # the free roll: J6 never moves
     # at every spot the nozzle axis (flange z) passes through the disc centre
     # with the tip one stream length away (300 mm, or 100 mm for the small
@@ -104,7 +110,13 @@ def test_trajectory_structure_and_nozzle_on_the_spots(s1_plan):
     F = ROBOT.frames(q[at])[:, -1]
     tip = F[:, :3, 3] + 0.1 * F[:, :3, 2]
     target = tip + (p.stream_mm[spots] / 1000.0)[:, None] * F[:, :3, 2]
-    np.testing.assert_allclose(target, p.centers[spots], atol=1e-6)
+    # the axis meets the surface at the aim point; the exact cone–plane
+    # footprint's centre lies beyond it along the tilt (footprint.py)
+    np.testing.assert_allclose(target, p.aim_points[spots], atol=1e-6)
+    shift = p.centers_2d - p.aim_points_2d
+    cross = shift[:, 0] * p.major_dir_2d[:, 1] - shift[:, 1] * p.major_dir_2d[:, 0]
+    np.testing.assert_allclose(cross, 0.0, atol=1e-9)  # along the footprint's major axis
+    assert np.all(np.einsum("ij,ij->i", shift, p.major_dir_2d) >= 0)
     # tilt stays within the seed's 45–90° to the surface
     n_in = -np.sign((ROBOT.base[:3, 3] - scenes.bridge_surface(1).origin) @ [0, 0, -1]) * np.array(
         [0, 0, -1.0]
