@@ -472,6 +472,13 @@ class Streamer:
                 return
             index = msg.index if isinstance(msg, CommandMessage) else None
             what = f"command {index}" if index is not None else type(msg).__name__
+            latched = int(event.nak.detail) if event.nak.reason == NakReason.FAULTED else 0
+            prefix = ""
+            if latched & FaultFlag.ESTOP:
+                # An E-stop latched on the robot, reported as this refusal
+                # before the state report that carries it.
+                self._finish(Outcome.ESTOPPED)
+                return
             if event.nak.reason == NakReason.RUN_ACTIVE:
                 # Another execution owns the robot: leave it alone.
                 kind = FaultKind.ROBOT_BUSY
@@ -479,10 +486,18 @@ class Streamer:
                 # Our run cannot go on as planned: stop it now rather than after
                 # the commands already queued (resume restarts from the last ack).
                 kind = FaultKind.REJECTED
+                if latched & FaultFlag.DRIVE:
+                    # The robot's drive fault, reaching us as this refusal before
+                    # the state report carrying it: only an operator's explicit
+                    # clear may resume from it.
+                    kind = FaultKind.ROBOT_FAULT
+                    last = self.link.last_report
+                    if last is not None and last.fault_code:
+                        prefix = f"robot fault code {last.fault_code}; "
                 self._try_send(self.link.abort)
             self._to_fault(
                 ExecState.FAULTED,
-                StreamFault(kind, f"robot refused {what}: {event.reason}", index),
+                StreamFault(kind, f"{prefix}robot refused {what}: {event.reason}", index),
             )
         elif isinstance(event, FrameAcked):
             msg = event.message

@@ -177,3 +177,43 @@ def test_empty_program_completes_at_once() -> None:
         Streamer(Program(()), link, run_id=1) as s,
     ):
         assert s.wait(timeout=5) == ExecState.COMPLETED
+
+
+def _refusal(link: RobotLink, prog: Program, run_id: int, index: int, detail: int):
+    from robots.adapters.link import FrameRefused
+    from robots.protocol.messages import Nak, NakReason
+
+    msg = prog[index].to_message(run_id, index)
+    nak = Nak(ref_seq=1, reason=NakReason.FAULTED, detail=detail)
+    return FrameRefused(seq=1, message=msg, nak=nak, session=link.session)
+
+
+def test_faulted_refusal_before_the_report_is_classified_by_its_bits() -> None:
+    """A robot that latched a fault refuses the next command (NAK FAULTED,
+    detail = fault bits) and that refusal can arrive before the state report
+    carrying the fault: a drive fault still reads as a robot fault (which
+    only an explicit clear resumes), an E-stop bit ends the run as
+    E-stopped, and other bits stay a plain refusal."""
+    from robots.protocol.messages import FaultFlag
+
+    cases = [
+        (int(FaultFlag.DRIVE), ExecState.FAULTED, FaultKind.ROBOT_FAULT),
+        (int(FaultFlag.ESTOP), ExecState.ESTOPPED, None),
+        (int(FaultFlag.WATCHDOG), ExecState.FAULTED, FaultKind.REJECTED),
+    ]
+    for k, (bits, state, kind) in enumerate(cases):
+        prog = moves(40, 0.2)
+        faults: list = []
+        with (
+            Emulator("generic") as emu,
+            RobotLink(emu.url) as link,
+            Streamer(prog, link, run_id=40 + k, on_fault=faults.append) as s,
+        ):
+            assert emu.wait_for(lambda e: e.robot.last_done >= 0, 10)
+            s._on_link_event(_refusal(link, prog, 40 + k, 3, bits))
+            assert s.wait(STOPPED | {ExecState.ESTOPPED}, 10) == state, bits
+        if kind is None:
+            assert faults == []
+        else:
+            assert faults[0].kind == kind and faults[0].index == 3
+            assert f"FAULTED (detail {bits})" in faults[0].message
