@@ -74,6 +74,41 @@ class _Tree:
         return np.array(out)
 
 
+def _rrt_connect(
+    planner: EdgePlanner | DiffDrivePlanner,
+    start: np.ndarray,
+    goal: np.ndarray,
+    sampler: Callable[[], np.ndarray],
+) -> tuple[np.ndarray | None, int]:
+    """RRT-Connect (Kuffner & LaValle 2000) with ``planner``'s ``valid``,
+    ``_extend``, ``_connect`` and ``max_iter``: poses start → goal or
+    ``None``, and the iterations used."""
+    ta, tb = _Tree(start, 256), _Tree(goal, 256)
+    a_is_start = True
+    buffer: list[np.ndarray] = []
+    for it in range(1, planner.max_iter + 1):
+        # Grow towards free samples only: on a narrow bar most raw samples
+        # are off the steel, and extending towards them mostly fails.  The
+        # samples are checked 256 at a time (one vectorised PIBC call).
+        if not buffer:
+            batch = np.array([sampler() for _ in range(256)])
+            ok = planner.valid(batch)
+            buffer = list(batch[ok][::-1]) if ok.any() else list(batch[:32][::-1])
+        q = buffer.pop()
+        status, ja = planner._extend(ta, q)
+        if status != "trapped":
+            status_b, jb = planner._connect(tb, ta.q[ja])
+            if status_b == "reached":
+                pa, pb = ta.path_to_root(ja)[::-1], tb.path_to_root(jb)
+                path = np.vstack([pa, pb[1:]])
+                if not a_is_start:
+                    path = path[::-1]
+                return path, it
+        ta, tb = tb, ta
+        a_is_start = not a_is_start
+    return None, planner.max_iter
+
+
 class EdgePlanner:
     """RRT-Connect + shortcut smoothing for one pose pair."""
 
@@ -145,30 +180,7 @@ class EdgePlanner:
         """Poses from ``start`` to ``goal`` (both must be valid) or ``None``; iterations used."""
         if self.motion_ok(start, goal):
             return np.array([start, goal]), 0
-        ta, tb = _Tree(start, 256), _Tree(goal, 256)
-        a_is_start = True
-        buffer: list[np.ndarray] = []
-        for it in range(1, self.max_iter + 1):
-            # Grow towards free samples only: on a narrow bar most raw samples
-            # are off the steel, and extending towards them mostly fails.  The
-            # samples are checked 256 at a time (one vectorised PIBC call).
-            if not buffer:
-                batch = np.array([sampler() for _ in range(256)])
-                ok = self.valid(batch)
-                buffer = list(batch[ok][::-1]) if ok.any() else list(batch[:32][::-1])
-            q = buffer.pop()
-            status, ja = self._extend(ta, q)
-            if status != "trapped":
-                status_b, jb = self._connect(tb, ta.q[ja])
-                if status_b == "reached":
-                    pa, pb = ta.path_to_root(ja)[::-1], tb.path_to_root(jb)
-                    path = np.vstack([pa, pb[1:]])
-                    if not a_is_start:
-                        path = path[::-1]
-                    return path, it
-            ta, tb = tb, ta
-            a_is_start = not a_is_start
-        return None, self.max_iter
+        return _rrt_connect(self, start, goal, sampler)
 
     def shortcut(self, path: np.ndarray, rng: np.random.Generator) -> np.ndarray:
         """Random shortcutting: replace a sub-path by a straight motion when valid."""
@@ -560,27 +572,7 @@ class DiffDrivePlanner:
             way = self.turn_point(start, goal, turn_centre, radius_m=turn_radius_m)
             if way is not None:
                 return np.array(way), 0
-        ta, tb = _Tree(start, 256), _Tree(goal, 256)
-        a_is_start = True
-        buffer: list[np.ndarray] = []
-        for it in range(1, self.max_iter + 1):
-            if not buffer:
-                batch = np.array([sampler() for _ in range(256)])
-                ok = self.valid(batch)
-                buffer = list(batch[ok][::-1]) if ok.any() else list(batch[:32][::-1])
-            q = buffer.pop()
-            status, ja = self._extend(ta, q)
-            if status != "trapped":
-                status_b, jb = self._connect(tb, ta.q[ja])
-                if status_b == "reached":
-                    pa, pb = ta.path_to_root(ja)[::-1], tb.path_to_root(jb)
-                    path = np.vstack([pa, pb[1:]])
-                    if not a_is_start:
-                        path = path[::-1]
-                    return path, it
-            ta, tb = tb, ta
-            a_is_start = not a_is_start
-        return None, self.max_iter
+        return _rrt_connect(self, start, goal, sampler)
 
     def shortcut(self, path: np.ndarray, rng: np.random.Generator) -> np.ndarray:
         """Random shortcuts: replace way-points i..j by a valid, cheaper
