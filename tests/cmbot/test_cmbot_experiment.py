@@ -120,3 +120,30 @@ def test_relocation_search_nearest_valid_stance_first(monkeypatch):
     assert prop.rear_foot_x == pytest.approx(8.25)
     assert calls == [7.95, 8.05, 7.9, 8.1, 7.85, 8.15, 7.8, 8.2, 7.75, 8.25]
     assert prop.shift_m == pytest.approx(0.25)
+
+
+@pytest.mark.slow
+def test_relocation_finds_a_real_stance_where_the_gate_passes():
+    """Unstubbed: with a 3.5 kg tool the §4 approach overloads J7 (static
+    torque > 150 N·m) at the seed's stance; the remedy search simulates the
+    nearest valid stances and proposes the first whose whole motion passes
+    the gate, for the same task in the world (the tool path, seen from the
+    moved base, is the seed's path offset by exactly the shift)."""
+    params = ExperimentParams(payload_kg=3.5)
+    plan = plan_manipulation(MODEL, params=params, relocate=True, max_shift_m=0.3)
+    assert not plan.gate.passed
+    failed = [c.name for c in plan.gate.checks if not c.passed]
+    assert any("torque" in n for n in failed), failed
+    prop = plan.proposal
+    assert prop is not None and prop.rear_foot_x is not None and prop.gate.passed
+    # nearest first: every stance tried before the proposal is no farther and failed
+    tried = [x for x, _ in prop.tried]
+    assert tried[-1] == pytest.approx(prop.rear_foot_x)
+    dists = [abs(x - 8.0) for x in tried]
+    assert dists == sorted(dists)
+    assert all("passed" not in why for _, why in prop.tried[:-1])
+    offset = prop.run.desired_pos - plan.run.desired_pos
+    np.testing.assert_allclose(offset, offset[:1].repeat(len(offset), axis=0), atol=1e-9)
+    assert np.linalg.norm(offset[0]) == pytest.approx(abs(prop.shift_m), abs=1e-9)
+    assert prop.run.pos_error.max() < 1e-3
+    assert prop.run.clearance.min() >= params.min_clearance_m
