@@ -163,6 +163,7 @@ def _bar_polygon(
     centre: np.ndarray,
     axis: np.ndarray,
     sliding_factor_m: float,
+    fill_slices: int = 1,
 ) -> np.ndarray:
     """NCBE (Alg. 1) of a bar sliced across its own axis, as an s-monotone ring.
 
@@ -186,8 +187,33 @@ def _bar_polygon(
     st = np.column_stack([s, t])
     right = _hull_arc(st, np.nonzero(sl == sl.max())[0], lower[-1], upper[-1])
     left = _hull_arc(st, np.nonzero(sl == 0)[0], upper[0], lower[0])
-    ring = np.concatenate([lower, right, upper[::-1], left])
-    poly = pts[ring]
+    # A dropout hole at a flange edge leaves one slice whose extreme point
+    # lies far inside the flange: a spike narrower than the real steel.  The
+    # interior slices take the outermost offset of their neighbours
+    # (a ±fill_slices running max / min), which fills holes up to that many
+    # slices long and cannot reach past the bar's own widest neighbour.
+    t_up, t_lo = t[upper].copy(), t[lower].copy()
+    if fill_slices > 0 and len(upper) > 2:
+        k = len(upper)
+        for d in range(1, fill_slices + 1):
+            t_up[d:] = np.maximum(t_up[d:], t[upper][:-d])
+            t_up[:-d] = np.maximum(t_up[:-d], t[upper][d:])
+            t_lo[d:] = np.minimum(t_lo[d:], t[lower][:-d])
+            t_lo[:-d] = np.minimum(t_lo[:-d], t[lower][d:])
+        t_up[[0, k - 1]] = t[upper][[0, k - 1]]  # the end caps start from real points
+        t_lo[[0, k - 1]] = t[lower][[0, k - 1]]
+
+    def lift(idx: np.ndarray, tt: np.ndarray) -> np.ndarray:
+        return centre + np.outer(s[idx], axis) + np.outer(tt, normal)
+
+    poly = np.concatenate(
+        [
+            lift(lower, t_lo),
+            pts[right],
+            lift(upper, t_up)[::-1],
+            pts[left],
+        ]
+    )
     keep = np.ones(len(poly), dtype=bool)
     keep[1:] = np.any(np.abs(np.diff(poly, axis=0)) > 1e-12, axis=1)
     return poly[keep]
