@@ -123,17 +123,15 @@ def _plan_and_approve(page, params: str) -> str:
         page.eval_on_selector_all("#plans tbody tr", "rows => rows.map(r => r.dataset.id)")
     )
     page.click("#submit-plan")
-    page.wait_for_function(
+    # One read that both waits and returns the id: the list re-renders on
+    # every event, so a second query could catch it mid-render.
+    plan_id = page.wait_for_function(
         "ids => [...document.querySelectorAll('#plans tbody tr[data-state=planned]')]"
-        ".some(r => !ids.includes(r.dataset.id))",
+        ".map(r => r.dataset.id).find(i => !ids.includes(i)) || null",
         arg=list(before),
         timeout=60_000,
-    )
-    plan_id = page.eval_on_selector_all(
-        "#plans tbody tr[data-state=planned]",
-        "(rows, ids) => rows.map(r => r.dataset.id).filter(i => !ids.includes(i))[0]",
-        list(before),
-    )
+    ).json_value()
+    assert isinstance(plan_id, str) and plan_id, plan_id
     page.locator(f"#plans tbody tr[data-id='{plan_id}']").click()
     page.wait_for_function(
         f"document.querySelector('#d-title').textContent.startsWith('{plan_id}')"
