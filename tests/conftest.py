@@ -11,10 +11,18 @@ from typing import Any
 
 import pytest
 from fastapi.testclient import TestClient
+from hypothesis import settings as hypothesis_settings
 
 from server.app import create_app
 from server.auth import create_token
 from server.settings import Settings
+
+# Property tests are deterministic by default (the same examples every run,
+# so CI cannot go red on a lucky draw); HYPOTHESIS_PROFILE=explore draws new
+# examples each run to hunt for counterexamples locally.
+hypothesis_settings.register_profile("deterministic", derandomize=True, database=None)
+hypothesis_settings.register_profile("explore", derandomize=False)
+hypothesis_settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE", "deterministic"))
 
 SHARED_DATA = Path(__file__).resolve().parents[2] / "shared" / "data"
 if not SHARED_DATA.is_dir():  # CI clones beside ../shared; a checkout elsewhere may set this

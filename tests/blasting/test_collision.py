@@ -67,8 +67,16 @@ def test_point_distance_matches_sampling_and_eq_3_14(seed):
     surf = spheroid_surface(f1, f2, cf, 200)
     brute = cKDTree(surf).query(p)[0]
     # sampled surface: distances agree to the sampling resolution, and the
-    # samples never come closer than the exact surface
-    h = cKDTree(surf).query(surf, k=2)[0][:, 1].max()
+    # samples never come closer than the exact surface.  The resolution is
+    # the grid's covering radius — half the longest cell diagonal (+10 % for
+    # the curvature), not the nearest-neighbour spacing, which only sees the
+    # finer of the two grid directions (seed 170: 2.3 mm vs 7.9 mm cells).
+    grid = surf.reshape(400, 200, 3)
+    diag = np.maximum(
+        np.linalg.norm(grid[1:, 1:] - grid[:-1, :-1], axis=-1),
+        np.linalg.norm(grid[1:, :-1] - grid[:-1, 1:], axis=-1),
+    )
+    h = 0.55 * diag.max()
     assert np.all(np.abs(d) <= brute + 1e-9)
     assert np.abs(np.abs(d) - brute).max() < h
     # sign = Eq. 3.14 (R1 + R2 ≤ C_f inside)
