@@ -324,26 +324,18 @@ def _edge_paths(
             )
             prev = None
         else:
-            planner: EdgePlanner | DiffDrivePlanner
-            if p.motion_model == "differential":
-                planner = DiffDrivePlanner(
-                    valid,
-                    yaw_radius_m=0.5 * p.footprint_length_m,
-                    step_m=p.rrt_step_m,
-                    resolution_m=p.rrt_resolution_m,
-                    turn_resolution_rad=p.turn_resolution_rad,
-                    max_iterations=p.rrt_max_iterations,
-                    shortcut_rounds=p.shortcut_rounds,
-                )
-            else:
-                planner = EdgePlanner(
-                    valid,
-                    yaw_radius_m=0.5 * p.footprint_length_m,
-                    step_m=p.rrt_step_m,
-                    resolution_m=p.rrt_resolution_m,
-                    max_iterations=p.rrt_max_iterations,
-                    shortcut_rounds=p.shortcut_rounds,
-                )
+            common = {
+                "yaw_radius_m": 0.5 * p.footprint_length_m,
+                "step_m": p.rrt_step_m,
+                "resolution_m": p.rrt_resolution_m,
+                "max_iterations": p.rrt_max_iterations,
+                "shortcut_rounds": p.shortcut_rounds,
+            }
+            planner: EdgePlanner | DiffDrivePlanner = (
+                DiffDrivePlanner(valid, turn_resolution_rad=p.turn_resolution_rad, **common)
+                if p.motion_model == "differential"
+                else EdgePlanner(valid, **common)
+            )
             sampler = corridor_sampler(
                 a, b, rng, lateral_sigma_m=0.03, margin_m=0.5 * p.footprint_length_m
             )

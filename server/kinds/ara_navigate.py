@@ -29,6 +29,7 @@ from planners.navigation import NavigationParams, NavigationResult, plan_navigat
 from planners.navigation.pibc import steel_union, swept_on_steel
 from planners.navigation.synthetic import SAMPLES, SHAPES
 from server.kinds.base import Check, JobContext, KindOutput, PlanKind, check_ge
+from server.kinds.programs import wheel_steps
 
 
 class AraNavigateParams(BaseModel):
@@ -158,7 +159,7 @@ def _checks(res: NavigationResult, p: AraNavigateParams) -> tuple[list[Check], d
         )
     )
     if poses and p.plan_paths:
-        slide = sum(_sideways_steps(x) for x in poses)
+        slide = sum(int(wheel_steps(x).sideways.sum()) for x in poses)
         checks.append(
             Check(
                 name="wheel_motion",
@@ -209,17 +210,6 @@ def _swept(poses: np.ndarray, steel: Any, geom: dict[str, float]) -> np.ndarray:
         center_x_m=geom["center_x_m"],
         center_y_m=geom["center_y_m"],
     )
-
-
-def _sideways_steps(poses: np.ndarray, tol_m: float = 1e-5, tol_rad: float = 1e-6) -> int:
-    """Consecutive pose pairs that are neither a turn in place nor a straight
-    drive along the heading (what a differential drive cannot do)."""
-    d = np.diff(poses, axis=0)
-    dist = np.hypot(d[:, 0], d[:, 1])
-    dyaw = np.abs((d[:, 2] + np.pi) % (2 * np.pi) - np.pi)
-    lateral = np.abs(d[:, 0] * np.sin(poses[:-1, 2]) - d[:, 1] * np.cos(poses[:-1, 2]))
-    ok = (dist <= 1e-6) | ((dyaw <= tol_rad) & (lateral <= tol_m))
-    return int((~ok).sum())
 
 
 def run(p: AraNavigateParams, ctx: JobContext) -> KindOutput:

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import itertools
 from collections.abc import Sequence
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -72,6 +73,47 @@ def differential_drive(
     return cmds
 
 
+@dataclass(frozen=True)
+class WheelSteps:
+    """Consecutive pose pairs (x, y, yaw) split the way a differential drive
+    sees them: ``dist`` moved, ``dyaw`` turned (wrapped), ``along`` /
+    ``lateral`` the move along / across the start heading; ``turn`` (turn in
+    place), ``drive`` (straight along the shared heading) and ``sideways``
+    (neither: what the wheels cannot do)."""
+
+    dist: np.ndarray
+    dyaw: np.ndarray
+    along: np.ndarray
+    lateral: np.ndarray
+    turn: np.ndarray
+    drive: np.ndarray
+
+    @property
+    def sideways(self) -> np.ndarray:
+        return ~self.turn & ~self.drive
+
+
+def wheel_steps(
+    poses: np.ndarray,
+    *,
+    position_tol_m: float = 1e-6,
+    lateral_tol_m: float = 1e-5,
+    yaw_tol_rad: float = 1e-6,
+) -> WheelSteps:
+    """Classify each step of ``poses`` (K,3) as a turn in place, a straight
+    drive, or a sideways move (:class:`WheelSteps`)."""
+    q = np.asarray(poses, dtype=float).reshape(-1, 3)
+    d = np.diff(q, axis=0)
+    dist = np.hypot(d[:, 0], d[:, 1])
+    dyaw = (d[:, 2] + np.pi) % (2 * np.pi) - np.pi
+    c, s = np.cos(q[:-1, 2]), np.sin(q[:-1, 2])
+    along = d[:, 0] * c + d[:, 1] * s
+    lateral = np.abs(d[:, 0] * s - d[:, 1] * c)
+    turn = dist <= position_tol_m
+    drive = ~turn & (np.abs(dyaw) <= yaw_tol_rad) & (lateral <= lateral_tol_m)
+    return WheelSteps(dist, dyaw, along, lateral, turn, drive)
+
+
 def differential_drive_poses(
     poses: np.ndarray,
     *,
@@ -101,15 +143,11 @@ def differential_drive_poses(
     q = np.asarray(poses, dtype=float).reshape(-1, 3)
     if len(q) < 1:
         raise ValueError("no poses to drive")
-    d = np.diff(q, axis=0)
-    dist = np.hypot(d[:, 0], d[:, 1])
-    dyaw = (d[:, 2] + np.pi) % (2 * np.pi) - np.pi
-    heading = np.column_stack([np.cos(q[:-1, 2]), np.sin(q[:-1, 2])])
-    along = d[:, 0] * heading[:, 0] + d[:, 1] * heading[:, 1]
-    lateral = np.abs(d[:, 0] * heading[:, 1] - d[:, 1] * heading[:, 0])
-    turn = dist <= position_tol_m
-    drive = ~turn & (np.abs(dyaw) <= yaw_tol_rad) & (lateral <= lateral_tol_m)
-    bad = ~turn & ~drive
+    st = wheel_steps(
+        q, position_tol_m=position_tol_m, lateral_tol_m=lateral_tol_m, yaw_tol_rad=yaw_tol_rad
+    )
+    dist, dyaw, along, lateral, turn = st.dist, st.dyaw, st.along, st.lateral, st.turn
+    bad = st.sideways
     if bad.any():
         k = int(np.argmax(bad))
         raise ValueError(
