@@ -314,15 +314,17 @@ def waypoint_clearance(
     horizon: float = np.inf,
     sign_only: bool = False,
     margin: float = 0.0,
+    rel_tol: float = 0.0,
 ) -> np.ndarray:
     """Signed clearance (m) of the force-field ellipsoids per way-point (see
-    :func:`planners.blasting.collision.clearance` for ``horizon``/``sign_only``)."""
+    :func:`planners.blasting.collision.clearance` for ``horizon``,
+    ``sign_only`` and ``rel_tol``)."""
     if obstacles.empty:
         return np.full(len(q), np.inf)
     out = np.empty(len(q))
     for s in range(0, len(q), chunk):
         S = link_spheroids(robot, q[s : s + chunk], nozzle_m, kp, foci)
         out[s : s + chunk] = clearance(
-            S, obstacles, horizon=horizon, sign_only=sign_only, margin=margin
+            S, obstacles, horizon=horizon, sign_only=sign_only, margin=margin, rel_tol=rel_tol
         )
     return out

@@ -248,13 +248,16 @@ def spheroid_box_distance(
     max_iter: int = 200,
     sign_only: bool = False,
     margin: float = 0.0,
+    rel_tol: float = 0.0,
 ) -> np.ndarray:
     """Signed distance between solid spheroids (1-D batch) and a box.
 
     Separated: alternating projections between the two convex sets converge
     to a closest pair; their gap is an upper bound and the separating-plane
     bound ``min_box(n·x) − h_spheroid(n)`` (n along the gap) a lower bound,
-    so each pair iterates until the two agree within ``tol`` (or, with
+    so each pair iterates until the two agree within ``tol`` or
+    ``rel_tol`` × the gap (the returned lower bound may then understate the
+    distance by that much, never overstate it; or, with
     ``sign_only``, until the lower bound exceeds ``margin``); the lower
     bound is returned.  Overlapping (a box
     point inside the spheroid, Eq. 3.14): negative, −(depth of the deepest
@@ -295,7 +298,7 @@ def spheroid_box_distance(
         lba = box_support_min(box, nn) - spheroid_support(Sa, nn)
         lb[active] = np.where(touching, 0.0, np.maximum(lba, 0.0))
         overlap[active] = touching | Sa.contains(ya)
-        done = overlap[active] | (gap - lba <= tol)
+        done = overlap[active] | (gap - lba <= np.maximum(tol, rel_tol * gap))
         if sign_only:
             done |= lba > margin
         active = active[~done]
@@ -321,13 +324,15 @@ def clearance(
     horizon: float = np.inf,
     sign_only: bool = False,
     margin: float = 0.0,
+    rel_tol: float = 0.0,
 ) -> np.ndarray:
     """Smallest signed distance from each set of spheroids (..., E) to any
     obstacle: returns (...,) (``inf`` when there are none).  Pairs whose
     bounding-sphere lower bound exceeds the best upper bound (or ``horizon``)
     are not refined, so values beyond ``horizon`` are lower bounds; with
     ``sign_only`` only the comparison with ``margin`` is exact (values above
-    it are lower bounds)."""
+    it are lower bounds); ``rel_tol`` > 0 lets box distances stop at a lower
+    bound within that fraction of the gap (see :func:`spheroid_box_distance`)."""
     shape = S.cf.shape[:-1]
     E = S.cf.shape[-1]
     flat = Spheroids(S.f1.reshape(-1, 3), S.f2.reshape(-1, 3), S.cf.reshape(-1))
@@ -343,7 +348,9 @@ def clearance(
         for k, box in enumerate(obstacles.boxes):
             need = np.nonzero((lbs[:, k] <= ub) & (lbs[:, k] <= horizon))[0]
             if len(need):
-                d = spheroid_box_distance(flat[need], box, sign_only=sign_only, margin=margin)
+                d = spheroid_box_distance(
+                    flat[need], box, sign_only=sign_only, margin=margin, rel_tol=rel_tol
+                )
                 best[need] = np.minimum(best[need], d)
             rest = np.setdiff1d(np.arange(n), need)
             best[rest] = np.minimum(best[rest], lbs[rest, k])

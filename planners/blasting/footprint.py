@@ -118,9 +118,7 @@ def ellipse_matrices(
     return np.stack([d / a[:, None], n / b[:, None]], axis=1)
 
 
-def ray_footprint(
-    L: float, tan_alpha: float, beta: float, n_rays: int = 720
-) -> np.ndarray:
+def ray_footprint(L: float, tan_alpha: float, beta: float, n_rays: int = 720) -> np.ndarray:
     """Brute force: where the cone's boundary rays meet the plane (2-D points,
     origin at the axis hit point, x along the tilt) — for tests and the
     benchmark's error table."""
