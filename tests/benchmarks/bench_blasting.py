@@ -309,12 +309,21 @@ def section_whole() -> None:
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--quick", action="store_true", help="skip the 3 m coverage cases")
+    ap.add_argument(
+        "--sections", default="5,2,3,4,1", help="comma-separated section numbers, in run order"
+    )
     args = ap.parse_args()
-    section_whole()
-    section_sequencing()
-    section_500()
-    section_ik()
-    section_coverage((0.5,) if args.quick else (0.5, 3.0))
+    run = {
+        "1": lambda: section_coverage((0.5,) if args.quick else (0.5, 3.0)),
+        "2": section_sequencing,
+        "3": section_500,
+        "4": section_ik,
+        "5": section_whole,
+    }
+    for k in args.sections.split(","):
+        if k.strip() not in run:
+            ap.error(f"unknown section {k!r}; sections are 1-5")
+        run[k.strip()]()
 
 
 if __name__ == "__main__":
