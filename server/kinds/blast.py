@@ -149,6 +149,9 @@ def _surface(p: BlastParams, ctx: JobContext) -> tuple[Surface, np.ndarray | Non
     )
     if not planes:
         raise NoPlaneError(f"no plane with ≥ 100 points found in cloud {p.cloud_id}")
+    # detect_planes reports in discovery order (one plane's pieces together);
+    # the operator picks by index, and index 0 is promised to be the largest
+    planes = sorted(planes, key=lambda pl: -pl.n_inliers)
     if p.plane_index >= len(planes):
         raise InvalidInputError(
             f"plane_index {p.plane_index} out of range: the cloud has {len(planes)} planes"

@@ -63,6 +63,11 @@ def test_plane_picked_from_a_cloud(api) -> None:
     assert abs(res["surface"]["normal"][2]) > 0.99 and res["surface"]["normal"][2] < 0
     assert 0.15 < res["surface"]["area_m2"] < 0.2
     assert len(res["planes"]) >= 3
+    # indices are promised largest first (detect_planes reports in discovery order)
+    sizes = [pl["points"] for pl in res["planes"]]
+    assert sizes == sorted(sizes, reverse=True) and [pl["index"] for pl in res["planes"]] == list(
+        range(len(sizes))
+    )
     checks = {c["name"]: c for c in plan["checks"]}
     assert checks["clearance"]["passed"] and checks["joint_speed"]["passed"]
     r = api.post(
