@@ -77,3 +77,22 @@ def drop_nonfinite(points: np.ndarray) -> tuple[np.ndarray, int]:
     pts = as_points(points, "points", dims=tuple(range(1, 8)), finite=False)
     keep = np.all(np.isfinite(pts), axis=1)
     return pts[keep], int(len(pts) - np.count_nonzero(keep))
+
+
+def statistical_outliers(points: np.ndarray, k: int = 8, std_ratio: float = 3.0) -> np.ndarray:
+    """Mask of outliers as PCL's StatisticalOutlierRemoval finds them: a point
+    whose mean distance to its ``k`` nearest neighbours exceeds the mean of
+    that statistic over the cloud by more than ``std_ratio`` standard
+    deviations."""
+    from scipy.spatial import cKDTree
+
+    pts = as_points(points, "points", dims=3)
+    k = int(k)
+    if k < 1:
+        raise InvalidInputError(f"k must be >= 1, got {k}")
+    positive(std_ratio, "std_ratio")
+    if len(pts) <= k:
+        return np.zeros(len(pts), dtype=bool)
+    d, _ = cKDTree(pts).query(pts, k=k + 1)
+    mean_d = d[:, 1:].mean(axis=1)
+    return mean_d > mean_d.mean() + float(std_ratio) * mean_d.std()

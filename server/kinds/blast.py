@@ -24,6 +24,7 @@ from planners.errors import InvalidInputError, NoPlaneError
 from server.kinds.base import Check, JobContext, KindOutput, PlanKind
 
 ROBOT = "denso_vm6083"
+FACING_DEG = 30.0  # chosen: a plane point whose local normal is further off is not of the patch
 
 
 class PolygonSurface(BaseModel):
@@ -140,7 +141,8 @@ def _surface(p: BlastParams, ctx: JobContext) -> tuple[Surface, np.ndarray | Non
         return p.polygon.build(), None, {}
     if p.cloud_id is None:
         return scenes.bridge_surface(int(p.seed_surface or 1)), None, {}
-    from planners.pointcloud.filters import voxel_downsample
+    from planners.pointcloud.filters import statistical_outliers, voxel_downsample
+    from planners.pointcloud.normals import facing_mask
     from planners.pointcloud.ransac import detect_planes
 
     pts = np.asarray(ctx.load_cloud(p.cloud_id), dtype=float)
@@ -156,7 +158,16 @@ def _surface(p: BlastParams, ctx: JobContext) -> tuple[Surface, np.ndarray | Non
         raise InvalidInputError(
             f"plane_index {p.plane_index} out of range: the cloud has {len(planes)} planes"
         )
-    mask = planes[p.plane_index].inliers
+    mask = planes[p.plane_index].inliers.copy()
+    # a distance threshold also takes the strip where a perpendicular face
+    # (a flange) crosses the plane; only points whose own surface faces
+    # the plane's way outline the patch
+    # (normals from the whole cloud: the strip's neighbours are on its face)
+    if len(pts) >= 12:
+        mask &= facing_mask(pts, planes[p.plane_index].normal, FACING_DEG)
+    # isolated points left in the plane would pull thin spikes into the outline
+    idx = np.nonzero(mask)[0]
+    mask[idx[statistical_outliers(pts[idx])]] = False
     surf = Surface.from_points(pts[mask], toward=base)
     label = np.full(len(pts), -1, dtype=np.int32)
     for i, pl in enumerate(planes):

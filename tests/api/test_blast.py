@@ -6,6 +6,7 @@ import socket
 import time
 
 import numpy as np
+import pytest
 
 
 def free_port() -> int:
@@ -57,7 +58,7 @@ def test_plane_picked_from_a_cloud(api) -> None:
     assert r.status_code == 201, r.text
     cloud = r.json()["id"]
     plan = api.wait(api.submit("blast", {"cloud_id": cloud, "plane_index": 0})["id"], timeout=240)
-    assert plan["state"] in ("planned", "rejected"), plan.get("error")
+    assert plan["state"] == "planned", (plan.get("error"), plan.get("checks"))
     res = plan["result"]
     # the largest plane is the rusted patch on the roof (Surface 1), normal toward the robot
     assert abs(res["surface"]["normal"][2]) > 0.99 and res["surface"]["normal"][2] < 0
@@ -70,6 +71,14 @@ def test_plane_picked_from_a_cloud(api) -> None:
     )
     checks = {c["name"]: c for c in plan["checks"]}
     assert checks["clearance"]["passed"] and checks["joint_speed"]["passed"]
+    # the next two planes are the patches on the girder web (Surfaces 2 and 3):
+    # without the facing filter and outlier removal, points where the flange
+    # crosses the web plane pulled spikes into their outlines (coverage 98 %)
+    for k, normal_x in ((1, 1.0), (2, 1.0)):
+        pk = api.wait(api.submit("blast", {"cloud_id": cloud, "plane_index": k})["id"], timeout=240)
+        failed = [c["message"] for c in pk["checks"] if not c["passed"]]
+        assert pk["state"] == "planned" and not failed, (pk.get("error"), failed)
+        assert pk["result"]["surface"]["normal"][0] == pytest.approx(normal_x, abs=0.01)
     r = api.post(
         "/api/v1/plans", json={"kind": "blast", "params": {"cloud_id": cloud, "plane_index": 99}}
     )
