@@ -490,10 +490,25 @@ def plan_blasting(
     P2 = c2[idx]
     pen = penalty[np.ix_(idx, idx)] if penalty is not None else None
     cpen = collision_penalty_m if pen is not None else 0.0
-    if sequencer == "ga":
-        sub = _seq.sequence_ga(P2, penalty=pen, c=cpen, seed=seed).order
+
+    def sequence(g: np.ndarray) -> np.ndarray:
+        pg = pen[np.ix_(g, g)] if pen is not None else None
+        if len(g) <= 2:
+            return g
+        if sequencer == "ga":
+            return g[_seq.sequence_ga(P2[g], penalty=pg, c=cpen, seed=seed).order]
+        return g[
+            _seq.sequence_default(P2[g], row_pitch=1.5 * r, angles=(angle,), penalty=pg, c=cpen)
+        ]
+
+    family = np.full(N, -1)
+    groups = _family_groups(oks[idx]) if Qs is not None else None
+    if groups is None:
+        sub = sequence(np.arange(len(idx)))
     else:
-        sub = _seq.sequence_default(P2, row_pitch=1.5 * r, angles=(angle,), penalty=pen, c=cpen)
+        sub = _join_tours([sequence(g) for g, _ in groups], P2)
+        for g, f in groups:
+            family[idx[g]] = f
     order = idx[sub]
     timings["sequencing_s"] = time.perf_counter() - t2
 
@@ -504,8 +519,9 @@ def plan_blasting(
         _progress(progress, 0.75, "trajectory")
         traj = _trajectory(
             robot, order, flange, axes, Qs, oks, q_start, step_m, approach_waypoints, obst,
-            nozzle_length_m, kp, joint_planner, seed,
+            nozzle_length_m, kp, joint_planner, seed, family,
         )  # fmt: skip
+        traj.stats["family_groups"] = 1 if groups is None else len(groups)
         if len(traj.unreached):
             keep[traj.unreached] = False
             order = order[~np.isin(order, traj.unreached)]
@@ -678,6 +694,46 @@ def _penalty_matrix(
     return pen
 
 
+def _family_mask(f: np.ndarray) -> np.ndarray:
+    """(K,8) branches of arm families ``f`` (K,): IK branch b = 4·wrist + f
+    (robots.denso_vm6083.ik_all), so a family is a position branch with
+    either wrist."""
+    return (np.arange(8)[None, :] % 4) == np.asarray(f)[:, None]
+
+
+def _family_groups(free: np.ndarray) -> list[tuple[np.ndarray, int]] | None:
+    """Spots grouped by arm family when obstacles split them: None when one
+    family (position branch, either wrist) reaches every spot collision-free;
+    else a greedy set cover — the family reaching most of the spots left
+    takes them all — as (spot indices, family), largest first.  Each group
+    is then sequenced and blasted in its family, so the arm reconfigures
+    (typically a 180° J1 swing) once per group instead of wherever the
+    sequence happens to cross between spots only one family reaches."""
+    fam = free[:, :4] | free[:, 4:]
+    if fam.all(axis=0).any() or not fam.any(axis=1).all():
+        return None
+    left = np.ones(len(fam), dtype=bool)
+    out = []
+    while left.any():
+        f = int(np.argmax((fam & left[:, None]).sum(axis=0)))
+        g = np.nonzero(left & fam[:, f])[0]
+        out.append((g, f))
+        left[g] = False
+    return out
+
+
+def _join_tours(tours: list[np.ndarray], pts: np.ndarray) -> np.ndarray:
+    """Concatenate tours in the given order, each after the first run in the
+    direction that starts nearer to where the previous one ended."""
+    out = [tours[0]]
+    for t in tours[1:]:
+        end = pts[out[-1][-1]]
+        if np.linalg.norm(pts[t[-1]] - end) < np.linalg.norm(pts[t[0]] - end):
+            t = t[::-1]
+        out.append(t)
+    return np.concatenate(out)
+
+
 @dataclass
 class _Traj:
     q: np.ndarray
@@ -689,7 +745,7 @@ class _Traj:
 
 def _trajectory(
     robot, order, flange, axes, Qs, oks, q_start, step_m, approach_waypoints, obst, nozzle_m, kp,
-    joint_planner, seed,
+    joint_planner, seed, family=None,
 ) -> _Traj:  # fmt: skip
     """Way-points: start pose, ``approach_waypoints`` joint-space points to the
     first spot, then straight moves between spots every ``step_m``.
@@ -731,8 +787,11 @@ def _trajectory(
         )
         return c - SAFETY_M
 
-    # Cartesian way-points between consecutive spots
+    fam = np.full(len(Qs), -1) if family is None else np.asarray(family)
+    # Cartesian way-points between consecutive spots; each carries the arm
+    # family its spots were grouped in (-1: any)
     P, A, spot = [flange[order[0]]], [axes[order[0]]], [order[0]]
+    wfam = [fam[order[0]]]
     for a_i, b_i in itertools.pairwise(order):
         L = float(np.linalg.norm(flange[b_i] - flange[a_i]))
         n = max(1, int(np.ceil(L / step_m)))
@@ -741,14 +800,20 @@ def _trajectory(
         ax = axes[a_i] + t * (axes[b_i] - axes[a_i])
         A.append(ax / np.linalg.norm(ax, axis=1, keepdims=True))
         spot.append(np.r_[np.full(n - 1, -1), b_i])
+        between = fam[a_i] if fam[a_i] == fam[b_i] else -1
+        wfam.append(np.r_[np.full(n - 1, between), fam[b_i]])
     P = np.vstack([np.atleast_2d(p) for p in P])
     A = np.vstack([np.atleast_2d(a) for a in A])
     spot = np.concatenate([np.atleast_1d(s) for s in spot]).astype(int)
+    wfam = np.concatenate([np.atleast_1d(f) for f in wfam]).astype(int)
     Q, ok = robot.ik_axis(P, A, q_start)
     at = spot >= 0
     # spots use their own solution set (tilt / approximate IK included)
     Q[at] = Qs[spot[at]]
     ok[at] = oks[spot[at]]
+    grouped = wfam >= 0
+    if grouped.any():
+        ok[grouped] &= _family_mask(wfam[grouped])
     for _ in range(4):
         usable = ok.any(axis=1)
         usable[at] = True
@@ -903,8 +968,8 @@ def _via_polylines(
                 corners = [q0, *([] if a is None else [a]), *mid, *([] if b is None else [b]), q1]
                 cands.append(np.stack(corners))
             if home is not None:
-                cands.append(np.stack([q0, *([] if a is None else [a]), home,
-                                       *([] if b is None else [b]), q1]))  # fmt: skip
+                pa, pb = [] if a is None else [a], [] if b is None else [b]
+                cands.append(np.stack([q0, *pa, home, *pb, q1]))
     length = [float(np.abs(np.diff(c, axis=0)).max(axis=1).sum()) for c in cands]
     return [cands[i] for i in np.argsort(length, kind="stable")]
 

@@ -7,8 +7,18 @@ import itertools
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
-from planners.blasting import FOCI, _via_polylines, plan_blasting, scenes
+from planners.blasting import (
+    FOCI,
+    _family_groups,
+    _family_mask,
+    _join_tours,
+    _via_polylines,
+    plan_blasting,
+    scenes,
+)
 from planners.blasting import arm as A
 from planners.blasting.collision import Obstacles
 from planners.errors import CancelledError, InvalidInputError, StreamLengthError
@@ -157,6 +167,12 @@ def test_colliding_spots_are_rejected_not_planned_through():
     # the skipped discs are not in the sequence and coverage says so
     assert not set(p.skipped) & set(p.order)
     assert p.coverage <= p.coverage_planned
+    # the box leaves some spots to one arm family only: spots are grouped by
+    # family, so the shoulder swings (J1 > 150° between consecutive spots)
+    # happen only between groups (7 swings without the grouping)
+    at = np.nonzero(p.waypoint_spot >= 0)[0]
+    swings = int((np.abs(np.diff(p.joint_trajectory[at, 0])) > np.deg2rad(150)).sum())
+    assert p.motion["family_groups"] > 1 and swings <= p.motion["family_groups"] - 1
 
 
 def test_inputs_are_validated():
@@ -219,3 +235,41 @@ def test_via_polylines_start_end_and_order():
         np.testing.assert_array_equal(p[-1], q1)
     assert any(len(p) == 2 for p in polys)
     assert sum(any((c == home).all() for c in p) for p in polys) == 6
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.integers(0, 2**31 - 1), st.integers(1, 12))
+def test_family_groups_cover_every_spot_in_a_free_family(seed, n):
+    rng = np.random.default_rng(seed)
+    free = rng.random((n, 8)) < 0.35
+    free[np.arange(n), rng.integers(0, 8, n)] = True  # every spot reachable somehow
+    groups = _family_groups(free)
+    fam = free[:, :4] | free[:, 4:]
+    if fam.all(axis=0).any():
+        assert groups is None  # one family reaches every spot: no split
+        return
+    assert groups is not None
+    seen = np.concatenate([g for g, _ in groups])
+    assert sorted(seen) == list(range(n))  # a partition
+    for g, f in groups:
+        assert fam[g, f].all()
+    # greedy set cover: never more groups than spots, and no family used twice
+    assert len({f for _, f in groups}) == len(groups) <= n
+    # optimal cover size by brute force; greedy is within the H(n) bound
+    best = min(
+        k
+        for k in range(1, 5)
+        for fs in itertools.combinations(range(4), k)
+        if fam[:, list(fs)].any(axis=1).all()
+    )
+    assert len(groups) <= best * sum(1 / i for i in range(1, n + 1)) + 1e-9
+    np.testing.assert_array_equal(
+        _family_mask(np.array([0, 3])),
+        [[1, 0, 0, 0, 1, 0, 0, 0], [0, 0, 0, 1, 0, 0, 0, 1]],
+    )
+
+
+def test_join_tours_turns_each_tour_to_start_near_the_last_end():
+    pts = np.array([[0.0, 0], [1, 0], [5, 0], [2, 0]])
+    out = _join_tours([np.array([0, 1]), np.array([2, 3])], pts)
+    np.testing.assert_array_equal(out, [0, 1, 3, 2])
