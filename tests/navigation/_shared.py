@@ -1,10 +1,14 @@
-"""Cached pipeline runs shared by the navigation tests (keeps the suite fast)."""
+"""Cached pipeline runs and synthetic boundaries shared by the navigation
+tests (keeps the suite fast)."""
 
 from __future__ import annotations
 
 from functools import lru_cache
 
+import numpy as np
+
 from planners.navigation import NavigationParams, NavigationResult, plan_navigation
+from planners.navigation.boundaries import star_polygon
 from planners.navigation.synthetic import SyntheticStructure, make_structure
 
 #: Generator seeds the unit tests use per shape (the benchmark runs 20).
@@ -37,3 +41,23 @@ def route_only(shape: str, seed: int, segmentation: str = "default") -> Navigati
 def with_paths(shape: str, seed: int) -> NavigationResult:
     st = structure(shape, seed)
     return plan_navigation(st.points, params=NavigationParams(**SMALL_ROBOT))
+
+
+def bar_boundaries(rects) -> tuple[list[np.ndarray], list[np.ndarray]]:
+    """Centres and star-polygon boundaries of axis-aligned bars ((x0, y0), (x1, y1)),
+    each grown by 1 mm so neighbours overlap, as the pipeline's boundaries
+    overlap across borders."""
+    polys, centres = [], []
+    for (x0, y0), (x1, y1) in rects:
+        c = np.array([(x0 + x1) / 2, (y0 + y1) / 2])
+        pts = np.array(
+            [
+                [x0 - 1e-3, y0 - 1e-3],
+                [x1 + 1e-3, y0 - 1e-3],
+                [x1 + 1e-3, y1 + 1e-3],
+                [x0 - 1e-3, y1 + 1e-3],
+            ]
+        )
+        polys.append(star_polygon(pts, c))
+        centres.append(c)
+    return centres, polys

@@ -13,7 +13,6 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from shapely import affinity
 
-from planners.navigation.boundaries import star_polygon
 from planners.navigation.pibc import (
     BoundarySet,
     footprint_points,
@@ -31,6 +30,8 @@ from planners.navigation.rrt import (
     rtr_waypoints,
     wrap,
 )
+
+from ._shared import bar_boundaries
 
 FAST = settings(max_examples=60, deadline=None)
 
@@ -365,19 +366,7 @@ def _shape(rects: list[tuple[tuple[float, float], tuple[float, float]]]):
     """Boundary polygons of axis-aligned bars overlapping by 1 mm (as the
     pipeline's boundaries overlap across borders), the PIBC set, the exact
     steel and an independent shapely union."""
-    polys, centres = [], []
-    for (x0, y0), (x1, y1) in rects:
-        c = np.array([(x0 + x1) / 2, (y0 + y1) / 2])
-        pts = np.array(
-            [
-                [x0 - 1e-3, y0 - 1e-3],
-                [x1 + 1e-3, y0 - 1e-3],
-                [x1 + 1e-3, y1 + 1e-3],
-                [x0 - 1e-3, y1 + 1e-3],
-            ]
-        )
-        polys.append(star_polygon(pts, c))
-        centres.append(c)
+    centres, polys = bar_boundaries(rects)
     union = shapely.union_all(
         [shapely.box(x0 - 1e-3, y0 - 1e-3, x1 + 1e-3, y1 + 1e-3) for (x0, y0), (x1, y1) in rects]
     )

@@ -5,9 +5,10 @@ from __future__ import annotations
 import numpy as np
 import shapely
 
-from planners.navigation.boundaries import star_polygon
 from planners.navigation.pibc import BoundarySet, footprint_points, poses_valid, project_footprint
 from planners.navigation.rrt import EdgePlanner, corridor_sampler, settle_pose, wrap
+
+from ._shared import bar_boundaries
 
 # An L of two 0.10 m wide bars meeting in a 0.10 m corner square.
 RECTS = [((0.0, -0.05), (1.0, 0.05)), ((-0.05, 0.05), (0.05, 1.0)), ((-0.05, -0.05), (0.05, 0.05))]
@@ -15,22 +16,8 @@ FOOT = footprint_points(0.12, 0.03, spacing_m=0.02)
 
 
 def _boundaries() -> tuple[BoundarySet, shapely.Geometry]:
-    polys, centres = [], []
-    for (x0, y0), (x1, y1) in RECTS:
-        c = np.array([(x0 + x1) / 2, (y0 + y1) / 2])
-        # Boundaries overlap by 1 mm, as the pipeline's do across borders.
-        pts = np.array(
-            [
-                [x0 - 1e-3, y0 - 1e-3],
-                [x1 + 1e-3, y0 - 1e-3],
-                [x1 + 1e-3, y1 + 1e-3],
-                [x0 - 1e-3, y1 + 1e-3],
-            ]
-        )
-        polys.append(star_polygon(pts, c))
-        centres.append(c)
     union = shapely.union_all([shapely.box(x0, y0, x1, y1) for (x0, y0), (x1, y1) in RECTS])
-    return BoundarySet(centres, polys), union.buffer(1.01e-3)
+    return BoundarySet(*bar_boundaries(RECTS)), union.buffer(1.01e-3)
 
 
 def _on_steel(poses: np.ndarray, union: shapely.Geometry) -> bool:
