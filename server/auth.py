@@ -5,14 +5,26 @@ is enough for random secrets of this size — there is nothing to brute-force).
 The console's browser session carries the same token in an HttpOnly cookie so
 that the scene iframe and the event stream, which cannot set headers, are
 authenticated too.
+
+A token may carry an expiry.  Long-lived connections (event streams, scene
+websockets) are checked for the whole of their life, not only at the
+handshake: :func:`until_invalid` returns once the token is revoked or expired.
+It compares the expiry with the clock and the store's in-process revocation
+counter every ``poll_s`` (0.25 s), and re-reads the token row on a change of
+that counter or every ``recheck_s`` (2 s, which also catches a revocation made
+by another process such as ``steelpath token revoke``).
 """
 
 from __future__ import annotations
 
+import asyncio
 import hashlib
 import os
+import re
 import secrets
+import time
 from dataclasses import dataclass
+from datetime import UTC, datetime, timedelta
 from pathlib import Path
 from typing import Annotated
 
@@ -34,12 +46,49 @@ def generate_token() -> str:
     return TOKEN_PREFIX + secrets.token_urlsafe(32)
 
 
-def create_token(store: Store, name: str, role: str, actor: str) -> tuple[str, str]:
-    """Create a token; returns ``(token_id, secret)``.  The secret is not stored."""
+#: Longest accepted token lifetime (10 years): beyond that, use no expiry.
+MAX_LIFETIME_S = 10 * 365 * 86400
+_UNITS = {"s": 1, "m": 60, "h": 3600, "d": 86400}
+_DURATION = re.compile(r"^\s*(\d+(?:\.\d+)?)\s*([smhd])\s*$")
+
+
+def parse_duration(text: str) -> float:
+    """``"30d"``, ``"12h"``, ``"15m"``, ``"90s"`` → seconds; ``ValueError`` otherwise."""
+    m = _DURATION.match(text or "")
+    if m is None:
+        raise ValueError(
+            f"invalid duration {text!r}: give a number with a unit s, m, h or d (e.g. 30d, 12h)"
+        )
+    seconds = float(m.group(1)) * _UNITS[m.group(2)]
+    check_lifetime(seconds)
+    return seconds
+
+
+def check_lifetime(seconds: float) -> None:
+    if not (0 < seconds <= MAX_LIFETIME_S):
+        raise ValueError(
+            f"token lifetime must be more than 0 s and at most {MAX_LIFETIME_S} s "
+            f"(10 years); got {seconds:g} s"
+        )
+
+
+def create_token(
+    store: Store, name: str, role: str, actor: str, *, expires_in_s: float | None = None
+) -> tuple[str, str]:
+    """Create a token; returns ``(token_id, secret)``.  The secret is not stored.
+
+    ``expires_in_s`` (seconds from now) makes it expire; ``None`` never expires.
+    """
     if role not in ROLES:
         raise ValueError(f"unknown role {role!r}; choose one of {', '.join(ROLES)}")
+    expires_at = None
+    if expires_in_s is not None:
+        check_lifetime(expires_in_s)
+        expires_at = (datetime.now(UTC) + timedelta(seconds=expires_in_s)).isoformat(
+            timespec="milliseconds"
+        )
     secret = generate_token()
-    rec = store.add_token(name, role, hash_token(secret), actor)
+    rec = store.add_token(name, role, hash_token(secret), actor, expires_at=expires_at)
     return rec.id, secret
 
 
@@ -61,6 +110,7 @@ class Principal:
     token_id: str
     name: str
     role: str
+    expires_at: float | None = None  # Unix time; None: never
 
     @property
     def actor(self) -> str:
@@ -78,13 +128,101 @@ def token_from_request(request: Request) -> str | None:
     return request.cookies.get(COOKIE)
 
 
-def authenticate(services: Services, token: str | None) -> Principal | None:
+MISSING_TOKEN = (
+    "missing or invalid token: send 'Authorization: Bearer <token>' "
+    "(create one with 'steelpath token create --role operator')"
+)
+INVALID_TOKEN = "invalid or revoked token"
+
+
+class TokenRefused(Exception):
+    """The token cannot be used; ``detail`` says why (missing, unknown, revoked, expired)."""
+
+    def __init__(self, detail: str) -> None:
+        super().__init__(detail)
+        self.detail = detail
+
+
+def resolve(store: Store, token: str | None) -> Principal:
+    """The principal a token stands for, or :class:`TokenRefused` saying why not."""
     if not token:
-        return None
-    rec = services.store.find_token(hash_token(token))
+        raise TokenRefused(MISSING_TOKEN)
+    rec = store.lookup_token(hash_token(token))
     if rec is None:
+        raise TokenRefused(INVALID_TOKEN)
+    if rec.revoked_at is not None:
+        raise TokenRefused(f"token revoked at {rec.revoked_at}; ask an admin for a new one")
+    if rec.expired():
+        raise TokenRefused(
+            f"token expired at {rec.expires_at}; ask an admin for a new one "
+            "('steelpath token create --expires-in 30d')"
+        )
+    return Principal(rec.id, rec.name, rec.role, rec.expires_ts)
+
+
+def authenticate(services: Services, token: str | None) -> Principal | None:
+    try:
+        return resolve(services.store, token)
+    except TokenRefused:
         return None
-    return Principal(rec.id, rec.name, rec.role)
+
+
+class CredentialWatch:
+    """Whether a principal's token is still good, cheap enough to ask often.
+
+    ``check()`` costs a clock read and an integer compare unless the store's
+    revocation counter moved or ``recheck_s`` passed; then it re-reads the row
+    (a blocking SQLite read: call it off the event loop, as
+    :func:`until_invalid` does).
+    """
+
+    def __init__(self, store: Store, principal: Principal, *, recheck_s: float = 2.0) -> None:
+        self.store = store
+        self.principal = principal
+        self.recheck_s = recheck_s
+        self._epoch = store.token_epoch
+        self._next_read = time.monotonic() + recheck_s
+
+    def needs_read(self) -> bool:
+        return self.store.token_epoch != self._epoch or time.monotonic() >= self._next_read
+
+    def expired(self) -> bool:
+        exp = self.principal.expires_at
+        return exp is not None and time.time() >= exp
+
+    def read(self) -> str | None:
+        """Re-read the token row; the reason it is no longer valid, or ``None``."""
+        self._epoch = self.store.token_epoch
+        self._next_read = time.monotonic() + self.recheck_s
+        try:
+            rec = self.store.get_token(self.principal.token_id)
+        except KeyError:
+            return "token deleted"
+        if rec.revoked_at is not None:
+            return "token revoked"
+        if rec.expired():
+            return "token expired"
+        return None
+
+
+async def until_invalid(
+    store: Store, principal: Principal, *, poll_s: float = 0.25, recheck_s: float = 2.0
+) -> str:
+    """Return (``"token revoked"`` / ``"token expired"`` …) once the token stops being valid.
+
+    Run it as a task beside a long-lived connection and close the connection
+    when it returns; cancel it when the connection ends first.
+    """
+    watch = CredentialWatch(store, principal, recheck_s=recheck_s)
+    while True:
+        if watch.expired():
+            return "token expired"
+        if watch.needs_read():
+            # SQLite may wait on a writer's lock: never on the event loop.
+            reason = await asyncio.to_thread(watch.read)
+            if reason is not None:
+                return reason
+        await asyncio.sleep(poll_s)
 
 
 def require(role: str):
@@ -94,16 +232,14 @@ def require(role: str):
         request: Request, services: Annotated[Services, Depends(get_services)]
     ) -> Principal:
         token = token_from_request(request)
-        principal = authenticate(services, token)
-        if principal is None:
+        try:
+            principal = resolve(services.store, token)
+        except TokenRefused as exc:
             raise HTTPException(
                 status.HTTP_401_UNAUTHORIZED,
-                detail="missing or invalid token: send 'Authorization: Bearer <token>' "
-                "(create one with 'steelpath token create --role operator')"
-                if token is None
-                else "invalid or revoked token",
+                detail=exc.detail,
                 headers={"WWW-Authenticate": "Bearer"},
-            )
+            ) from None
         if not principal.has(role):
             raise HTTPException(
                 status.HTTP_403_FORBIDDEN,

@@ -10,7 +10,7 @@ from typing import Annotated
 from fastapi import APIRouter, Depends, Request
 from fastapi.responses import StreamingResponse
 
-from server.auth import Viewer
+from server.auth import Viewer, until_invalid
 from server.services import Services, get_services
 
 router = APIRouter(tags=["events"])
@@ -20,34 +20,50 @@ router = APIRouter(tags=["events"])
 async def events(
     request: Request,
     services: Annotated[Services, Depends(get_services)],
-    _: Viewer,
+    who: Viewer,
     heartbeat_s: float = 15.0,
     once: bool = False,
 ) -> StreamingResponse:
-    """A ``text/event-stream``: ``event: plan|execution|robot|estop|cloud``, JSON
-    ``data``.  Reconnecting clients send ``Last-Event-ID`` to replay what they
-    missed (from a bounded history).  ``once=true`` sends the backlog and ends
-    (for scripts and tests)."""
+    """A ``text/event-stream``: ``event: plan|execution|robot|estop|cloud|proposal``,
+    JSON ``data``; a last ``event: auth`` when the token is revoked or expires.
+    Reconnecting clients send ``Last-Event-ID`` to replay what they missed
+    (from a bounded history).  ``once=true`` sends the backlog and ends (for
+    scripts and tests)."""
     last = request.headers.get("last-event-id")
     after = int(last) if last and last.isdigit() else (0 if once else None)
     queue = services.events.subscribe(after=after)
 
     async def stream() -> AsyncIterator[bytes]:
+        # Ends the stream (with a final ``event: auth``) once the token is
+        # revoked or expires, instead of streaming to it forever.
+        invalid = asyncio.create_task(until_invalid(services.store, who))
         try:
             yield b": steelpath event stream\n\n"
             while True:
-                try:
-                    ev = await asyncio.wait_for(queue.get(), timeout=0.05 if once else heartbeat_s)
-                except TimeoutError:
+                get = asyncio.ensure_future(queue.get())
+                done, _ = await asyncio.wait(
+                    {get, invalid},
+                    timeout=0.05 if once else heartbeat_s,
+                    return_when=asyncio.FIRST_COMPLETED,
+                )
+                if get not in done:
+                    get.cancel()  # a cancelled Queue.get leaves its item queued
+                if invalid in done:
+                    body = json.dumps({"detail": invalid.result(), "token_id": who.token_id})
+                    yield f"event: auth\ndata: {body}\n\n".encode()
+                    return
+                if get not in done:
                     if once:
                         return
                     yield b": heartbeat\n\n"
                     if await request.is_disconnected():
                         return
                     continue
+                ev = get.result()
                 body = json.dumps({"id": ev.id, "ts": ev.ts, **ev.data})
                 yield f"id: {ev.id}\nevent: {ev.type}\ndata: {body}\n\n".encode()
         finally:
+            invalid.cancel()
             services.events.unsubscribe(queue)
 
     return StreamingResponse(

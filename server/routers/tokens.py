@@ -1,4 +1,9 @@
-"""``/api/v1/tokens`` (admin) and ``/api/v1/session`` (the console's cookie login)."""
+"""``/api/v1/tokens`` (admin) and ``/api/v1/session`` (the console's cookie login).
+
+Revoking a token also ends the event streams and scene websockets opened with
+it (they watch it through :func:`server.auth.until_invalid`), within about
+0.25 s in this process.
+"""
 
 from __future__ import annotations
 
@@ -7,7 +12,15 @@ from typing import Annotated, Any, Literal
 from fastapi import APIRouter, Depends, HTTPException, Request, Response
 from pydantic import BaseModel, Field
 
-from server.auth import COOKIE, Admin, Viewer, authenticate, create_token
+from server.auth import (
+    COOKIE,
+    MAX_LIFETIME_S,
+    Admin,
+    TokenRefused,
+    Viewer,
+    create_token,
+    resolve,
+)
 from server.services import Services, get_services
 
 router = APIRouter(tags=["auth"])
@@ -18,6 +31,13 @@ Svc = Annotated[Services, Depends(get_services)]
 class TokenRequest(BaseModel):
     name: str = Field(..., min_length=1, max_length=100, description="who or what holds it")
     role: Literal["viewer", "operator", "admin"] = "operator"
+    expires_in_s: int | None = Field(
+        None,
+        ge=1,
+        le=MAX_LIFETIME_S,
+        description="lifetime in seconds from now (e.g. 2592000 for 30 days); "
+        "omitted or null: the token never expires",
+    )
 
 
 @router.get("/tokens")
@@ -28,7 +48,9 @@ def list_tokens(services: Svc, _: Admin) -> list[dict[str, Any]]:
 @router.post("/tokens", status_code=201)
 def new_token(req: TokenRequest, services: Svc, who: Admin) -> dict[str, Any]:
     """Create a token; the secret is in this response only."""
-    tid, secret = create_token(services.store, req.name, req.role, who.actor)
+    tid, secret = create_token(
+        services.store, req.name, req.role, who.actor, expires_in_s=req.expires_in_s
+    )
     return {**services.store.get_token(tid).public(), "token": secret}
 
 
@@ -48,9 +70,10 @@ def login(
     req: SessionRequest, request: Request, services: Svc, response: Response
 ) -> dict[str, Any]:
     """Exchange a token for an HttpOnly session cookie (console, scene, events)."""
-    principal = authenticate(services, req.token)
-    if principal is None:
-        raise HTTPException(401, detail="invalid or revoked token")
+    try:
+        principal = resolve(services.store, req.token)
+    except TokenRefused as exc:
+        raise HTTPException(401, detail=exc.detail) from None
     response.set_cookie(
         COOKIE,
         req.token,

@@ -1,8 +1,17 @@
-"""The SQLite connection: WAL mode, migrations, serialised transactions."""
+"""The SQLite connection: WAL mode, migrations, serialised transactions.
+
+The database holds token hashes and the audit trail, so it is private to the
+service's user: the data directory is 0700 and the database with its WAL and
+shared-memory files 0600, enforced on every open (a directory or file left
+looser by an older version or a careless copy is tightened, and logged).
+"""
 
 from __future__ import annotations
 
+import logging
+import os
 import sqlite3
+import stat
 import threading
 from collections.abc import Iterator
 from contextlib import contextmanager
@@ -12,9 +21,43 @@ from typing import Any
 
 from server.store.migrations import migrate
 
+log = logging.getLogger(__name__)
+
+DIR_MODE = 0o700
+FILE_MODE = 0o600
+
 
 def utcnow() -> str:
     return datetime.now(UTC).isoformat(timespec="milliseconds")
+
+
+def _tighten(path: Path, mode: int) -> None:
+    """chmod ``path`` to ``mode`` if its permission bits differ; log the change."""
+    try:
+        current = stat.S_IMODE(path.stat().st_mode)
+    except FileNotFoundError:
+        return
+    if current == mode:
+        return
+    try:
+        os.chmod(path, mode)
+    except OSError as exc:  # not our file (e.g. a mounted volume): say so, keep going
+        log.warning("cannot set %s to %o (it is %o): %s", path, mode, current, exc)
+        return
+    log.warning("tightened permissions of %s from %o to %o", path, current, mode)
+
+
+def ensure_private_dir(path: Path) -> None:
+    """Create ``path`` (and parents) with the leaf at mode 0700; fix an existing one."""
+    path = Path(path)
+    path.mkdir(parents=True, exist_ok=True, mode=DIR_MODE)
+    _tighten(path, DIR_MODE)
+
+
+def secure_database_files(path: Path) -> None:
+    """Mode 0600 for the database file and its ``-wal``/``-shm`` companions."""
+    for p in (path, Path(f"{path}-wal"), Path(f"{path}-shm")):
+        _tighten(p, FILE_MODE)
 
 
 class Database:
@@ -28,7 +71,11 @@ class Database:
 
     def __init__(self, path: Path, *, migrate_to: int | None = None) -> None:
         self.path = Path(path)
-        self.path.parent.mkdir(parents=True, exist_ok=True)
+        self.path.parent.mkdir(parents=True, exist_ok=True, mode=DIR_MODE)
+        if not self.path.exists():
+            # Created 0600 before SQLite opens it: SQLite gives the WAL and
+            # shm files the database file's mode, so they start private too.
+            os.close(os.open(self.path, os.O_WRONLY | os.O_CREAT, FILE_MODE))
         self._lock = threading.RLock()
         self._conn = sqlite3.connect(
             self.path, check_same_thread=False, isolation_level=None, timeout=30.0
@@ -42,6 +89,7 @@ class Database:
                 migrate(self._conn)
             else:
                 migrate(self._conn, migrate_to)
+        secure_database_files(self.path)  # the -wal/-shm exist once WAL has written
 
     @property
     def journal_mode(self) -> str:

@@ -105,6 +105,10 @@ MIGRATIONS: list[str] = [
         updated_at TEXT NOT NULL
     );
     """,
+    # 4: token lifetime: optional expiry (ISO-8601 UTC; NULL = never expires)
+    """
+    ALTER TABLE tokens ADD COLUMN expires_at TEXT;
+    """,
 ]
 
 SCHEMA_VERSION = len(MIGRATIONS)

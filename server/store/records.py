@@ -4,7 +4,9 @@ from __future__ import annotations
 
 import json
 import sqlite3
+import time
 from dataclasses import dataclass, field
+from datetime import datetime
 from typing import Any
 
 import numpy as np
@@ -168,16 +170,30 @@ class AuditEvent:
 
 @dataclass
 class TokenRecord:
+    """A bearer token's row; ``expires_at`` (ISO-8601 UTC) is ``None`` for no expiry."""
+
     id: str
     name: str
     role: str
     hash: str
     created_at: str
     revoked_at: str | None
+    expires_at: str | None = None
 
     @classmethod
     def from_row(cls, row: sqlite3.Row) -> TokenRecord:
         return cls(**dict(row))
+
+    @property
+    def expires_ts(self) -> float | None:
+        """Expiry as a Unix timestamp (``None``: never expires)."""
+        if self.expires_at is None:
+            return None
+        return datetime.fromisoformat(self.expires_at).timestamp()
+
+    def expired(self, now: float | None = None) -> bool:
+        ts = self.expires_ts
+        return ts is not None and (time.time() if now is None else now) >= ts
 
     def public(self) -> dict[str, Any]:
         return {
@@ -186,4 +202,6 @@ class TokenRecord:
             "role": self.role,
             "created_at": self.created_at,
             "revoked_at": self.revoked_at,
+            "expires_at": self.expires_at,
+            "expired": self.expired(),
         }

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import json
 import secrets
+import threading
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
@@ -27,7 +28,7 @@ from server.lifecycle import (
     next_state,
 )
 from server.store.arrays import ArrayStore
-from server.store.database import Database, utcnow
+from server.store.database import Database, ensure_private_dir, utcnow
 from server.store.records import (
     AuditEvent,
     CloudRecord,
@@ -57,8 +58,12 @@ class Store:
 
     def __init__(self, data_dir: Path, *, migrate_to: int | None = None) -> None:
         self.data_dir = Path(data_dir)
-        self.data_dir.mkdir(parents=True, exist_ok=True)
+        ensure_private_dir(self.data_dir)
         self.db = Database(self.data_dir / "steelpath.sqlite3", migrate_to=migrate_to)
+        # Bumped by every revocation in this process: long-lived connections
+        # (event streams, scene sockets) poll it and re-check their token.
+        self._token_epoch = 0
+        self._epoch_lock = threading.Lock()
         self.arrays = ArrayStore(self.data_dir / "arrays")
 
     def close(self) -> None:
@@ -407,14 +412,25 @@ class Store:
         return [ExecutionRecord.from_row(r) for r in rows]
 
     # ----------------------------------------------------------------- tokens
-    def add_token(self, name: str, role: str, token_hash: str, actor: str) -> TokenRecord:
+    def add_token(
+        self,
+        name: str,
+        role: str,
+        token_hash: str,
+        actor: str,
+        *,
+        expires_at: str | None = None,
+    ) -> TokenRecord:
+        """Store a token's hash; ``expires_at`` is ISO-8601 UTC or ``None`` (never)."""
         tid = new_id("tk")
+        reason = f"{name} ({role})" + (f", expires {expires_at}" if expires_at else "")
         with self.db.transaction() as conn:
             conn.execute(
-                "INSERT INTO tokens VALUES (?,?,?,?,?,?)",
-                (tid, name, role, token_hash, utcnow(), None),
+                "INSERT INTO tokens (id, name, role, hash, created_at, revoked_at, expires_at) "
+                "VALUES (?,?,?,?,?,?,?)",
+                (tid, name, role, token_hash, utcnow(), None, expires_at),
             )
-            self._audit(conn, actor, "token", tid, "create", reason=f"{name} ({role})")
+            self._audit(conn, actor, "token", tid, "create", reason=reason)
         return self.get_token(tid)
 
     def get_token(self, token_id: str) -> TokenRecord:
@@ -423,9 +439,17 @@ class Store:
             raise NotFoundError(f"no token with id {token_id!r}")
         return TokenRecord.from_row(row)
 
+    def lookup_token(self, token_hash: str) -> TokenRecord | None:
+        """The token with this hash, revoked or expired included (to say which)."""
+        row = self.db.query_one("SELECT * FROM tokens WHERE hash = ?", (token_hash,))
+        return None if row is None else TokenRecord.from_row(row)
+
     def find_token(self, token_hash: str) -> TokenRecord | None:
+        """The *usable* token with this hash: not revoked, not expired."""
         row = self.db.query_one(
-            "SELECT * FROM tokens WHERE hash = ? AND revoked_at IS NULL", (token_hash,)
+            "SELECT * FROM tokens WHERE hash = ? AND revoked_at IS NULL "
+            "AND (expires_at IS NULL OR expires_at > ?)",
+            (token_hash, utcnow()),
         )
         return None if row is None else TokenRecord.from_row(row)
 
@@ -436,7 +460,11 @@ class Store:
         ]
 
     def count_active_tokens(self) -> int:
-        row = self.db.query_one("SELECT COUNT(*) FROM tokens WHERE revoked_at IS NULL")
+        row = self.db.query_one(
+            "SELECT COUNT(*) FROM tokens WHERE revoked_at IS NULL "
+            "AND (expires_at IS NULL OR expires_at > ?)",
+            (utcnow(),),
+        )
         return int(row[0]) if row else 0
 
     def revoke_token(self, token_id: str, actor: str) -> TokenRecord:
@@ -444,7 +472,14 @@ class Store:
         with self.db.transaction() as conn:
             conn.execute("UPDATE tokens SET revoked_at = ? WHERE id = ?", (utcnow(), token_id))
             self._audit(conn, actor, "token", token_id, "revoke")
+        with self._epoch_lock:
+            self._token_epoch += 1
         return self.get_token(token_id)
+
+    @property
+    def token_epoch(self) -> int:
+        """Count of revocations made through this store object (cheap to poll)."""
+        return self._token_epoch
 
     # ----------------------------------------------------------------- robots
     def set_robot_url(self, name: str, url: str, actor: str) -> None:
