@@ -12,6 +12,26 @@ without sockets.
 Every command it starts is recorded in :attr:`SimRobot.log` with its run id and
 index, ending ``done`` or ``interrupted`` — the evidence tests use to assert
 that nothing was lost or executed twice (:func:`check_exactly_once`).
+
+Continuation (docs/protocol.md §8.2): a command stopped mid-motion (link loss,
+watchdog, ``ABORT``, new session, fault, E-stop, power-down) is remembered as
+:class:`Interrupted` ``(run_id, index, progress)``.  When the host sends that
+same command again — a resume — the robot executes only the remainder:
+
+- ``CMD_WHEELS`` (relative): the same speeds for ``duration − done``, so the
+  odometry ends exactly at ``speeds × duration``;
+- ``CMD_JOINTS`` / ``CMD_LIFT`` (absolute targets): from where the joints are
+  to the same target, in ``duration × f`` where ``f = max_j |target_j − q_j| /
+  |target_j − q_start_j|`` over the joints the command moves (``q_start``: the
+  pose the command first started from).  Every joint then moves at most at its
+  planned speed; a command that moves nothing (a dwell) waits out its
+  remaining time;
+- magnet, plate, nozzle, stop: absolute states, applied (idempotent).
+
+Any other command or run clears the memory; completed commands stay refused
+(``ALREADY_DONE``).  The interruption and the continuation are separate
+records (``progress``, ``continued_from``), so :func:`check_exactly_once` can
+prove that no part of a motion was executed twice or skipped.
 """
 
 from __future__ import annotations
@@ -62,9 +82,19 @@ REPLY_MEMORY = 64  # replies remembered per session for repeated (retransmitted)
 LIMIT_TOL_URAD = 1  # one quantum of slack at the joint limits
 
 
+PROGRESS_TOL = 1e-6  # progress fractions equal within this (float round-off)
+TRAVEL_MIN_RAD = 1e-6  # a joint whose planned travel is below 1 µrad does not "move"
+
+
 @dataclass(frozen=True)
 class ExecutionRecord:
-    """One command execution: started, then ``done`` or ``interrupted`` (why)."""
+    """One command execution: started, then ``done`` or ``interrupted`` (why).
+
+    ``progress``: fraction (0…1) of the *whole* command done when this record
+    ended (1.0 for ``done``; ``None`` in logs of emulators that did not report
+    it).  ``continued_from``: the progress this execution resumed from, or
+    ``None`` when it started the command from its beginning.
+    """
 
     run_id: int
     index: int
@@ -75,6 +105,25 @@ class ExecutionRecord:
     sim_end_s: float
     wall_start: float  # time.monotonic()
     wall_end: float
+    progress: float | None = None
+    continued_from: float | None = None
+
+
+@dataclass(frozen=True)
+class Interrupted:
+    """A command stopped mid-motion, remembered so that a resume continues it.
+
+    ``done_s``: simulated seconds of the command executed (the remainder of a
+    timed command is ``duration − done_s``); ``q_start``/``lift_start``: where
+    the joints/lifting arm were when the command first started (the reference
+    of the remaining-distance fraction).
+    """
+
+    msg: CommandMessage
+    progress: float
+    done_s: float
+    q_start: tuple[float, ...]
+    lift_start: float
 
 
 @dataclass(frozen=True)
@@ -91,24 +140,51 @@ def check_exactly_once(
     log: Iterable[ExecutionRecord], run_id: int, n: int, start: int = 0
 ) -> list[str]:
     """Problems (empty when none) with run ``run_id`` having executed commands
-    ``start … n−1`` each exactly once, in order.
+    ``start … n−1`` each exactly once, in order, with nothing repeated or skipped.
 
-    A command interrupted mid-motion (watchdog, link loss, fault, E-stop) and
-    executed again to completion after a resume is fine — way-points are
-    absolute targets — but a command completed twice, completed out of order,
-    never completed, or started again after completing is a problem.
+    A command interrupted mid-motion and then *continued* is fine when each
+    continuation resumes from exactly the progress its interruption recorded
+    (nothing done twice, nothing lost).  Problems: a command completed twice,
+    completed out of order, never completed, started again after completing,
+    started again from its beginning after part of it was done (the motion
+    repeated), or continued from another progress than the one recorded (or
+    from a part missing from the log).  Records without ``progress`` (older
+    logs) are only checked for completion.
     """
     problems: list[str] = []
     done: list[int] = []
     completed: set[int] = set()
+    seen: set[int] = set()
+    reached: dict[int, float | None] = {}  # index → progress of its last interruption
     for r in log:
         if r.run_id != run_id:
             continue
         if r.index in completed:
             problems.append(f"command {r.index} started again after completing ({r.outcome})")
+        before = reached.get(r.index)
+        if r.continued_from is None:
+            if before is not None and before > PROGRESS_TOL:
+                problems.append(
+                    f"command {r.index} started again from its beginning after "
+                    f"{before:.1%} of it was done (motion repeated)"
+                )
+        elif r.index not in seen:
+            problems.append(
+                f"command {r.index} continued from {r.continued_from:.1%} "
+                "but its first part is not in the log"
+            )
+        elif before is not None and abs(r.continued_from - before) > PROGRESS_TOL:
+            what = "repeated" if r.continued_from < before else "skipped"
+            problems.append(
+                f"command {r.index} continued from {r.continued_from:.4%} after an "
+                f"interruption at {before:.4%} (motion {what})"
+            )
+        seen.add(r.index)
         if r.outcome == "done":
             done.append(r.index)
             completed.add(r.index)
+        else:
+            reached[r.index] = r.progress
     expected = list(range(start, n))
     if done != expected:
         counts = Counter(done)
@@ -128,14 +204,21 @@ def check_exactly_once(
 
 @dataclass
 class _Segment:
+    """The executing command (or the remainder of an interrupted one)."""
+
     msg: CommandMessage
-    duration: float  # sim seconds
+    duration: float  # sim seconds of this segment (the remainder when continuing)
     elapsed: float = 0.0
-    q_from: np.ndarray | None = None
+    q_from: np.ndarray | None = None  # joints at the start of this segment
     lift_from: float = 0.0
     fault_at: float | None = None  # sim seconds into the segment
     sim_start: float = 0.0
     wall_start: float = 0.0
+    planned: float = 0.0  # the command's full duration, sim seconds
+    done_before: float = 0.0  # sim seconds of the command executed before this segment
+    q_start: np.ndarray | None = None  # joints when the command first started
+    lift_start: float = 0.0
+    continued_from: float | None = None  # progress resumed from; None: a fresh start
 
 
 @dataclass
@@ -150,6 +233,9 @@ class SimRobot:
     faults_injected: FaultConfig = field(default_factory=FaultConfig)
     clock: Callable[[], float] = time.monotonic
     on_record: Callable[[ExecutionRecord], None] | None = None
+    # Called whenever the robot comes to rest or its kept state changes at rest
+    # (halt, completion of a command, pause, clear): where a robot saves to NV memory.
+    on_rest: Callable[[], None] | None = None
 
     def __post_init__(self) -> None:
         lim = self.profile.joint_limits
@@ -168,6 +254,7 @@ class SimRobot:
         self.last_queued = -1
         self.buffer: collections.deque[CommandMessage] = collections.deque()
         self.current: _Segment | None = None
+        self.interrupted: Interrupted | None = None  # command to continue on resume
         self.session = False
         self.expected_seq = 1
         self.replies: collections.OrderedDict[int, Message] = collections.OrderedDict()
@@ -298,10 +385,19 @@ class SimRobot:
         self.sim_t += max(0.0, remaining)
 
     def _start(self, msg: CommandMessage, now: float) -> None:
-        duration = getattr(msg, "duration_ms", 0) / 1000.0
-        seg = _Segment(msg, duration, sim_start=self.sim_t, wall_start=now)
+        planned = getattr(msg, "duration_ms", 0) / 1000.0
+        seg = _Segment(msg, planned, sim_start=self.sim_t, wall_start=now, planned=planned)
         seg.q_from = self.q.copy()
         seg.lift_from = self.lift
+        seg.q_start = self.q.copy()
+        seg.lift_start = self.lift
+        mem, self.interrupted = self.interrupted, None  # any other command forgets it
+        if mem is not None and (mem.msg.run_id, mem.msg.index) == (msg.run_id, msg.index):
+            if mem.msg == msg:
+                self._continue(seg, mem)
+            else:
+                # Same slot, other content: not a resume of what was interrupted.
+                self.counters["continuation_mismatch"] += 1
         inj = self.faults_injected
         if (
             inj.fault_at_index is not None
@@ -309,7 +405,7 @@ class SimRobot:
             and self._fault_left > 0
         ):
             self._fault_left -= 1
-            seg.fault_at = duration / 2
+            seg.fault_at = seg.duration / 2
         if isinstance(msg, WheelsCmd):
             self.wheel_speeds = np.asarray(msg.speeds_um_s, dtype=float) / 1e6
         else:
@@ -317,6 +413,70 @@ class SimRobot:
             self.wheel_speeds[:] = 0.0
         self.current = seg
         self.changed = True
+
+    def _continue(self, seg: _Segment, mem: Interrupted) -> None:
+        """Turn ``seg`` into the remainder of the interrupted command ``mem``."""
+        msg = seg.msg
+        seg.continued_from = mem.progress
+        seg.q_start = np.asarray(mem.q_start, dtype=float)
+        seg.lift_start = mem.lift_start
+        self.counters["continuations"] += 1
+        if isinstance(msg, JointsCmd | LiftCmd):
+            # Absolute target: continue to it at no more than the planned joint speed.
+            frac = self._remaining_fraction(seg)
+            if frac is None:  # a dwell: wait out the remaining time
+                seg.done_before = min(seg.planned, mem.done_s)
+                seg.duration = seg.planned - seg.done_before
+            else:
+                seg.duration = seg.planned * frac
+                seg.done_before = max(0.0, seg.planned - seg.duration)
+        else:
+            # Wheels are relative: only the time not yet driven, at the same speeds.
+            seg.done_before = min(seg.planned, mem.done_s)
+            seg.duration = seg.planned - seg.done_before
+
+    def _remaining_fraction(self, seg: _Segment) -> float | None:
+        """max_j |target − now| / |target − start| over the joints the command moves;
+        ``None`` when it moves none (or is no joint/lift command)."""
+        msg = seg.msg
+        if isinstance(msg, JointsCmd) and seg.q_start is not None:
+            target = np.asarray(msg.q_urad, dtype=float) / 1e6
+            travel = np.abs(target - seg.q_start)
+            left = np.abs(target - self.q)
+        elif isinstance(msg, LiftCmd):
+            target_l = msg.angle_urad / 1e6
+            travel = np.array([abs(target_l - seg.lift_start)])
+            left = np.array([abs(target_l - self.lift)])
+        else:
+            return None
+        moves = travel > TRAVEL_MIN_RAD
+        if not moves.any():
+            return None
+        return float(max(0.0, np.max(left[moves] / travel[moves])))
+
+    def _progress(self, seg: _Segment) -> float:
+        """Fraction of the whole command done now (distance for joints/lift, else time)."""
+        frac = self._remaining_fraction(seg)
+        if frac is not None:
+            return min(1.0, max(0.0, 1.0 - frac))
+        if seg.planned <= 0:
+            return 0.0  # an instantaneous command that did not complete did nothing
+        return min(1.0, (seg.done_before + seg.elapsed) / seg.planned)
+
+    def resume_point(self) -> Interrupted | None:
+        """What the robot would continue on a resume if it stopped now: the
+        executing command at its progress, else the remembered interruption."""
+        seg = self.current
+        if seg is None:
+            return self.interrupted
+        assert seg.q_start is not None
+        return Interrupted(
+            msg=seg.msg,
+            progress=self._progress(seg),
+            done_s=min(seg.planned, seg.done_before + seg.elapsed),
+            q_start=tuple(float(v) for v in seg.q_start),
+            lift_start=float(seg.lift_start),
+        )
 
     def _move(self, seg: _Segment, step: float) -> None:
         msg = seg.msg
@@ -341,10 +501,17 @@ class SimRobot:
             self.wheel_speeds[:] = 0.0
         self.current = None
         self.last_done = msg.index
-        self._record(seg, "done", "", now)
+        self._record(seg, "done", "", now, progress=1.0)
         self.changed = True
+        self._rested()
 
-    def _record(self, seg: _Segment, outcome: str, reason: str, now: float) -> None:
+    def _rested(self) -> None:
+        if self.on_rest is not None:
+            self.on_rest()
+
+    def _record(
+        self, seg: _Segment, outcome: str, reason: str, now: float, *, progress: float
+    ) -> None:
         rec = ExecutionRecord(
             run_id=seg.msg.run_id,
             index=seg.msg.index,
@@ -355,6 +522,8 @@ class SimRobot:
             sim_end_s=self.sim_t,
             wall_start=seg.wall_start,
             wall_end=now,
+            progress=progress,
+            continued_from=seg.continued_from,
         )
         self.log.append(rec)
         if self.on_record is not None:
@@ -365,7 +534,12 @@ class SimRobot:
         moving = self.current is not None
         index = self.current.msg.index if self.current else -1
         if self.current is not None:
-            self._record(self.current, "interrupted", reason, now)
+            # Remembered so that a resume of this command continues it (docs §8.2).
+            self.interrupted = self.resume_point()
+            assert self.interrupted is not None
+            self._record(
+                self.current, "interrupted", reason, now, progress=self.interrupted.progress
+            )
             self.current = None
         self.buffer.clear()
         self.last_queued = self.last_done
@@ -376,8 +550,18 @@ class SimRobot:
             self.fault_code = code
         self.stops.append(StopEvent(now, reason, moving, index))
         self.changed = True
+        self._rested()
 
     # --- messages ----------------------------------------------------------------------
+
+    def power_down(self, now: float | None = None) -> None:
+        """The robot is switched off cleanly (emulator exit): stop first, so that
+        what it keeps is a state at rest; latches ``LINK_RESET`` if it was busy."""
+        now = self.clock() if now is None else now
+        self.advance(now)
+        if self.busy or self.paused:
+            self._halt("shutdown", now, latch=FaultFlag.LINK_RESET)
+        self.session = False
 
     def link_lost(self, now: float | None = None) -> None:
         """The transport knows the connection dropped (TCP): stop at once if busy."""
@@ -493,6 +677,7 @@ class SimRobot:
     def _apply(self, msg: Message, seq: int, now: float) -> Message:
         if isinstance(msg, Pause):
             self.paused = True
+            self._rested()
         elif isinstance(msg, Resume):
             self.paused = False
         elif isinstance(msg, Abort):
@@ -502,6 +687,8 @@ class SimRobot:
             self.faults &= ~msg.faults
             if msg.faults & FaultFlag.DRIVE:
                 self.fault_code = 0
+            if not self.busy:
+                self._rested()
         elif isinstance(msg, CommandMessage):
             return self._accept(msg, seq)
         self.changed = True
@@ -525,6 +712,7 @@ class SimRobot:
                 return self._nak(msg, seq, NakReason.RUN_ACTIVE)
             self.run_id = msg.run_id
             self.last_done = self.last_queued = msg.index - 1
+            self.interrupted = None  # another run: nothing of the old one to continue
         if msg.index <= self.last_done:
             self.counters["already_done"] += 1
             return self._ack(msg, seq, AckStatus.ALREADY_DONE)
@@ -575,6 +763,7 @@ def _set_bit(mask: int, bit: int, on: bool) -> int:
 
 __all__ = [
     "ExecutionRecord",
+    "Interrupted",
     "SimRobot",
     "StopEvent",
     "check_exactly_once",

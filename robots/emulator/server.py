@@ -37,6 +37,7 @@ from urllib.parse import urlsplit
 import numpy as np
 
 from robots.emulator.faults import FaultConfig
+from robots.emulator.persist import OrphanTimer, StateFile, remove_port_file, write_port_file
 from robots.emulator.profiles import RobotProfile, resolve_profile
 from robots.emulator.robot import ExecutionRecord, SimRobot, StopEvent
 from robots.protocol.framing import PROTOCOL_MAJOR, Frame, FrameDecoder
@@ -168,6 +169,14 @@ class Emulator:
     ``pty=True`` adds a pseudo-terminal whose path (:attr:`pty_path`) a host
     opens like a serial device.  ``time_scale`` > 1 runs motions faster than
     real time (watchdog and link timing stay in real time).
+
+    Surviving the server (:mod:`robots.emulator.persist`): ``state_file``
+    loads the robot's kept state at construction if the file exists and writes
+    it atomically whenever the robot comes to rest and on :meth:`close`;
+    ``port_file`` announces ``{"pid", "url", "robot"}`` after binding;
+    ``exit_when_orphaned_s`` ends the loop (state saved, ``on_orphaned``
+    called, :attr:`orphaned` set) after that long with no controller and
+    nothing executing.
     """
 
     def __init__(
@@ -183,7 +192,13 @@ class Emulator:
         state_period_s: float = 0.1,
         buffer_capacity: int = 16,
         log_path: str | os.PathLike[str] | None = None,
+        state_file: str | os.PathLike[str] | None = None,
+        port_file: str | os.PathLike[str] | None = None,
+        exit_when_orphaned_s: float | None = None,
+        on_orphaned: Callable[[], None] | None = None,
     ) -> None:
+        if exit_when_orphaned_s is not None and not exit_when_orphaned_s > 0:
+            raise ValueError(f"exit_when_orphaned_s={exit_when_orphaned_s}: must be > 0")
         if listen is None and not pty:
             raise ValueError("the emulator needs a TCP listen address, a pty, or both")
         if time_scale <= 0:
@@ -203,6 +218,21 @@ class Emulator:
             faults_injected=self.faults,
             on_record=self._write_record if self._log_file else None,
         )
+        self._state_file = StateFile(state_file) if state_file is not None else None
+        self.state_loaded = False  # the robot's state came from ``state_file``
+        if self._state_file is not None:
+            try:
+                self.state_loaded = self._state_file.load_into(self.robot)
+            except ValueError:
+                if self._log_file is not None:
+                    self._log_file.close()
+                raise
+            self.robot.on_rest = self._capture_state
+        self._port_file = port_file
+        self._orphan_after = exit_when_orphaned_s
+        self._orphan: OrphanTimer | None = None
+        self._on_orphaned = on_orphaned
+        self.orphaned = False
         self._rng = random.Random(self.faults.seed)
         self._lock = threading.RLock()
         self._cond = threading.Condition(self._lock)
@@ -247,6 +277,15 @@ class Emulator:
         if self._want_pty:
             self._pty = _PtyPort()
             self._sel.register(self._pty, selectors.EVENT_READ, self._pty)
+        if self._orphan_after is not None:
+            self._orphan = OrphanTimer(self._orphan_after, time.monotonic())
+        if self._port_file is not None:
+            write_port_file(
+                self._port_file,
+                url=self.url if self.address is not None else None,
+                robot=self.profile.name,
+                pty=self._pty.path if self._pty is not None else None,
+            )
         self._thread = threading.Thread(
             target=self._loop, name=f"emulator {self.profile.name}", daemon=True
         )
@@ -259,6 +298,16 @@ class Emulator:
         self._wake()
         if self._thread is not None:
             self._thread.join(timeout)
+        with self._lock:
+            # Come to rest, then keep that state: what a robot does when switched off.
+            self.robot.power_down(time.monotonic())
+            if self._state_file is not None:
+                try:
+                    self._state_file.save(self.robot)
+                except OSError:
+                    log.exception("emulator %s: cannot save its state", self.profile.name)
+        if self._port_file is not None:
+            remove_port_file(self._port_file)
         for port in (self._tcp, self._pty):
             if port is not None:
                 port.close()
@@ -390,6 +439,36 @@ class Emulator:
             for port in (self._tcp, self._pty):
                 if port is not None:
                     self._send(port, report, now)
+        self._persist_tick(now)
+
+    def _capture_state(self) -> None:
+        if self._state_file is not None:
+            self._state_file.capture(self.robot)
+
+    def _persist_tick(self, now: float) -> None:
+        """Write the state captured at the last rest; end the loop when orphaned."""
+        if self._state_file is not None:
+            try:
+                self._state_file.flush()
+            except OSError:
+                log.exception("emulator %s: cannot save its state", self.profile.name)
+        if self._orphan is not None and not self.orphaned:
+            robot = self.robot
+            if self._orphan.expired(
+                now,
+                connected=self._tcp is not None,
+                active=robot.busy or robot.paused,
+                last_rx=robot.last_host_rx,
+            ):
+                log.info(
+                    "emulator %s: no controller for %.0f s, exiting",
+                    self.profile.name,
+                    self._orphan.seconds,
+                )
+                self.orphaned = True
+                self._stop = True
+                if self._on_orphaned is not None:
+                    self._on_orphaned()
 
     def _on_accept(self, now: float) -> None:
         assert self._listener is not None

@@ -1,0 +1,353 @@
+"""State that outlives the emulator process: a state file, a port file, an orphan timer.
+
+A real robot keeps its pose, odometry and progress whatever happens to the
+server that commands it; an emulator started by that server must too, or a
+server crash would "teleport" the robot home and a resume could not be checked
+honestly.  Three pieces, used by :class:`robots.emulator.server.Emulator`:
+
+- :class:`StateFile` (``--state-file``): the robot's kept state as JSON —
+  pose, odometry, joints, lifting arm, magnets, plates, nozzle, latched
+  faults, ``run_id``/``last_done`` and the interrupted-command memory
+  (:class:`~robots.emulator.robot.Interrupted`).  A snapshot is *captured*
+  (in memory, cheap) at each moment the robot comes to rest or changes its
+  kept state at rest — halt, completion of a command, pause, clear — and the
+  latest one is *written* at the end of the emulator's loop turn and on clean
+  exit, atomically (temporary file in the same directory, ``fsync``,
+  ``rename``, ``fsync`` of the directory), so a reader sees either the old or
+  the new file, never a torn one.  States at rest are exact, so an emulator
+  started from the file continues precisely.  Like a real robot whose
+  non-volatile memory is written only at rest, a power cut (``kill -9``)
+  mid-motion loses the motion since the last rest: the restarted robot stands
+  where it last stopped.
+- :func:`write_port_file` (``--port-file``): ``{"pid", "url", "robot"}``
+  written atomically after binding, so a restarted server finds a running
+  emulator and reuses it (:func:`read_port_file` checks the process is alive).
+- :class:`OrphanTimer` (``--exit-when-orphaned SECONDS``): true once no
+  controller has been connected and nothing has executed for that long, so
+  emulators left behind by a killed server do not live forever.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import json
+import os
+import tempfile
+from collections.abc import Mapping
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from robots.emulator.robot import Interrupted, SimRobot
+from robots.protocol.messages import MESSAGE_CLASSES, CommandMessage, MessageError
+
+STATE_FORMAT = "steelpath-emulator-state"
+STATE_VERSION = 1
+
+
+class StateFileError(ValueError):
+    """A state or port file that cannot be used (corrupt, another robot, wrong shape)."""
+
+
+# --- atomic JSON ------------------------------------------------------------------------
+
+
+def write_json_atomic(path: str | os.PathLike[str], data: Mapping[str, Any]) -> None:
+    """Write ``data`` as JSON to ``path`` atomically: tmp + fsync + rename + fsync(dir)."""
+    target = Path(path)
+    directory = target.parent if str(target.parent) else Path(".")
+    fd, tmp = tempfile.mkstemp(prefix=f".{target.name}.", suffix=".tmp", dir=directory)
+    try:
+        with os.fdopen(fd, "w", encoding="utf-8") as fh:
+            json.dump(data, fh, indent=1, sort_keys=True)
+            fh.write("\n")
+            fh.flush()
+            os.fsync(fh.fileno())
+        os.replace(tmp, target)
+    except BaseException:
+        with contextlib.suppress(OSError):
+            os.unlink(tmp)
+        raise
+    # The rename itself is durable only once the directory entry is on disk.
+    dir_fd = os.open(directory, os.O_RDONLY)
+    try:
+        os.fsync(dir_fd)
+    finally:
+        os.close(dir_fd)
+
+
+def _read_json(path: Path, what: str) -> dict[str, Any] | None:
+    try:
+        text = path.read_text(encoding="utf-8")
+    except FileNotFoundError:
+        return None
+    except OSError as exc:
+        raise StateFileError(f"{what} {path}: cannot read: {exc}") from exc
+    try:
+        data = json.loads(text)
+    except json.JSONDecodeError as exc:
+        raise StateFileError(f"{what} {path}: not JSON ({exc})") from exc
+    if not isinstance(data, dict):
+        raise StateFileError(f"{what} {path}: expected a JSON object")
+    return data
+
+
+# --- robot state ------------------------------------------------------------------------
+
+
+def _encode_command(msg: CommandMessage) -> dict[str, Any]:
+    # The wire payload is the command's exact identity (run, index, every field).
+    return {"type": int(msg.TYPE), "payload": msg.payload().hex()}
+
+
+def _decode_command(data: Mapping[str, Any]) -> CommandMessage:
+    cls = MESSAGE_CLASSES.get(int(data["type"]))
+    if cls is None or not issubclass(cls, CommandMessage):
+        raise StateFileError(f"interrupted command of unknown type {data['type']!r}")
+    try:
+        msg = cls.from_payload(bytes.fromhex(str(data["payload"])))
+    except (MessageError, ValueError) as exc:
+        raise StateFileError(f"interrupted command does not parse: {exc}") from exc
+    assert isinstance(msg, CommandMessage)
+    return msg
+
+
+def robot_state(robot: SimRobot) -> dict[str, Any]:
+    """The state a robot keeps across a restart, as JSON-ready data.
+
+    An executing command is saved as interrupted at its current progress (what
+    the robot would remember had it stopped now); queued commands are not kept
+    (every restart drops the queue; the host sends them again).
+    """
+    mem = robot.resume_point()
+    return {
+        "format": STATE_FORMAT,
+        "version": STATE_VERSION,
+        "robot": robot.profile.name,
+        "q_rad": [float(v) for v in robot.q],
+        "lift_rad": float(robot.lift),
+        "odometry_m": [float(v) for v in robot.odometry],
+        "magnets": int(robot.magnets),
+        "plates": int(robot.plates),
+        "nozzle": bool(robot.nozzle),
+        "faults": int(robot.faults),
+        "fault_code": int(robot.fault_code),
+        "run_id": int(robot.run_id),
+        "last_done": int(robot.last_done),
+        "sim_t": float(robot.sim_t),
+        "interrupted": None
+        if mem is None
+        else {
+            "command": _encode_command(mem.msg),
+            "progress": float(mem.progress),
+            "done_s": float(mem.done_s),
+            "q_start_rad": [float(v) for v in mem.q_start],
+            "lift_start_rad": float(mem.lift_start),
+        },
+    }
+
+
+def restore_robot_state(robot: SimRobot, state: Mapping[str, Any], source: str = "state") -> None:
+    """Apply a :func:`robot_state` snapshot to an idle ``robot``; raises
+    :class:`StateFileError` (naming ``source``) if it is not this robot's."""
+    p = robot.profile
+    if state.get("format") != STATE_FORMAT:
+        raise StateFileError(f"{source}: not an emulator state file")
+    if state.get("version") != STATE_VERSION:
+        raise StateFileError(f"{source}: state version {state.get('version')!r} unsupported")
+    if state.get("robot") != p.name:
+        raise StateFileError(f"{source}: state of robot {state.get('robot')!r}, not {p.name!r}")
+    try:
+        q = np.asarray(state["q_rad"], dtype=float)
+        odometry = np.asarray(state["odometry_m"], dtype=float)
+        if q.shape != (p.n_joints,) or odometry.shape != (p.n_wheels,):
+            raise StateFileError(
+                f"{source}: {q.size} joints / {odometry.size} wheels, the robot has "
+                f"{p.n_joints} / {p.n_wheels}"
+            )
+        if not (np.all(np.isfinite(q)) and np.all(np.isfinite(odometry))):
+            raise StateFileError(f"{source}: non-finite pose")
+        mem = None
+        raw = state.get("interrupted")
+        if raw is not None:
+            q_start = tuple(float(v) for v in raw["q_start_rad"])
+            if len(q_start) != p.n_joints:
+                raise StateFileError(
+                    f"{source}: interrupted command's start pose has {len(q_start)} joints"
+                )
+            mem = Interrupted(
+                msg=_decode_command(raw["command"]),
+                progress=float(raw["progress"]),
+                done_s=float(raw["done_s"]),
+                q_start=q_start,
+                lift_start=float(raw["lift_start_rad"]),
+            )
+        values = {
+            "lift": float(state["lift_rad"]),
+            "magnets": int(state["magnets"]),
+            "plates": int(state["plates"]),
+            "nozzle": bool(state["nozzle"]),
+            "faults": int(state["faults"]),
+            "fault_code": int(state["fault_code"]),
+            "run_id": int(state["run_id"]),
+            "last_done": int(state["last_done"]),
+            "sim_t": float(state.get("sim_t", 0.0)),
+        }
+    except (KeyError, TypeError, ValueError) as exc:
+        if isinstance(exc, StateFileError):
+            raise
+        raise StateFileError(f"{source}: missing or bad field ({exc!r})") from exc
+    if robot.busy:
+        raise StateFileError(f"{source}: cannot restore into a robot that is executing")
+    robot.q = q
+    robot.odometry = odometry
+    robot.wheel_speeds[:] = 0.0
+    robot.lift = values["lift"]
+    robot.magnets = values["magnets"]
+    robot.plates = values["plates"]
+    robot.nozzle = values["nozzle"]
+    robot.faults = values["faults"]
+    robot.fault_code = values["fault_code"]
+    robot.run_id = values["run_id"]
+    robot.last_done = robot.last_queued = values["last_done"]
+    robot.sim_t = values["sim_t"]
+    robot.interrupted = mem
+    robot.changed = True
+
+
+class StateFile:
+    """The robot's state file: load at start, capture at rest, write atomically."""
+
+    def __init__(self, path: str | os.PathLike[str]) -> None:
+        self.path = Path(path)
+        self._captured: dict[str, Any] | None = None
+        self.writes = 0
+
+    def load_into(self, robot: SimRobot) -> bool:
+        """Restore ``robot`` from the file; False when there is no file yet."""
+        data = _read_json(self.path, "state file")
+        if data is None:
+            return False
+        restore_robot_state(robot, data, source=f"state file {self.path}")
+        return True
+
+    def capture(self, robot: SimRobot) -> None:
+        """Remember the robot's state now (called at rest; written by :meth:`flush`)."""
+        self._captured = robot_state(robot)
+
+    def flush(self) -> bool:
+        """Write the latest captured state, if any since the last write."""
+        data, self._captured = self._captured, None
+        if data is None:
+            return False
+        write_json_atomic(self.path, data)
+        self.writes += 1
+        return True
+
+    def save(self, robot: SimRobot) -> None:
+        self.capture(robot)
+        self.flush()
+
+
+# --- port file ---------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class PortInfo:
+    """A running emulator as announced in its port file."""
+
+    pid: int
+    url: str | None  # socket://127.0.0.1:PORT, None without a TCP endpoint
+    robot: str
+    pty: str | None = None
+
+
+def write_port_file(
+    path: str | os.PathLike[str], *, url: str | None, robot: str, pty: str | None = None
+) -> None:
+    """Announce this process's endpoint(s) atomically."""
+    data: dict[str, Any] = {"pid": os.getpid(), "url": url, "robot": robot}
+    if pty is not None:
+        data["pty"] = pty
+    write_json_atomic(path, data)
+
+
+def _pid_alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        return True  # exists, owned by someone else
+    return True
+
+
+def read_port_file(path: str | os.PathLike[str], *, check_alive: bool = True) -> PortInfo | None:
+    """The emulator a port file announces; ``None`` if there is no file or (with
+    ``check_alive``) its process is gone.  Raises :class:`StateFileError` if corrupt."""
+    p = Path(path)
+    data = _read_json(p, "port file")
+    if data is None:
+        return None
+    try:
+        info = PortInfo(
+            pid=int(data["pid"]),
+            url=None if data.get("url") is None else str(data["url"]),
+            robot=str(data["robot"]),
+            pty=None if data.get("pty") is None else str(data["pty"]),
+        )
+    except (KeyError, TypeError, ValueError) as exc:
+        raise StateFileError(f"port file {p}: missing or bad field ({exc!r})") from exc
+    if check_alive and not _pid_alive(info.pid):
+        return None
+    return info
+
+
+def remove_port_file(path: str | os.PathLike[str]) -> None:
+    """Remove the port file if it still announces this process (a newer one may own it)."""
+    try:
+        info = read_port_file(path, check_alive=False)
+    except StateFileError:
+        return
+    if info is not None and info.pid == os.getpid():
+        with contextlib.suppress(FileNotFoundError):
+            os.unlink(path)
+
+
+# --- orphan timer -------------------------------------------------------------------------
+
+
+class OrphanTimer:
+    """Expires ``seconds`` after the robot last had a controller or work.
+
+    "Contact" is a TCP connection being open, a valid host frame (any port), or
+    the robot being busy or paused; an orphaned emulator saves its state and exits.
+    """
+
+    def __init__(self, seconds: float, now: float) -> None:
+        if not seconds > 0:
+            raise ValueError(f"exit_when_orphaned={seconds}: must be > 0 seconds")
+        self.seconds = seconds
+        self.last_contact = now
+
+    def expired(self, now: float, *, connected: bool, active: bool, last_rx: float) -> bool:
+        if connected or active:
+            self.last_contact = now
+        self.last_contact = max(self.last_contact, last_rx)
+        return now - self.last_contact >= self.seconds
+
+
+__all__ = [
+    "OrphanTimer",
+    "PortInfo",
+    "StateFile",
+    "StateFileError",
+    "read_port_file",
+    "remove_port_file",
+    "restore_robot_state",
+    "robot_state",
+    "write_json_atomic",
+    "write_port_file",
+]
