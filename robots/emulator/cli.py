@@ -5,7 +5,9 @@
         [--nak-index I] [--fault-at-index I] ...
 
 Prints the endpoints it serves (``socket://…`` and the pty path), one per line,
-then runs until SIGINT/SIGTERM.  ``python -m robots.emulator`` is the same.
+then runs until SIGINT/SIGTERM (or, with ``--exit-when-orphaned``, until no
+controller has been connected for that long), saving ``--state-file`` on the
+way out.  ``python -m robots.emulator`` is the same.
 """
 
 from __future__ import annotations
@@ -42,6 +44,28 @@ def build_parser(prog: str = "steelpath emulate") -> argparse.ArgumentParser:
     p.add_argument("--state-period", type=float, default=0.1, help="state report period, s")
     p.add_argument("--buffer", type=int, default=16, help="command buffer capacity")
     p.add_argument("--log-jsonl", default=None, help="append every executed command to this file")
+    s = p.add_argument_group("surviving the server")
+    s.add_argument(
+        "--state-file",
+        default=None,
+        metavar="PATH",
+        help="load the robot's state (pose, odometry, progress) from PATH at start if it "
+        "exists; save it atomically whenever the robot comes to rest and on exit",
+    )
+    s.add_argument(
+        "--port-file",
+        default=None,
+        metavar="PATH",
+        help='after binding, write {"pid", "url", "robot"} to PATH (removed on exit)',
+    )
+    s.add_argument(
+        "--exit-when-orphaned",
+        type=float,
+        default=None,
+        metavar="SECONDS",
+        help="exit (saving state) after SECONDS with no controller connected and nothing "
+        "executing; default: never",
+    )
     f = p.add_argument_group("fault injection")
     f.add_argument(
         "--drop-after",
@@ -82,6 +106,7 @@ def main(argv: list[str] | None = None) -> int:
     """Entry point of ``steelpath emulate``; returns the exit status."""
     args = build_parser().parse_args(argv)
     listen = args.listen
+    stop = threading.Event()  # set by SIGINT/SIGTERM, or when the emulator is orphaned
     if listen is None and not args.pty:
         listen = "tcp://127.0.0.1:0"
     try:
@@ -112,12 +137,15 @@ def main(argv: list[str] | None = None) -> int:
             state_period_s=args.state_period,
             buffer_capacity=args.buffer,
             log_path=args.log_jsonl,
+            state_file=args.state_file,
+            port_file=args.port_file,
+            exit_when_orphaned_s=args.exit_when_orphaned,
+            on_orphaned=stop.set,
         )
     except ValueError as exc:
         print(f"steelpath emulate: {exc}", file=sys.stderr)
         return 2
     logging.basicConfig(level=logging.INFO, format="%(asctime)s %(name)s %(message)s")
-    stop = threading.Event()
     previous = {}
     if threading.current_thread() is threading.main_thread():
         for sig in (signal.SIGINT, signal.SIGTERM):
