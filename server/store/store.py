@@ -124,6 +124,30 @@ class Store:
             )
         return self.get_cloud(cid)
 
+    def register_cloud(
+        self,
+        cloud_id: str,
+        name: str,
+        source: str,
+        n_points: int,
+        bounds: dict[str, list[float]],
+        dropped: int,
+        actor: str,
+    ) -> CloudRecord:
+        """Record a cloud whose array a parser already wrote at ``clouds/{cloud_id}.npy``."""
+        relname = f"clouds/{cloud_id}.npy"
+        if not self.arrays.path(relname).is_file():
+            raise FileNotFoundError(f"cloud array {relname} was not written")
+        with self.db.transaction() as conn:
+            conn.execute(
+                "INSERT INTO clouds VALUES (?,?,?,?,?,?,?,?,?)",
+                (cloud_id, name, source, n_points, _json(bounds), dropped, relname, utcnow(), actor),
+            )
+            self._audit(
+                conn, actor, "cloud", cloud_id, "upload", reason=f"{name} ({n_points} points)"
+            )
+        return self.get_cloud(cloud_id)
+
     def get_cloud(self, cloud_id: str) -> CloudRecord:
         row = self.db.query_one("SELECT * FROM clouds WHERE id = ?", (cloud_id,))
         if row is None:
