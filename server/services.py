@@ -21,7 +21,8 @@ class Services:
     events: EventBus
     jobs: JobRunner
     scene: Any = None  # server.scene.service.SceneService when the scene runs
-    dispatch: Any = None  # the dispatch engine once robots are wired
+    dispatch: Any = None  # server.linkservice.LinkServiceClient once robots are wired
+    emulators: Any = None  # server.linkservice.EmulatorSupervisor when built-in emulators run
     estop_handlers: list[Callable[[str | None, str], None]] = field(default_factory=list)
 
 

@@ -1,30 +1,34 @@
 """The dispatch engine: approved plans → robots, with a human in the loop.
 
-Nothing else in the service talks to a robot.  The engine keeps one
-:class:`robots.adapters.link.RobotLink` per robot (and, by default, one
-embedded emulator per robot so a new user can dispatch at once), streams a
-plan's compiled program with a :class:`robots.adapters.streamer.Streamer`,
-records every acknowledgement in SQLite *before* the streamer may advance
-(``on_ack`` runs synchronously on the streamer's thread), and mirrors robot
-state into the store, the event bus and the scene.
+Nothing else in the service talks to a robot.  The engine runs inside the
+robot-link service process (:mod:`server.linkservice`), apart from the HTTP
+event loop, the scene and the planning workers.  It keeps one
+:class:`robots.adapters.link.RobotLink` per robot, streams a plan's compiled
+program with a :class:`robots.adapters.streamer.Streamer`, records every
+completion in SQLite *before* the streamer may advance (``on_ack`` runs on
+the streamer's thread, never on a link's I/O thread), and mirrors robot state
+into the store and the event sink from a thread of its own, so a slow SQLite
+write can never delay a heartbeat.
 
 Executions survive a server restart as ``interrupted`` and resume from the
-last acknowledged command with the same ``run_id``: the robot itself refuses
-to re-run a command it has completed, so nothing runs twice and nothing is
-skipped.  The E-stop reaches every link from the caller's thread, in any
-state, including while a link is reconnecting.
+last recorded completion with the same ``run_id``: the robot refuses to re-run
+a command it has completed and continues an interrupted one from where it
+stopped (docs/protocol.md §8.2), so nothing runs twice and nothing is skipped.
+The E-stop (:meth:`DispatchEngine.estop_links`) writes to every link from the
+caller's thread, in any state, including while a link is reconnecting; the
+bookkeeping (streamers, store transitions) comes after.
 """
 
 from __future__ import annotations
 
 import logging
+import queue
 import secrets
 import threading
 import time
+from collections.abc import Callable
 from dataclasses import asdict, dataclass, is_dataclass
 from typing import Any
-
-import numpy as np
 
 from robots import ROBOT_NAMES
 from robots.adapters.link import CONNECTED_STATES, LinkConfig, LinkState, RobotLink
@@ -32,7 +36,6 @@ from robots.adapters.streamer import ExecState, Outcome, Streamer, StreamFault
 from robots.protocol.commands import CommandError
 from robots.protocol.messages import LINK_FAULTS, FaultFlag, State
 from robots.protocol.program import Program
-from server.events import EventBus
 from server.lifecycle import ExecutionState, IllegalTransitionError, PlanState
 from server.settings import Settings
 from server.store import ExecutionRecord, NotFoundError, Store
@@ -51,12 +54,18 @@ class DispatchError(Exception):
         self.status = status
 
 
+class EventSink:
+    """Where the engine publishes plan/execution/robot changes (``EventBus`` or a channel)."""
+
+    def publish(self, type_: str, data: dict[str, Any]) -> Any:  # pragma: no cover - protocol
+        raise NotImplementedError
+
+
 @dataclass
 class _Robot:
     name: str
     url: str
     link: RobotLink
-    emulator: Any = None
     last_state: dict[str, Any] | None = None
     last_saved: float = 0.0
 
@@ -73,51 +82,55 @@ def state_to_dict(report: State | None) -> dict[str, Any] | None:
 
 
 class DispatchEngine:
-    """Owns robot links, embedded emulators and running executions."""
+    """Owns robot links and running executions (inside the link service)."""
 
     def __init__(
         self,
         store: Store,
-        events: EventBus,
+        events: EventSink,
         settings: Settings,
         *,
-        scene: Any = None,
         link_config: LinkConfig | None = None,
+        emulator_urls: dict[str, str] | None = None,
+        secret_for: Callable[[str], bytes | None] | None = None,
     ) -> None:
         self.store = store
         self.events = events
         self.settings = settings
-        self.scene = scene
         self._link_config = link_config
+        self._emulator_urls = dict(emulator_urls or {})
+        self._secret_for = secret_for or (lambda _name: None)
         self._lock = threading.RLock()
         self._robots: dict[str, _Robot] = {}
         self._streamers: dict[str, Streamer] = {}
+        # Latest report per robot, written to the store by the mirror thread:
+        # the link I/O thread only drops it here (a dict store, never blocks).
+        self._mirror_q: queue.SimpleQueue[tuple[str, dict[str, Any]] | None] = (
+            queue.SimpleQueue()
+        )
+        self._mirror_thread: threading.Thread | None = None
 
     # ------------------------------------------------------------- lifecycle
     def start(self) -> None:
         self._interrupt_leftovers()
         stored = self.store.robot_urls()
+        self._mirror_thread = threading.Thread(
+            target=self._mirror_loop, name="robot-state mirror", daemon=True
+        )
+        self._mirror_thread.start()
         for name in ROBOT_NAMES:
-            emulator = None
-            url = stored.get(name)
-            if url is None and self.settings.emulators:
-                emulator = self._start_emulator(name)
-                url = emulator.url
+            url = stored.get(name) or self._emulator_urls.get(name)
             if url is None:
                 url = "loop://"  # no robot configured: a link that never handshakes
-            self._robots[name] = _Robot(name, url, self._new_link(name, url), emulator)
-
-    def _start_emulator(self, name: str) -> Any:
-        from robots.emulator.server import Emulator
-
-        return Emulator(
-            name, listen="tcp://127.0.0.1:0", time_scale=self.settings.emulator_time_scale
-        ).start()
+            self._robots[name] = _Robot(name, url, self._new_link(name, url))
 
     def _new_link(self, name: str, url: str) -> RobotLink:
         base = self._link_config or LinkConfig()
-        cfg = LinkConfig(**{**asdict(base), "expected_robot": name})
-        link = RobotLink(url, cfg, name=name)
+        fields: dict[str, Any] = {**asdict(base), "expected_robot": name}
+        secret = self._secret_for(name)
+        if secret is not None and "secret" in fields:
+            fields["secret"] = secret
+        link = RobotLink(url, LinkConfig(**fields), name=name)
         link.subscribe(lambda ev, n=name: self._on_link_event(n, ev))
         return link.start()
 
@@ -129,8 +142,9 @@ class DispatchEngine:
             s.close(timeout=2)
         for r in robots:
             r.link.close(timeout=2)
-            if r.emulator is not None:
-                r.emulator.close(timeout=2)
+        self._mirror_q.put(None)
+        if self._mirror_thread is not None:
+            self._mirror_thread.join(timeout=2)
 
     def _interrupt_leftovers(self) -> None:
         """Executions a previous server left running are interrupted (resumable)."""
@@ -157,7 +171,7 @@ class DispatchEngine:
         return {
             "name": name,
             "url": r.url,
-            "emulated": r.emulator is not None and r.url == r.emulator.url,
+            "emulated": r.url == self._emulator_urls.get(name),
             "state": str(st.state),
             "reason": st.reason,
             "connected": st.state in (LinkState.READY, LinkState.STREAMING),
@@ -197,10 +211,14 @@ class DispatchEngine:
         return self._robot(name).link.wait_connected(timeout)
 
     # ------------------------------------------------------------- dispatch
-    def dispatch(self, plan_id: str, robot: str, actor: str) -> ExecutionRecord:
-        """Start executing an approved plan on ``robot`` (409 with the reason otherwise)."""
-        from server.kinds import registry
+    def dispatch(
+        self, plan_id: str, robot: str, actor: str, kind_robot: str | None = None
+    ) -> ExecutionRecord:
+        """Start executing an approved plan on ``robot`` (409 with the reason otherwise).
 
+        ``kind_robot`` is the robot the plan's kind drives: the web server looks
+        it up in the kind registry, so this process never imports the planners.
+        """
         plan = self.store.get_plan(plan_id)
         r = self._robot(robot)
         if plan.state != PlanState.APPROVED:
@@ -212,9 +230,8 @@ class DispatchEngine:
             raise DispatchError(
                 f"plan {plan_id} has failed checks ({names}); it cannot move a robot"
             )
-        kind = registry().get(plan.kind)
-        if kind is not None and kind.robot is not None and kind.robot != robot:
-            raise DispatchError(f"plan kind {plan.kind} drives robot {kind.robot!r}, not {robot!r}")
+        if kind_robot is not None and kind_robot != robot:
+            raise DispatchError(f"plan kind {plan.kind} drives robot {kind_robot!r}, not {robot!r}")
         if not plan.program:
             raise DispatchError(
                 f"plan {plan_id} has no compiled command program (kind {plan.kind} has no "
@@ -335,10 +352,16 @@ class DispatchEngine:
         return self._transition(execution_id, "abort", actor, "operator abort", strict=True) or ex
 
     def estop(self, robot: str | None, reason: str) -> list[str]:
-        """Stop every robot (or one) now; returns the robots reached.
+        """Stop every robot (or one) now, then record it; returns the robots reached."""
+        reached = self.estop_links(robot)
+        self.estop_bookkeeping(robot, reason)
+        return reached
 
-        ``link.estop()`` writes the frame from this thread and latches it for
-        reconnects, so this never waits on a busy link or a streamer.
+    def estop_links(self, robot: str | None) -> list[str]:
+        """The first-priority part: write ESTOP to every target link from this thread.
+
+        ``link.estop()`` writes the frame at once and latches it for
+        reconnects, so this never waits on a busy link, a streamer or SQLite.
         """
         targets = list(self._robots.values()) if robot is None else [self._robot(robot)]
         reached = []
@@ -348,13 +371,16 @@ class DispatchEngine:
                 reached.append(r.name)
             except Exception:  # one dead link must not stop the others' E-stop
                 log.exception("E-stop to %s failed", r.name)
+        return reached
+
+    def estop_bookkeeping(self, robot: str | None, reason: str) -> None:
+        """Stop the streamers and abort the executions of the E-stopped robots."""
         for eid, s in list(self._streamers.items()):
             ex = self.store.get_execution(eid)
             if robot is None or ex.robot == robot:
                 s.estop()
                 if ex.state in ACTIVE:
                     self._transition(eid, "abort", "estop", reason)
-        return reached
 
     # ------------------------------------------------------------- callbacks
     def _on_ack(self, execution_id: str, index: int) -> None:
@@ -392,22 +418,29 @@ class DispatchEngine:
         if r is None:
             return
         if isinstance(event, ReportReceived):
-            state = state_to_dict(event.report)
-            r.last_state = state
+            # On the link's I/O thread: convert and hand on, nothing that blocks.
             now = time.monotonic()
             if now - r.last_saved > 0.5:  # mirror at 2 Hz: enough for a console
                 r.last_saved = now
-                try:
-                    self.store.save_robot_state(name, state or {})
-                except Exception:
-                    log.exception("could not store state of %s", name)
-                self.events.publish("robot", {"name": name, "report": state})
-                if self.scene is not None and state is not None:
-                    self.scene.update_live_robot(name, np.asarray(state["q_rad"]))
+                state = state_to_dict(event.report)
+                r.last_state = state
+                self._mirror_q.put((name, state or {}))
         elif isinstance(event, LinkStateChanged):
             self.events.publish(
                 "robot", {"name": name, "state": str(event.new), "reason": event.reason}
             )
+
+    def _mirror_loop(self) -> None:
+        while True:
+            item = self._mirror_q.get()
+            if item is None:
+                return
+            name, state = item
+            try:
+                self.store.save_robot_state(name, state)
+            except Exception:
+                log.exception("could not store state of %s", name)
+            self.events.publish("robot", {"name": name, "report": state})
 
     # --------------------------------------------------------------- helpers
     def _transition(

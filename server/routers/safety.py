@@ -2,13 +2,15 @@
 
 from __future__ import annotations
 
+import asyncio
 import logging
+from concurrent.futures import ThreadPoolExecutor
 from typing import Annotated, Any
 
-from fastapi import APIRouter, Depends
+from fastapi import APIRouter, Depends, HTTPException, Request, status
 from pydantic import BaseModel, Field
 
-from server.auth import Operator, Viewer
+from server.auth import Principal, Viewer, authenticate, token_from_request
 from server.services import Services, get_services
 from server.store import NotFoundError
 
@@ -47,16 +49,61 @@ def trigger_estop(services: Services, robot: str | None, actor: str, reason: str
     return {"robot": target, "handlers": reached, "errors": errors}
 
 
-@router.post("/estop")
-def estop(services: Svc, who: Operator, req: EstopRequest | None = None) -> dict[str, Any]:
+#: E-stop requests never queue behind other requests for a worker thread: they
+#: have threads of their own (the shared pool may be taken by 40 slow polls).
+_ESTOP_POOL = ThreadPoolExecutor(4, thread_name_prefix="estop-http")
+
+
+def _operator(services: Services, token: str | None) -> Principal:
+    principal = authenticate(services, token)
+    if principal is None:
+        raise HTTPException(
+            status.HTTP_401_UNAUTHORIZED,
+            detail="missing or invalid token: send 'Authorization: Bearer <token>'",
+            headers={"WWW-Authenticate": "Bearer"},
+        )
+    if not principal.has("operator"):
+        raise HTTPException(
+            status.HTTP_403_FORBIDDEN,
+            detail=f"the E-stop needs the operator role; token {principal.name!r} has "
+            f"{principal.role}",
+        )
+    return principal
+
+
+async def _estop_first(request: Request, robot: str | None, reason: str) -> dict[str, Any]:
+    """Authenticate and stop on the E-stop pool, not the shared worker threads.
+
+    The handler is ``async`` and takes no sync dependencies, so nothing waits
+    for a free thread of the shared pool; the event loop only hands over.
+    """
+    services: Services = request.app.state.services
+    token = token_from_request(request)
+
+    def run() -> dict[str, Any]:
+        who = _operator(services, token)
+        return trigger_estop(services, robot, who.actor, reason)
+
+    return await asyncio.get_running_loop().run_in_executor(_ESTOP_POOL, run)
+
+
+_ESTOP_RESPONSES: dict[int | str, dict[str, Any]] = {
+    401: {"description": "missing, invalid or revoked token"},
+    403: {"description": "the token's role is below operator"},
+    404: {"description": "no such robot"},
+}
+
+
+@router.post("/estop", responses=_ESTOP_RESPONSES)
+async def estop(request: Request, req: EstopRequest | None = None) -> dict[str, Any]:
     """Emergency stop: every robot (or ``robot``) stops now, in any state."""
     req = req or EstopRequest()
-    return trigger_estop(services, req.robot, who.actor, req.reason)
+    return await _estop_first(request, req.robot, req.reason)
 
 
-@router.post("/robots/{robot}/estop")
-def estop_robot(robot: str, services: Svc, who: Operator) -> dict[str, Any]:
-    return trigger_estop(services, robot, who.actor, "operator E-stop")
+@router.post("/robots/{robot}/estop", responses=_ESTOP_RESPONSES)
+async def estop_robot(robot: str, request: Request) -> dict[str, Any]:
+    return await _estop_first(request, robot, "operator E-stop")
 
 
 @router.get("/audit")

@@ -1,0 +1,325 @@
+"""The web server's handle on the robot-link service process.
+
+:class:`LinkServiceClient` starts ``python -m server.linkservice`` with two
+``socketpair`` ends, and offers the dispatch engine's methods as blocking
+calls (for FastAPI's sync handlers, which run in worker threads).  Events the
+service pushes are published on the web server's :class:`EventBus` and mirrored
+into the scene by one reader thread.
+
+:meth:`LinkServiceClient.estop` uses its own channel and writes from the
+caller's thread: it never waits behind an RPC, the event reader, or the
+asyncio loop.  If the service dies (it should not), the client restarts it:
+the robots stopped when their links closed, and the new service marks the
+executions that were running ``interrupted``.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import itertools
+import json
+import logging
+import os
+import socket
+import subprocess
+import sys
+import threading
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from server.dispatch.engine import DispatchError
+from server.lifecycle import IllegalTransitionError
+from server.linkservice.channel import Channel, ChannelClosed
+from server.settings import Settings
+from server.store import ExecutionRecord, NotFoundError, Store
+
+log = logging.getLogger(__name__)
+
+#: How long a request may take before the API answers 503 (a dispatch checks
+#: the store and starts a streamer: milliseconds; this is a wedge detector).
+RPC_TIMEOUT_S = 15.0
+ESTOP_TIMEOUT_S = 2.0
+
+
+class LinkServiceUnavailable(DispatchError):
+    def __init__(self, message: str) -> None:
+        super().__init__(message, status=503)
+
+
+class _Pending:
+    __slots__ = ("done", "reply")
+
+    def __init__(self) -> None:
+        self.done = threading.Event()
+        self.reply: dict[str, Any] | None = None
+
+
+def _raise(error: dict[str, Any]) -> None:
+    kind = error.get("type")
+    msg = str(error.get("message", ""))
+    if kind == "DispatchError":
+        raise DispatchError(msg, int(error.get("status", 409)))
+    if kind == "IllegalTransitionError":
+        raise IllegalTransitionError(
+            error["entity"], error["entity_id"], error["state"], error["action"], error["allowed"]
+        )
+    if kind == "NotFoundError":
+        raise NotFoundError(msg)
+    raise DispatchError(f"link service error ({kind}): {msg}", 500)
+
+
+class LinkServiceClient:
+    """Same public methods as :class:`server.dispatch.DispatchEngine`, across a process."""
+
+    def __init__(
+        self,
+        store: Store,
+        events: Any,
+        settings: Settings,
+        *,
+        scene: Any = None,
+        emulators: Any = None,
+        kind_robot: Callable[[str], str | None] | None = None,
+    ) -> None:
+        self.store = store
+        self.events = events
+        self.settings = settings
+        self.scene = scene
+        self.emulators = emulators
+        self._kind_robot = kind_robot or (lambda _kind: None)
+        self._ids = itertools.count(1)
+        self._pending: dict[int, _Pending] = {}
+        self._plock = threading.Lock()
+        self._estop_lock = threading.Lock()
+        self._proc: subprocess.Popen[bytes] | None = None
+        self._rpc: Channel | None = None
+        self._estop: Channel | None = None
+        self._reader: threading.Thread | None = None
+        self._closing = False
+        self._ready = threading.Event()
+        self._names: list[str] = []
+        self.restarts = 0
+
+    # -------------------------------------------------------------- lifecycle
+    def start(self, timeout: float = 60.0) -> LinkServiceClient:
+        self._spawn()
+        if not self._ready.wait(timeout):
+            raise RuntimeError(f"the robot-link service did not start within {timeout:.0f} s")
+        self._names = list(self._call("robot_names", {}))
+        return self
+
+    def _spawn(self) -> None:
+        rpc_parent, rpc_child = socket.socketpair()
+        estop_parent, estop_child = socket.socketpair()
+        urls = self.emulators.urls() if self.emulators is not None else {}
+        cfg = {
+            "settings": json.loads(self.settings.model_dump_json()),
+            "emulator_urls": urls,
+            "log_level": self.settings.log_level,
+        }
+        cmd = [
+            sys.executable,
+            "-m",
+            "server.linkservice",
+            "--rpc-fd",
+            str(rpc_child.fileno()),
+            "--estop-fd",
+            str(estop_child.fileno()),
+            "--parent-pid",
+            str(os.getpid()),
+            "--config",
+            json.dumps(cfg),
+        ]
+        root = str(Path(__file__).resolve().parents[2])
+        env = {
+            **os.environ,
+            "PYTHONPATH": os.pathsep.join(filter(None, [root, os.environ.get("PYTHONPATH")])),
+        }
+        self._ready.clear()
+        self._proc = subprocess.Popen(
+            cmd, pass_fds=(rpc_child.fileno(), estop_child.fileno()), env=env, close_fds=True
+        )
+        rpc_child.close()
+        estop_child.close()
+        self._rpc = Channel(rpc_parent)
+        self._estop = Channel(estop_parent)
+        self._reader = threading.Thread(
+            target=self._read_loop, args=(self._rpc,), name="link-service reader", daemon=True
+        )
+        self._reader.start()
+
+    def shutdown(self) -> None:
+        self._closing = True
+        proc = self._proc
+        for ch in (self._rpc, self._estop):
+            if ch is not None:
+                ch.close()
+        if proc is not None:
+            try:
+                proc.wait(timeout=8)
+            except subprocess.TimeoutExpired:
+                proc.terminate()
+                try:
+                    proc.wait(timeout=3)
+                except subprocess.TimeoutExpired:
+                    proc.kill()
+                    proc.wait()
+        self._fail_pending("the robot-link service stopped")
+
+    @property
+    def pid(self) -> int | None:
+        return self._proc.pid if self._proc is not None else None
+
+    # ---------------------------------------------------------------- reading
+    def _read_loop(self, channel: Channel) -> None:
+        while True:
+            try:
+                msg = channel.recv()
+            except ChannelClosed:
+                break
+            if "event" in msg:
+                self._on_event(str(msg["event"]), msg.get("data") or {})
+                continue
+            with self._plock:
+                pending = self._pending.pop(int(msg.get("id", -1)), None)
+            if pending is not None:
+                pending.reply = msg
+                pending.done.set()
+        self._fail_pending("the robot-link service exited")
+        if not self._closing and channel is self._rpc:
+            log.error("the robot-link service exited unexpectedly; restarting it")
+            self.restarts += 1
+            threading.Thread(target=self._restart, name="link-service restart", daemon=True).start()
+
+    def _restart(self) -> None:
+        if self._proc is not None:
+            with contextlib.suppress(Exception):
+                self._proc.wait(timeout=5)
+        if not self._closing:
+            self._spawn()
+
+    def _fail_pending(self, why: str) -> None:
+        with self._plock:
+            pending = list(self._pending.values())
+            self._pending.clear()
+        for p in pending:
+            p.reply = {"ok": False, "error": {"type": "Unavailable", "message": why}}
+            p.done.set()
+
+    def _on_event(self, type_: str, data: dict[str, Any]) -> None:
+        if type_ == "linkservice":
+            self._ready.set()
+            return
+        self.events.publish(type_, data)
+        if type_ == "robot" and self.scene is not None:
+            report = data.get("report")
+            if report and "q_rad" in report:
+                with contextlib.suppress(Exception):
+                    self.scene.update_live_robot(data["name"], np.asarray(report["q_rad"]))
+
+    # ---------------------------------------------------------------- calling
+    def _call(self, op: str, args: dict[str, Any], timeout: float = RPC_TIMEOUT_S) -> Any:
+        rpc = self._rpc
+        if rpc is None:
+            raise LinkServiceUnavailable("the robot-link service is not running")
+        rid = next(self._ids)
+        pending = _Pending()
+        with self._plock:
+            self._pending[rid] = pending
+        try:
+            rpc.send({"id": rid, "op": op, "args": args})
+        except ChannelClosed:
+            with self._plock:
+                self._pending.pop(rid, None)
+            raise LinkServiceUnavailable("the robot-link service is not running") from None
+        if not pending.done.wait(timeout):
+            with self._plock:
+                self._pending.pop(rid, None)
+            raise LinkServiceUnavailable(
+                f"the robot-link service did not answer {op} within {timeout:.0f} s"
+            )
+        reply = pending.reply or {}
+        if reply.get("ok"):
+            return reply.get("result")
+        error = reply.get("error") or {}
+        if error.get("type") == "Unavailable":
+            raise LinkServiceUnavailable(str(error.get("message")))
+        _raise(error)
+
+    # ------------------------------------------------------ the engine's API
+    def robot_names(self) -> list[str]:
+        return list(self._names)
+
+    def robot_status(self, name: str) -> dict[str, Any]:
+        return dict(self._call("robot_status", {"name": name}))
+
+    def set_connection(self, name: str, url: str, actor: str) -> dict[str, Any]:
+        return dict(self._call("set_connection", {"name": name, "url": url, "actor": actor}))
+
+    def clear_estop(self, name: str, actor: str) -> dict[str, Any]:
+        return dict(self._call("clear_estop", {"name": name, "actor": actor}))
+
+    def wait_connected(self, name: str, timeout: float) -> bool:
+        return bool(
+            self._call(
+                "wait_connected", {"name": name, "timeout": timeout}, timeout + RPC_TIMEOUT_S
+            )
+        )
+
+    def dispatch(self, plan_id: str, robot: str, actor: str) -> ExecutionRecord:
+        plan = self.store.get_plan(plan_id)
+        args = {
+            "plan_id": plan_id,
+            "robot": robot,
+            "actor": actor,
+            "kind_robot": self._kind_robot(plan.kind),
+        }
+        result = self._call("dispatch", args)
+        return self.store.get_execution(str(result["id"]))
+
+    def pause(self, execution_id: str, actor: str) -> ExecutionRecord:
+        self._call("pause", {"execution_id": execution_id, "actor": actor})
+        return self.store.get_execution(execution_id)
+
+    def resume(self, execution_id: str, actor: str, clear_faults: bool = False) -> ExecutionRecord:
+        args = {"execution_id": execution_id, "actor": actor, "clear_faults": clear_faults}
+        self._call("resume", args)
+        return self.store.get_execution(execution_id)
+
+    def abort(self, execution_id: str, actor: str) -> ExecutionRecord:
+        self._call("abort", {"execution_id": execution_id, "actor": actor})
+        return self.store.get_execution(execution_id)
+
+    def stats(self) -> dict[str, Any]:
+        return dict(self._call("stats", {}))
+
+    def estop(self, robot: str | None, reason: str) -> list[str]:
+        """E-stop over the dedicated channel, from this thread; returns the robots reached.
+
+        Raises :class:`LinkServiceUnavailable` when the service cannot be reached
+        (its robots have then lost their links, and stop on their own).
+        """
+        ch = self._estop
+        if ch is None:
+            raise LinkServiceUnavailable("the robot-link service is not running")
+        rid = next(self._ids)
+        with self._estop_lock:  # one E-stop in flight at a time: replies come in order
+            try:
+                ch.send({"id": rid, "robot": robot, "reason": reason})
+                ch.sock.settimeout(ESTOP_TIMEOUT_S)
+                try:
+                    reply = ch.recv()
+                    while reply.get("id") != rid:  # a late answer to a timed-out E-stop
+                        reply = ch.recv()
+                finally:
+                    ch.sock.settimeout(None)
+            except (ChannelClosed, TimeoutError, OSError) as exc:
+                raise LinkServiceUnavailable(
+                    f"E-stop not confirmed by the robot-link service: {exc}"
+                ) from None
+        if not reply.get("ok"):
+            _raise(reply.get("error") or {})
+        return list(reply.get("result") or [])

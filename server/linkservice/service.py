@@ -1,0 +1,310 @@
+"""The robot-link service: a process of its own that owns every robot link.
+
+``steelpath serve`` starts it as a child (``python -m server.linkservice``)
+and talks to it over two inherited ``socketpair`` ends (no name on disk, so
+no other local process can reach it):
+
+- the **E-stop channel**: a thread that does nothing but wait on it.  A
+  request is answered only after ESTOP has been written to every target
+  link; bookkeeping (streamers, store) comes after, on another thread;
+- the **RPC channel**: requests (``dispatch``, ``pause``, ``robot_status``…)
+  run on a small pool of threads; replies and pushed events leave through
+  one bounded send queue, so a web server that stops reading can never block
+  a streamer, a link or the mirror thread (excess events are dropped and
+  counted, replies never).
+
+Each robot link runs its own I/O thread (heartbeats, retransmission, link
+watchdog) in this process, where no HTTP handler, upload parser, scene or
+planner shares the GIL.  The process asks for a higher scheduling priority
+(``os.nice(-5)``, granted to root) and dies with its parent
+(``PR_SET_PDEATHSIG`` plus a check of the parent pid): a robot must not go
+on moving while no operator console or E-stop can reach it.
+"""
+
+from __future__ import annotations
+
+import argparse
+import concurrent.futures
+import contextlib
+import ctypes
+import json
+import logging
+import os
+import queue
+import signal
+import socket
+import sys
+import threading
+import time
+from pathlib import Path
+from typing import Any
+
+from server.dispatch.engine import DispatchEngine, DispatchError
+from server.lifecycle import IllegalTransitionError
+from server.linkservice.channel import Channel, ChannelClosed
+from server.settings import Settings
+from server.store import NotFoundError, Store
+
+log = logging.getLogger("steelpath.linkservice")
+
+#: Pushed events waiting for the web server; beyond this the oldest are dropped.
+EVENT_QUEUE = 2000
+
+
+def die_with_parent(sig: int = signal.SIGTERM) -> None:
+    """Ask Linux to send ``sig`` to this process when its parent dies."""
+    with contextlib.suppress(Exception):
+        libc = ctypes.CDLL("libc.so.6", use_errno=True)
+        libc.prctl(1, sig, 0, 0, 0)  # PR_SET_PDEATHSIG
+
+
+class _Outbox:
+    """One sender thread for replies and events; events are droppable."""
+
+    def __init__(self, channel: Channel) -> None:
+        self.channel = channel
+        self._q: queue.Queue[dict[str, Any] | None] = queue.Queue()
+        self._events = 0
+        self._lock = threading.Lock()
+        self.dropped_events = 0
+        self._thread = threading.Thread(target=self._run, name="link-service outbox", daemon=True)
+        self._thread.start()
+
+    def reply(self, msg: dict[str, Any]) -> None:
+        self._q.put(msg)
+
+    def publish(self, type_: str, data: dict[str, Any]) -> None:
+        with self._lock:
+            if self._events >= EVENT_QUEUE:
+                self.dropped_events += 1
+                return
+            self._events += 1
+        self._q.put({"event": type_, "data": data})
+
+    def close(self) -> None:
+        self._q.put(None)
+        self._thread.join(timeout=2)
+
+    def _run(self) -> None:
+        while True:
+            msg = self._q.get()
+            if msg is None:
+                return
+            if "event" in msg:
+                with self._lock:
+                    self._events -= 1
+            try:
+                self.channel.send(msg)
+            except ChannelClosed:
+                return
+            except (TypeError, ValueError):
+                log.exception("could not encode %s", str(msg)[:200])
+
+
+def _error(exc: BaseException) -> dict[str, Any]:
+    if isinstance(exc, DispatchError):
+        return {"type": "DispatchError", "message": str(exc), "status": exc.status}
+    if isinstance(exc, IllegalTransitionError):
+        return {
+            "type": "IllegalTransitionError",
+            "message": str(exc),
+            "entity": exc.entity,
+            "entity_id": exc.entity_id,
+            "state": exc.state,
+            "action": exc.action,
+            "allowed": list(exc.allowed),
+        }
+    if isinstance(exc, NotFoundError):
+        return {"type": "NotFoundError", "message": str(exc)}
+    return {"type": type(exc).__name__, "message": str(exc), "status": 500}
+
+
+class LinkService:
+    """The child side: an engine, an RPC loop and an E-stop loop."""
+
+    OPS = (
+        "robot_names",
+        "robot_status",
+        "set_connection",
+        "clear_estop",
+        "wait_connected",
+        "dispatch",
+        "pause",
+        "resume",
+        "abort",
+        "estop",
+        "stats",
+    )
+
+    def __init__(
+        self,
+        settings: Settings,
+        rpc: Channel,
+        estop: Channel,
+        emulator_urls: dict[str, str],
+    ) -> None:
+        self.settings = settings
+        self.rpc = rpc
+        self.estop_channel = estop
+        self.outbox = _Outbox(rpc)
+        self.store = Store(settings.data)
+        self.engine = DispatchEngine(
+            self.store,
+            self.outbox,
+            settings,
+            emulator_urls=emulator_urls,
+            secret_for=self._secret_for,
+        )
+        self.pool = concurrent.futures.ThreadPoolExecutor(8, thread_name_prefix="link-rpc")
+        self._book = concurrent.futures.ThreadPoolExecutor(1, thread_name_prefix="estop-book")
+        self.stopping = threading.Event()
+        self.estops = 0
+
+    def _secret_for(self, name: str) -> bytes | None:
+        try:
+            from robots.protocol.auth import load_or_create_secret
+        except ImportError:  # protocol without authentication
+            return None
+        return load_or_create_secret(robot_key_path(self.settings.data, name))
+
+    # ----------------------------------------------------------------- E-stop
+    def estop_loop(self) -> None:
+        while not self.stopping.is_set():
+            try:
+                req = self.estop_channel.recv()
+            except ChannelClosed:
+                self.stopping.set()
+                return
+            robot = req.get("robot")
+            t0 = time.monotonic()
+            try:
+                reached = self.engine.estop_links(robot)
+                reply: dict[str, Any] = {"id": req.get("id"), "ok": True, "result": reached}
+            except Exception as exc:
+                reply = {"id": req.get("id"), "ok": False, "error": _error(exc)}
+            reply["took_s"] = time.monotonic() - t0
+            self.estops += 1
+            with contextlib.suppress(ChannelClosed):
+                self.estop_channel.send(reply)
+            reason = str(req.get("reason") or "E-stop")
+            self._book.submit(self._estop_bookkeeping, robot, reason)
+
+    def _estop_bookkeeping(self, robot: str | None, reason: str) -> None:
+        try:
+            self.engine.estop_bookkeeping(robot, reason)
+        except Exception:
+            log.exception("E-stop bookkeeping failed")
+
+    # -------------------------------------------------------------------- RPC
+    def rpc_loop(self) -> None:
+        while not self.stopping.is_set():
+            try:
+                req = self.rpc.recv()
+            except ChannelClosed:
+                self.stopping.set()
+                return
+            self.pool.submit(self._handle, req)
+
+    def _handle(self, req: dict[str, Any]) -> None:
+        op = req.get("op")
+        args = req.get("args") or {}
+        try:
+            if op not in self.OPS:
+                raise ValueError(f"unknown operation {op!r}")
+            result = self._call(str(op), args)
+            reply = {"id": req.get("id"), "ok": True, "result": result}
+        except Exception as exc:
+            if not isinstance(exc, DispatchError | IllegalTransitionError | NotFoundError):
+                log.exception("link service %s failed", op)
+            reply = {"id": req.get("id"), "ok": False, "error": _error(exc)}
+        self.outbox.reply(reply)
+
+    def _call(self, op: str, args: dict[str, Any]) -> Any:
+        eng = self.engine
+        if op == "robot_names":
+            return eng.robot_names()
+        if op == "robot_status":
+            return eng.robot_status(args["name"])
+        if op == "set_connection":
+            return eng.set_connection(args["name"], args["url"], args["actor"])
+        if op == "clear_estop":
+            return eng.clear_estop(args["name"], args["actor"])
+        if op == "wait_connected":
+            return eng.wait_connected(args["name"], float(args["timeout"]))
+        if op == "dispatch":
+            return eng.dispatch(
+                args["plan_id"], args["robot"], args["actor"], args.get("kind_robot")
+            ).public()
+        if op == "pause":
+            return eng.pause(args["execution_id"], args["actor"]).public()
+        if op == "resume":
+            return eng.resume(
+                args["execution_id"], args["actor"], bool(args.get("clear_faults"))
+            ).public()
+        if op == "abort":
+            return eng.abort(args["execution_id"], args["actor"]).public()
+        if op == "estop":
+            return eng.estop(args.get("robot"), str(args.get("reason") or "E-stop"))
+        if op == "stats":
+            return {
+                "pid": os.getpid(),
+                "nice": os.nice(0),
+                "estops": self.estops,
+                "dropped_events": self.outbox.dropped_events,
+            }
+        raise ValueError(op)  # pragma: no cover - OPS guards it
+
+    # -------------------------------------------------------------- lifecycle
+    def run(self, parent_pid: int) -> None:
+        self.engine.start()
+        threading.Thread(target=self.estop_loop, name="estop", daemon=True).start()
+        threading.Thread(target=self.rpc_loop, name="link-rpc reader", daemon=True).start()
+        self.outbox.publish("linkservice", {"state": "ready", "pid": os.getpid()})
+        while not self.stopping.wait(0.2):
+            if os.getppid() != parent_pid:
+                log.error("web server (pid %d) is gone: stopping every link", parent_pid)
+                break
+        self.shutdown()
+
+    def shutdown(self) -> None:
+        self.stopping.set()
+        self.engine.shutdown()
+        self.pool.shutdown(wait=False, cancel_futures=True)
+        self._book.shutdown(wait=False, cancel_futures=True)
+        self.outbox.close()
+        self.store.close()
+
+
+def robot_key_path(data: Path, robot: str) -> Path:
+    """Where a robot's link secret lives: ``<data>/robots/<robot>.key`` (mode 0600)."""
+    return Path(data) / "robots" / f"{robot}.key"
+
+
+def main(argv: list[str] | None = None) -> int:
+    p = argparse.ArgumentParser(prog="python -m server.linkservice")
+    p.add_argument("--rpc-fd", type=int, required=True)
+    p.add_argument("--estop-fd", type=int, required=True)
+    p.add_argument("--parent-pid", type=int, required=True)
+    p.add_argument("--config", required=True, help="JSON: settings and emulator URLs")
+    ns = p.parse_args(argv)
+    die_with_parent()
+    if os.getppid() != ns.parent_pid:
+        return 1  # the parent died before we got here
+    cfg = json.loads(ns.config)
+    logging.basicConfig(
+        level=getattr(logging, str(cfg.get("log_level", "info")).upper(), logging.INFO),
+        format="%(asctime)s link-service %(levelname)s %(name)s: %(message)s",
+        stream=sys.stderr,
+    )
+    try:
+        os.nice(-5)
+    except OSError:
+        log.info("running at the default priority (raising it needs root or CAP_SYS_NICE)")
+    settings = Settings(**cfg["settings"])
+    rpc = Channel(socket.socket(fileno=ns.rpc_fd))
+    estop = Channel(socket.socket(fileno=ns.estop_fd))
+    service = LinkService(settings, rpc, estop, cfg.get("emulator_urls") or {})
+    signal.signal(signal.SIGTERM, lambda *_: service.stopping.set())
+    signal.signal(signal.SIGINT, signal.SIG_IGN)  # the parent decides when we stop
+    service.run(ns.parent_pid)
+    return 0
