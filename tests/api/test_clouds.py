@@ -74,3 +74,100 @@ def test_delete_cloud(api) -> None:
     assert api.delete(f"/api/v1/clouds/{cid}", "viewer").status_code == 403
     assert api.delete(f"/api/v1/clouds/{cid}").status_code == 204
     assert api.get(f"/api/v1/clouds/{cid}").status_code == 404
+
+
+# ---------------------------------------------------------------- issue #12 §1, §5
+def _upload_files(api, name: str, data: bytes):
+    return api.post("/api/v1/clouds", files={"file": (name, data)})
+
+
+def _ply_header(n: int, fmt: str = "binary_little_endian") -> bytes:
+    return (
+        f"ply\nformat {fmt} 1.0\nelement vertex {n}\n"
+        "property float x\nproperty float y\nproperty float z\nend_header\n"
+    ).encode()
+
+
+def test_self_contradicting_files_are_refused(api) -> None:
+    """The fuzzer's finds: negative counts read the whole body, complex NPY lost its imaginary part."""
+    r = _upload_files(api, "neg.ply", _ply_header(-1) + np.zeros((4, 3), "<f4").tobytes())
+    assert r.status_code == 400 and "≥ 0" in r.json()["detail"], r.text
+    pcd = (
+        b"VERSION 0.7\nFIELDS x y z\nSIZE 4 4 4\nTYPE F F F\nCOUNT 1 1 1\nWIDTH 4\n"
+        b"HEIGHT 1\nPOINTS -1\nDATA binary\n" + np.zeros((4, 3), "<f4").tobytes()
+    )
+    r = _upload_files(api, "neg.pcd", pcd)
+    assert r.status_code == 400 and "POINTS" in r.json()["detail"], r.text
+    buf = io.BytesIO()
+    np.save(buf, np.ones((5, 3), np.complex128))
+    r = _upload_files(api, "c.npy", buf.getvalue())
+    assert r.status_code == 400 and "real numbers" in r.json()["detail"], r.text
+    assert api.get("/api/v1/clouds").json() == []
+
+
+def test_upload_leaves_no_spool_or_array_files(make_api, tmp_path) -> None:
+    api = make_api(max_upload_mb=0.01)
+    data_dir = api.services.store.data_dir
+    assert _upload_files(api, "big.xyz", b"1 2 3\n" * 5000).status_code == 413
+    assert _upload_files(api, "bad.ply", b"ply\nformat ascii 1.0\n").status_code == 400
+    ok = _upload_files(api, "ok.xyz", b"1 2 3\n4 5 6\n")
+    assert ok.status_code == 201
+    files = sorted(p.relative_to(data_dir).as_posix() for p in data_dir.rglob("*") if p.is_file())
+    arrays = [f for f in files if f.startswith(("arrays/", "uploads/"))]
+    assert arrays == [f"arrays/clouds/{ok.json()['id']}.npy"]
+
+
+def test_binary_ply_upload_round_trip(api) -> None:
+    pts = np.random.default_rng(2).normal(size=(1000, 3)).astype("<f4")
+    r = _upload_files(api, "b.ply", _ply_header(len(pts)) + pts.tobytes())
+    assert r.status_code == 201, r.text
+    assert r.json()["bounds"]["min"] == [float(v) for v in pts.min(axis=0)]
+    raw = api.get(f"/api/v1/clouds/{r.json()['id']}/points.npy", "viewer").content
+    np.testing.assert_array_equal(np.load(io.BytesIO(raw)), pts.astype(np.float64))
+
+
+GATE_WRAPPER = """
+import pathlib, sys, time
+gate = pathlib.Path(sys.argv[1])
+pathlib.Path(sys.argv[2]).touch()          # the parse has started
+while not gate.exists():                   # ...and is held until the test opens the gate
+    time.sleep(0.01)
+from server.cloud_io import main
+sys.exit(main(sys.argv[3:]))
+"""
+
+
+def test_health_is_served_while_an_upload_parses(api, tmp_path, monkeypatch) -> None:
+    """Ordering, not timing: /health completes while the upload's parse is held open."""
+    import sys
+    import threading
+
+    from server.routers import clouds
+
+    gate, started = tmp_path / "gate", tmp_path / "started"
+    script = tmp_path / "gated_parser.py"
+    script.write_text(GATE_WRAPPER)
+    monkeypatch.setattr(clouds, "PARSER", [sys.executable, str(script), str(gate), str(started)])
+    result: dict = {}
+
+    def upload() -> None:
+        result["r"] = _upload_files(api, "held.xyz", b"0 0 0\n1 1 1\n")
+
+    t = threading.Thread(target=upload)
+    t.start()
+    try:
+        for _ in range(3000):  # up to 30 s for the child to start
+            if started.exists():
+                break
+            t.join(0.01)
+        assert started.exists(), "the parser child never started"
+        for _ in range(3):
+            h = api.get("/api/v1/health")
+            assert h.status_code == 200 and h.json()["status"] == "ok"
+        assert api.get("/api/v1/clouds", "viewer").json() == []
+        assert t.is_alive() and "r" not in result  # the upload is still parsing
+    finally:
+        gate.touch()
+        t.join(60)
+    assert not t.is_alive()
+    assert result["r"].status_code == 201 and result["r"].json()["n_points"] == 2
