@@ -328,3 +328,217 @@ def test_unparseable_sequenced_frame_is_refused_and_consumed() -> None:
     assert robot.receive_invalid(0x17, 1) == [nak]  # retransmission: same answer
     assert isinstance(robot.receive(joints(0), 2)[0], Ack)
     assert robot.receive_invalid(0x7E, 0) == []  # not sequenced: ignored
+
+
+# --- continuation of an interrupted command (docs/protocol.md §8.2) -----------------------
+
+
+def wheels(index: int = 0, ms: int = 2000, speeds=(1.0, 0.5), run: int = 9) -> WheelsCmd:
+    return WheelsCmd(
+        run_id=run,
+        index=index,
+        duration_ms=ms,
+        speeds_um_s=tuple(round(v * 1e6) for v in speeds),
+    )
+
+
+def run_for(robot: SimRobot, clock: Clock, seconds: float, step: float = 0.1) -> None:
+    """Let simulated time pass with heartbeats well inside the watchdog."""
+    for _ in range(round(seconds / step)):
+        clock.t += step
+        robot.receive(Heartbeat(), 0)
+
+
+def reconnect(robot: SimRobot) -> int:
+    """What a resuming host does: new session, clear the link fault; returns the next seq."""
+    hello(robot)
+    (ack,) = robot.receive(Clear(faults=FaultFlag.LINK_RESET | FaultFlag.WATCHDOG), 1)
+    assert isinstance(ack, Ack)
+    return 2
+
+
+def test_wheels_resume_drives_only_the_remainder() -> None:
+    # The issue's case: link lost 1.03 m into a 2.0 m wheels command, then resumed.
+    robot, clock = make()
+    hello(robot, watchdog_ms=2000)
+    cmd = wheels(ms=2000, speeds=(1.0, 0.5))
+    robot.receive(cmd, 1)
+    robot.advance()
+    clock.t += 1.03
+    robot.link_lost()
+    assert robot.odometry == pytest.approx([1.03, 0.515])
+    assert robot.interrupted is not None and robot.interrupted.progress == pytest.approx(0.515)
+    seq = reconnect(robot)
+    (ack,) = robot.receive(cmd, seq)  # the resume sends the same command again
+    assert isinstance(ack, Ack) and ack.status == AckStatus.OK
+    robot.advance()
+    assert robot.current is not None and robot.current.duration == pytest.approx(0.97)
+    run_for(robot, clock, 1.5)
+    assert robot.last_done == 0 and robot.mode == Mode.IDLE
+    assert robot.odometry == pytest.approx([2.0, 1.0], abs=1e-9)  # not 3.03 m
+    first, second = robot.log
+    assert (first.outcome, first.reason, first.continued_from) == ("interrupted", "link_lost", None)
+    assert first.progress == pytest.approx(0.515)
+    assert (second.outcome, second.progress) == ("done", 1.0)
+    assert second.continued_from == pytest.approx(0.515)
+    assert check_exactly_once(robot.log, 9, 1) == []
+    (again,) = robot.receive(cmd, seq + 1)  # completed: still never executed again
+    assert isinstance(again, Ack) and again.status == AckStatus.ALREADY_DONE
+    assert robot.interrupted is None and len(robot.log) == 2
+
+
+def test_wheels_interrupted_twice_ends_at_the_planned_total() -> None:
+    robot, clock = make()
+    hello(robot, watchdog_ms=300)
+    cmd = wheels(ms=3000, speeds=(0.2, 0.2))
+    robot.receive(cmd, 1)
+    robot.advance()
+    clock.t += 0.7
+    robot.advance()  # watchdog: stops at 0.3 s
+    assert robot.faults & FaultFlag.WATCHDOG
+    seq = reconnect(robot)
+    robot.receive(cmd, seq)
+    run_for(robot, clock, 1.0)
+    robot.receive(Abort(), seq + 1)  # stopped again, at 1.3 s of 3 s
+    seq = reconnect(robot)
+    robot.receive(cmd, seq)
+    run_for(robot, clock, 2.0)
+    assert robot.odometry == pytest.approx([0.6, 0.6], abs=1e-9)
+    assert [(r.outcome, r.reason) for r in robot.log] == [
+        ("interrupted", "watchdog"),
+        ("interrupted", "abort"),
+        ("done", ""),
+    ]
+    p = [r.progress for r in robot.log]
+    assert p[:2] == pytest.approx([0.1, 1.3 / 3])
+    assert [r.continued_from for r in robot.log][1:] == pytest.approx(p[:2])
+    assert check_exactly_once(robot.log, 9, 1) == []
+
+
+@pytest.mark.parametrize("kind", ["joints", "lift"])
+def test_absolute_target_resumes_to_it_at_no_more_than_the_planned_speed(kind: str) -> None:
+    robot, clock = make()
+    hello(robot)
+    if kind == "joints":
+        cmd = joints(0, q=(0.5, 0.25), ms=1000)
+    else:
+        cmd = LiftCmd(run_id=9, index=0, duration_ms=1000, angle_urad=1_000_000)
+    robot.receive(cmd, 1)
+    robot.advance()
+    clock.t += 0.4
+    robot.receive(Pause(), 2)  # pause, then abort: the command is interrupted at 40 %
+    clock.t += 0.3
+    robot.receive(Abort(), 3)
+    assert robot.log[-1].progress == pytest.approx(0.4)
+    seq = reconnect(robot)
+    robot.receive(cmd, seq)
+    robot.advance()
+    seg = robot.current
+    assert seg is not None and seg.continued_from == pytest.approx(0.4)
+    # Rule: remaining duration = planned × remaining-distance fraction (0.6 s), so
+    # each joint moves at exactly its planned speed, never faster.
+    assert seg.duration == pytest.approx(0.6)
+    before = robot.q.copy() if kind == "joints" else np.array([robot.lift])
+    clock.t += 0.3
+    robot.receive(Heartbeat(), 0)
+    after = robot.q.copy() if kind == "joints" else np.array([robot.lift])
+    planned_speed = np.array([0.5, 0.25]) if kind == "joints" else np.array([1.0])
+    assert np.abs(after - before) / 0.3 == pytest.approx(planned_speed)
+    run_for(robot, clock, 0.5)
+    assert robot.last_done == 0
+    if kind == "joints":
+        assert robot.q == pytest.approx([0.5, 0.25], abs=1e-12)
+    else:
+        assert robot.lift == pytest.approx(1.0, abs=1e-12)
+    assert check_exactly_once(robot.log, 9, 1) == []
+
+
+def test_resume_of_a_dwell_waits_only_the_rest() -> None:
+    robot, clock = make()
+    hello(robot)
+    robot.receive(joints(0, q=(0.0, 0.0), ms=0), 1)  # where the robot already is
+    robot.receive(joints(1, q=(0.0, 0.0), ms=1000), 2)  # a 1 s dwell
+    robot.advance()
+    clock.t += 0.25
+    robot.link_lost()
+    seq = reconnect(robot)
+    robot.receive(joints(1, q=(0.0, 0.0), ms=1000), seq)
+    robot.advance()
+    assert robot.current is not None and robot.current.duration == pytest.approx(0.75)
+
+
+def test_state_commands_resume_idempotently() -> None:
+    # A fault injected "halfway" through an instantaneous magnet command interrupts it
+    # before it acts; the resume applies the (absolute) state once.
+    robot, _ = make(FaultConfig(fault_at_index=0))
+    hello(robot)
+    cmd = MagnetCmd(run_id=9, index=0, magnet=1, touched=True)
+    robot.receive(cmd, 1)
+    robot.advance()
+    assert robot.faults == FaultFlag.DRIVE and robot.magnets == 0
+    robot.receive(Clear(faults=FaultFlag.DRIVE), 2)
+    robot.receive(cmd, 3)
+    robot.advance()
+    assert robot.magnets == 0b10 and robot.last_done == 0
+    assert [(r.outcome, r.continued_from) for r in robot.log] == [("interrupted", None), ("done", 0.0)]
+    assert check_exactly_once(robot.log, 9, 1) == []
+
+
+def test_another_run_or_another_command_clears_the_memory() -> None:
+    robot, clock = make()
+    hello(robot)
+    robot.receive(wheels(ms=2000, run=9), 1)
+    robot.advance()
+    clock.t += 0.5
+    robot.link_lost()
+    seq = reconnect(robot)
+    robot.receive(wheels(ms=2000, run=10), seq)  # a new execution: runs in full
+    assert robot.interrupted is None
+    run_for(robot, clock, 2.5)
+    assert robot.odometry[0] == pytest.approx(2.5)
+    assert robot.log[-1].continued_from is None and robot.counters["continuations"] == 0
+    # Same (run, index) but other content is not a resume of what was interrupted.
+    robot.receive(wheels(index=1, ms=2000, run=10), seq + 1)
+    robot.advance()
+    clock.t += 0.5
+    robot.link_lost()
+    seq = reconnect(robot)
+    robot.receive(wheels(index=1, ms=1000, run=10), seq)
+    robot.advance()
+    assert robot.current is not None and robot.current.duration == pytest.approx(1.0)
+    assert robot.counters["continuation_mismatch"] == 1
+
+
+def test_resume_point_of_a_paused_command_and_power_down() -> None:
+    robot, clock = make()
+    hello(robot)
+    robot.receive(wheels(ms=2000), 1)
+    robot.advance()
+    clock.t += 0.5
+    robot.receive(Pause(), 2)
+    point = robot.resume_point()  # what a state file written now keeps
+    assert point is not None and point.progress == pytest.approx(0.25)
+    assert point.done_s == pytest.approx(0.5) and robot.interrupted is None
+    robot.power_down()
+    assert robot.log[-1].reason == "shutdown" and robot.faults == FaultFlag.LINK_RESET
+    assert robot.interrupted == point
+
+
+def _rec_p(index: int, outcome: str, progress: float | None, cont: float | None) -> ExecutionRecord:
+    return ExecutionRecord(1, index, "wheels", outcome, "", 0, 0, 0, 0, progress, cont)
+
+
+def test_check_exactly_once_finds_repeated_and_skipped_motion() -> None:
+    ok = [_rec_p(0, "interrupted", 0.4, None), _rec_p(0, "done", 1.0, 0.4)]
+    assert check_exactly_once(ok, 1, 1) == []
+    restarted = [_rec_p(0, "interrupted", 0.4, None), _rec_p(0, "done", 1.0, None)]
+    assert any("motion repeated" in p for p in check_exactly_once(restarted, 1, 1))
+    # Interrupted before anything moved: starting over repeats nothing.
+    nothing = [_rec_p(0, "interrupted", 0.0, None), _rec_p(0, "done", 1.0, None)]
+    assert check_exactly_once(nothing, 1, 1) == []
+    back = [_rec_p(0, "interrupted", 0.4, None), _rec_p(0, "done", 1.0, 0.2)]
+    assert any("motion repeated" in p for p in check_exactly_once(back, 1, 1))
+    ahead = [_rec_p(0, "interrupted", 0.4, None), _rec_p(0, "done", 1.0, 0.6)]
+    assert any("motion skipped" in p for p in check_exactly_once(ahead, 1, 1))
+    orphan = [_rec_p(0, "done", 1.0, 0.4)]
+    assert any("first part is not in the log" in p for p in check_exactly_once(orphan, 1, 1))
