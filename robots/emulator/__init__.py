@@ -3,14 +3,24 @@
 - :class:`Emulator` — transport + :class:`SimRobot`, with link fault injection.
 - :class:`SimRobot` — protocol state machine and simulation, no I/O.
 - :class:`FaultConfig` — what to inject; :func:`resolve_profile` — the robot's hardware.
-- :func:`check_exactly_once` — assert nothing lost or duplicated from the execution log.
+- :func:`check_exactly_once` — assert nothing lost or duplicated from the execution log
+  (an interrupted command must be *continued*, never repeated: docs/protocol.md §8.2).
+- :class:`StateFile`, :func:`read_port_file` — state and endpoint that outlive the
+  emulator process (``--state-file``, ``--port-file``; :mod:`robots.emulator.persist`).
 - :func:`main` — ``steelpath emulate`` entry point.
 """
 
 from robots.emulator.cli import main
 from robots.emulator.faults import FaultConfig
+from robots.emulator.persist import PortInfo, StateFile, StateFileError, read_port_file
 from robots.emulator.profiles import FALLBACK_PROFILES, RobotProfile, resolve_profile
-from robots.emulator.robot import ExecutionRecord, SimRobot, StopEvent, check_exactly_once
+from robots.emulator.robot import (
+    ExecutionRecord,
+    Interrupted,
+    SimRobot,
+    StopEvent,
+    check_exactly_once,
+)
 from robots.emulator.server import Emulator
 
 __all__ = [
@@ -18,10 +28,15 @@ __all__ = [
     "Emulator",
     "ExecutionRecord",
     "FaultConfig",
+    "Interrupted",
+    "PortInfo",
     "RobotProfile",
     "SimRobot",
+    "StateFile",
+    "StateFileError",
     "StopEvent",
     "check_exactly_once",
     "main",
+    "read_port_file",
     "resolve_profile",
 ]
