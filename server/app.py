@@ -123,12 +123,10 @@ def create_app(settings: Settings | None = None, *, start_scene: bool | None = N
         if run_scene:
             from server.scene.service import SceneService
 
-            def propose(plan_id: str, patch: dict[str, Any]) -> str:
-                parent = store.get_plan(plan_id)
-                new = plans.submit_plan(
-                    services, parent.kind, {**parent.params, **patch}, "scene", parent.id
-                )
-                return new.id
+            def propose(proposal: dict[str, Any]) -> None:
+                # A scene interaction is only a proposal (DESIGN §10): publish it
+                # for the console; an operator accepts it over REST, which plans.
+                bus.publish("proposal", proposal)
 
             scene = SceneService(store, settings.scene_port, propose)
             scene.start()

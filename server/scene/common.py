@@ -7,6 +7,8 @@ from typing import Any
 
 import numpy as np
 
+from server.scene.context import current_scene_client
+
 #: Qualitative palette (Tableau 10) for clusters, planes and sequences.
 PALETTE = np.array(
     [
@@ -111,7 +113,12 @@ def add_spheres(
         def _(event: Any) -> None:
             idx = getattr(event, "instance_index", None)
             if idx is not None:
-                on_click(int(idx))
+                # Tag the call with the clicking client for per-client rate limits.
+                token = current_scene_client.set(getattr(event, "client_id", None))
+                try:
+                    on_click(int(idx))
+                finally:
+                    current_scene_client.reset(token)
 
     return handle
 

@@ -2,19 +2,24 @@
 
 Drawers (``server/scene/<kind>.py``) draw a *stored* plan into the viser scene
 under ``ctx.root``; they never compute plans (DESIGN §3).  Interaction that
-changes a plan goes through ``ctx.propose``, which creates a new plan revision
-through the same service REST uses.
+changes a plan goes through ``ctx.propose``, which records a *proposal* for a
+new plan revision; an operator accepts it over REST (DESIGN §10).
 """
 
 from __future__ import annotations
 
 import threading
 from collections.abc import Callable
+from contextvars import ContextVar
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 import numpy as np
+
+#: The viser client id whose event is being handled (set around click
+#: callbacks), so proposals can be rate-limited per client.
+current_scene_client: ContextVar[int | None] = ContextVar("current_scene_client", default=None)
 
 
 @dataclass
@@ -32,8 +37,9 @@ class DrawContext:
     - ``scene``: the viser ``SceneApi`` (``server.scene``); name every node
       under ``root`` (e.g. ``f"{ctx.root}/route"``) so a redraw clears it.
     - ``gui``: the viser ``GuiApi`` for small per-plan controls (toggles).
-    - ``propose(patch)``: submit a new plan whose params are this plan's params
-      updated with ``patch`` (e.g. ``{"start": 3}``); returns the new plan id.
+    - ``propose(patch)``: propose a new plan whose params are this plan's
+      params updated with ``patch`` (e.g. ``{"start": 3}``); returns the
+      proposal id, or ``None`` when rate-limited.  It never creates a plan.
     - ``add_urdf(robot, name)``: a ``viser.extras.ViserUrdf`` of a robot
       description under ``root``; call ``update_cfg(q)`` on it.
     - ``animate(duration_s, update)``: register a looping animation callback.
@@ -42,7 +48,7 @@ class DrawContext:
     scene: Any
     gui: Any
     root: str
-    propose: Callable[[dict[str, Any]], str]
+    propose: Callable[[dict[str, Any]], str | None]
     server: Any = None  # the viser.ViserServer (ViserUrdf needs it, not the SceneApi)
     lock: threading.RLock = field(default_factory=threading.RLock)
     animations: list[Animation] = field(default_factory=list)

@@ -5,6 +5,19 @@ embeds ``/scene/`` from FastAPI, which forwards the page and the websocket
 after checking the operator's token (cookie from ``POST /api/v1/session``
 or a bearer header).  viser's client derives its websocket address from the
 page URL (``/scene/`` → ``ws://host/scene``), so both routes live here.
+
+The websocket route also
+
+- refuses cross-origin handshakes (a browser ``Origin`` other than this
+  server's own ``Host``), since the session cookie is sent to any page on
+  the same host, whatever its port;
+- opens the upstream connection with a one-time ticket, without which viser
+  refuses the handshake (:mod:`server.scene.wsguard`);
+- closes the connection (code 1008) once its token is revoked or expires.
+
+Scene proposals (``/api/v1/scene/proposals``): viewers list them, operators
+accept (the plan is submitted through ``submit_plan`` as that operator) or
+dismiss them.
 """
 
 from __future__ import annotations
@@ -12,17 +25,21 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import logging
-from typing import Annotated, Any
+from typing import Annotated, Any, Literal
+from urllib.parse import urlsplit
 
 import httpx
 import websockets
-from fastapi import APIRouter, Depends, HTTPException, Request, Response, WebSocket
+from fastapi import APIRouter, Depends, HTTPException, Query, Request, Response, WebSocket
 from fastapi.responses import RedirectResponse
 from pydantic import BaseModel, model_validator
 from starlette.websockets import WebSocketDisconnect
 
-from server.auth import Operator, Viewer, authenticate
+from server.auth import Operator, TokenRefused, Viewer, resolve, until_invalid
+from server.scene.proposals import STATES, ProposalBook, ProposalDecidedError
+from server.scene.wsguard import TICKET_HEADER
 from server.services import Services, get_services
+from server.store import NotFoundError
 
 log = logging.getLogger(__name__)
 
@@ -63,15 +80,35 @@ async def scene_page(path: str, request: Request, services: Svc, _: Operator) ->
     return Response(upstream.content, status_code=upstream.status_code, headers=headers)
 
 
+def same_origin(origin: str | None, host: str | None) -> bool:
+    """A browser handshake's ``Origin`` must name this server (its ``Host``).
+
+    Non-browser clients send no ``Origin``; they authenticate with a token
+    they hold, so there is no ambient credential to misuse.
+    """
+    if origin is None:
+        return True
+    parts = urlsplit(origin)
+    return parts.scheme in ("http", "https") and bool(host) and parts.netloc == host
+
+
 @proxy_router.websocket("/scene")
 @proxy_router.websocket("/scene/")
 async def scene_socket(websocket: WebSocket) -> None:
     services: Services = websocket.app.state.services
+    origin = websocket.headers.get("origin")
+    if not same_origin(origin, websocket.headers.get("host")):
+        log.warning("refused a cross-origin scene websocket (Origin %r)", origin)
+        await websocket.close(code=1008)  # before accept: the handshake gets HTTP 403
+        return
     token = websocket.cookies.get("steelpath_token")
     header = websocket.headers.get("authorization", "")
     if header.lower().startswith("bearer "):
         token = header[7:].strip()
-    principal = authenticate(services, token)
+    try:
+        principal = resolve(services.store, token)
+    except TokenRefused:
+        principal = None
     if principal is None or not principal.has(SCENE_ROLE):
         # Closing before accept refuses the handshake (HTTP 403).
         await websocket.close(code=1008)
@@ -88,6 +125,7 @@ async def scene_socket(websocket: WebSocket) -> None:
     try:
         upstream = await websockets.connect(
             f"ws://127.0.0.1:{scene.port}/",
+            additional_headers={TICKET_HEADER: scene.issue_ticket()},
             subprotocols=offered or None,  # type: ignore[arg-type]
             max_size=None,
             compression=None,
@@ -115,9 +153,18 @@ async def scene_socket(websocket: WebSocket) -> None:
             else:
                 await websocket.send_text(data)
 
-    tasks = [asyncio.create_task(client_to_upstream()), asyncio.create_task(upstream_to_client())]
+    invalid = asyncio.create_task(until_invalid(services.store, principal))
+    tasks = [
+        asyncio.create_task(client_to_upstream()),
+        asyncio.create_task(upstream_to_client()),
+        invalid,
+    ]
+    reason = ""
     try:
         await asyncio.wait(tasks, return_when=asyncio.FIRST_COMPLETED)
+        if invalid.done() and not invalid.cancelled() and invalid.exception() is None:
+            reason = invalid.result()
+            log.info("closing scene websocket of %s: %s", principal.actor, reason)
     finally:
         for t in tasks:
             t.cancel()
@@ -126,7 +173,10 @@ async def scene_socket(websocket: WebSocket) -> None:
                 await t
         await upstream.close()
         with contextlib.suppress(Exception):
-            await websocket.close()
+            if reason:
+                await websocket.close(code=1008, reason=reason)
+            else:
+                await websocket.close()
 
 
 class ShowRequest(BaseModel):
@@ -149,7 +199,7 @@ def scene_state(services: Svc, _: Viewer) -> dict[str, Any]:
         "running": True,
         "path": "/scene/",
         "current": scene.current,
-        "proposals": scene.proposals[-20:],
+        "proposals": [p.public() for p in scene.proposals.list("pending")],
     }
 
 
@@ -163,3 +213,91 @@ def scene_show(req: ShowRequest, services: Svc, _: Operator) -> dict[str, Any]:
         return scene.show_plan(req.plan_id)
     assert req.cloud_id is not None
     return scene.show_cloud(req.cloud_id)
+
+
+# --------------------------------------------------------------- proposals
+def _book(services: Services) -> ProposalBook | None:
+    scene = services.scene
+    return None if scene is None else scene.proposals
+
+
+def _decided(exc: ProposalDecidedError) -> HTTPException:
+    return HTTPException(409, detail=f"{exc}; only pending proposals can be decided")
+
+
+@api_router.get("/proposals")
+def list_proposals(
+    services: Svc,
+    _: Viewer,
+    state: Annotated[
+        Literal["pending", "accepting", "accepted", "dismissed", "lapsed"] | None,
+        Query(description=f"only proposals in this state (one of {', '.join(STATES)})"),
+    ] = None,
+) -> list[dict[str, Any]]:
+    """Scene interactions waiting for (or given) an operator's decision, newest first."""
+    book = _book(services)
+    return [] if book is None else [p.public() for p in book.list(state)]
+
+
+@api_router.get("/proposals/{proposal_id}", responses={404: {"description": "no such proposal"}})
+def get_proposal(proposal_id: str, services: Svc, _: Viewer) -> dict[str, Any]:
+    return _require_book(services).get(proposal_id).public()
+
+
+def _require_book(services: Services) -> ProposalBook:
+    book = _book(services)
+    if book is None:
+        raise NotFoundError("no scene proposals: the 3D scene is not running")
+    return book
+
+
+@api_router.post(
+    "/proposals/{proposal_id}/accept",
+    status_code=202,
+    responses={404: {"description": "no such proposal"}, 409: {"description": "decided"}},
+)
+def accept_proposal(
+    proposal_id: str, services: Svc, who: Operator, response: Response
+) -> dict[str, Any]:
+    """Make the proposed plan (a revision of the plan it derives from) as this operator."""
+    from server.routers.plans import submit_plan
+
+    book = _require_book(services)
+    try:
+        proposal = book.begin_accept(proposal_id)
+    except ProposalDecidedError as exc:
+        raise _decided(exc) from None
+    try:
+        parent = services.store.get_plan(proposal.plan_id)
+        plan = submit_plan(
+            services, parent.kind, {**parent.params, **proposal.patch}, who.actor, parent.id
+        )
+    except BaseException:
+        book.abort_accept(proposal_id)
+        raise
+    proposal = book.finish_accept(proposal_id, plan.id, who.actor)
+    services.store.audit(
+        who.actor,
+        "plan",
+        plan.id,
+        "accept_proposal",
+        reason=f"scene proposal {proposal.id} from {proposal.source}: {proposal.patch}",
+    )
+    services.events.publish("proposal", proposal.public())
+    if services.scene is not None:
+        services.scene.follow(plan.id)
+    response.headers["Location"] = f"/api/v1/plans/{plan.id}"
+    return plan.public()
+
+
+@api_router.post(
+    "/proposals/{proposal_id}/dismiss",
+    responses={404: {"description": "no such proposal"}, 409: {"description": "decided"}},
+)
+def dismiss_proposal(proposal_id: str, services: Svc, who: Operator) -> dict[str, Any]:
+    try:
+        proposal = _require_book(services).dismiss(proposal_id, who.actor)
+    except ProposalDecidedError as exc:
+        raise _decided(exc) from None
+    services.events.publish("proposal", proposal.public())
+    return proposal.public()

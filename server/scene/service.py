@@ -1,10 +1,14 @@
 """The in-process viser server and what it shows.
 
 viser runs in its own daemon thread bound to 127.0.0.1 (it has no
-authentication); operators reach it only through the authenticated proxy in
-:mod:`server.scene.proxy`.  The scene is drawn from stored plans only, so a
-restart redraws the same picture.  Drawers and viser callbacks run on
-different threads, so every redraw holds ``self._lock``.
+authentication of its own); operators reach it only through the authenticated
+proxy in :mod:`server.scene.proxy`, and viser refuses any websocket that does
+not carry a one-time ticket from that proxy (:mod:`server.scene.wsguard`).
+Scene interactions never create plans: they become proposals
+(:mod:`server.scene.proposals`) that an operator accepts over REST.  The scene
+is drawn from stored plans only, so a restart redraws the same picture.
+Drawers and viser callbacks run on different threads, so every redraw holds
+``self._lock``.
 """
 
 from __future__ import annotations
@@ -20,22 +24,33 @@ import numpy as np
 
 from server.kinds import registry
 from server.lifecycle import PlanState
-from server.scene.context import Animation, DrawContext
+from server.scene.context import Animation, DrawContext, current_scene_client
+from server.scene.proposals import ProposalBook
+from server.scene.wsguard import TicketDesk, guarded_viser_start
 from server.store import PlanRecord, Store
 
 log = logging.getLogger(__name__)
 
 MAX_CLOUD_POINTS = 300_000
 
-ProposeFn = Callable[[str, dict[str, Any]], str]
+#: Told of every new proposal (``Proposal.public()``), e.g. to publish it.
+ProposeFn = Callable[[dict[str, Any]], None]
 
 
 class SceneService:
-    def __init__(self, store: Store, port: int, propose: ProposeFn) -> None:
+    def __init__(
+        self,
+        store: Store,
+        port: int,
+        propose: ProposeFn,
+        *,
+        proposals: ProposalBook | None = None,
+    ) -> None:
         self.store = store
         self.requested_port = port
         self.port: int | None = None
         self._propose = propose
+        self.tickets = TicketDesk()
         self._lock = threading.RLock()
         self._server: Any = None
         self._animations: list[Animation] = []
@@ -45,7 +60,7 @@ class SceneService:
         self._anim_thread: threading.Thread | None = None
         self.current: dict[str, Any] = {}
         self._live: dict[str, Any] = {}
-        self.proposals: list[dict[str, Any]] = []
+        self.proposals = proposals if proposals is not None else ProposalBook()
 
     # -------------------------------------------------------------- lifecycle
     @property
@@ -59,7 +74,20 @@ class SceneService:
     def start(self) -> None:
         import viser
 
-        self._server = viser.ViserServer(host="127.0.0.1", port=self.requested_port, verbose=False)
+        with guarded_viser_start(self.tickets) as wrapped:
+            self._server = viser.ViserServer(
+                host="127.0.0.1", port=self.requested_port, verbose=False
+            )
+        if not wrapped:
+            # Fail closed: an unguarded viser port lets any local process drive the scene.
+            self._server.stop()
+            self._server = None
+            log.error(
+                "the 3D scene is disabled: viser did not start through "
+                "websockets.asyncio.server.serve, so its websocket cannot be tied to the "
+                "/scene/ proxy (viser upgraded? see server/scene/wsguard.py)"
+            )
+            return
         # viser silently moves to the next free port: read back what it got.
         self.port = int(self._server.get_port())
         self._server.scene.set_up_direction("+z")
@@ -201,13 +229,31 @@ class SceneService:
             self._follow = None
             self.show_plan(plan_id)
 
-    def _on_propose(self, plan_id: str, patch: dict[str, Any]) -> str:
-        new_id = self._propose(plan_id, patch)
-        self.proposals.append(
-            {"from": plan_id, "patch": patch, "plan_id": new_id, "ts": time.time()}
-        )
-        self._follow = new_id
-        return new_id
+    def issue_ticket(self) -> str:
+        """A one-time ticket for the proxy's next upstream websocket."""
+        return self.tickets.issue()
+
+    def follow(self, plan_id: str) -> None:
+        """Redraw ``plan_id`` when it finishes planning (an accepted proposal)."""
+        self._follow = plan_id
+
+    def _on_propose(self, plan_id: str, patch: dict[str, Any]) -> str | None:
+        """A scene interaction: record a proposal (never a plan); its id or None if dropped."""
+        client = current_scene_client.get()
+        try:
+            kind = self.store.get_plan(plan_id).kind
+        except KeyError:  # the plan shown was deleted meanwhile
+            log.warning("scene proposal for missing plan %s dropped", plan_id)
+            return None
+        source = "scene" if client is None else f"scene client {client}"
+        proposal = self.proposals.propose(plan_id, kind, patch, client=client, source=source)
+        if proposal is None:
+            return None
+        try:
+            self._propose(proposal.public())
+        except Exception:  # publishing must not break viser's callback thread
+            log.exception("publishing scene proposal %s failed", proposal.id)
+        return proposal.id
 
     # -------------------------------------------------------------- animation
     def _animate(self) -> None:

@@ -1,4 +1,5 @@
-"""The in-process viser scene: drawing, clicks → proposals, and the authenticated proxy."""
+"""The in-process viser scene: drawing, clicks → proposals, and the authenticated proxy
+(more on proposals and the guarded viser port in ``test_scene_proposals.py``)."""
 
 from __future__ import annotations
 
@@ -66,7 +67,7 @@ def test_show_plan_draws_from_store(sapi) -> None:
     assert sapi.post("/api/v1/scene/show", json={"plan_id": "pl_x"}).status_code == 404
 
 
-def test_vertex_clicks_propose_a_new_plan(sapi) -> None:
+def test_vertex_clicks_make_a_proposal_not_a_plan(sapi) -> None:
     parent = sapi.wait(sapi.submit("demo.route")["id"])
     sapi.post("/api/v1/scene/show", json={"plan_id": parent["id"]})
     handle = sapi.services.scene.server.scene.get_handle_by_name("/plan/vertices")
@@ -75,12 +76,16 @@ def test_vertex_clicks_propose_a_new_plan(sapi) -> None:
         event = types.SimpleNamespace(instance_index=names.index(name))
         for entry in handle._impl.click_cb:
             entry.callback(event)
-    child = sapi.get(f"/api/v1/plans?parent_id={parent['id']}").json()
-    assert len(child) == 1
-    plan = sapi.wait(child[0]["id"])
+    assert sapi.get(f"/api/v1/plans?parent_id={parent['id']}").json() == []
+    (proposal,) = sapi.get("/api/v1/scene", "viewer").json()["proposals"]
+    assert proposal["plan_id"] == parent["id"]
+    assert proposal["patch"] == {"start": "b1", "end": "c0"}
+    # Accepting it (REST, as the operator) plans it; the scene then follows it.
+    r = sapi.post(f"/api/v1/scene/proposals/{proposal['id']}/accept")
+    assert r.status_code == 202, r.text
+    plan = sapi.wait(r.json()["id"])
     assert (plan["params"]["start"], plan["params"]["end"]) == ("b1", "c0")
-    assert plan["created_by"] == "scene"
-    # The scene follows the proposed plan once it is planned.
+    assert plan["created_by"] != "scene" and plan["parent_id"] == parent["id"]
     deadline = time.monotonic() + 10
     while sapi.services.scene.current.get("plan_id") != plan["id"] and time.monotonic() < deadline:
         time.sleep(0.05)
@@ -102,6 +107,26 @@ def test_proxy_requires_operator_token(sapi) -> None:
     c.cookies.set("steelpath_token", sapi.tokens["viewer"])
     with pytest.raises(WebSocketDisconnect), c.websocket_connect("/scene"):
         pass
+
+
+def test_proxy_refuses_cross_origin_websockets(sapi) -> None:
+    import viser
+
+    c = sapi.client
+    c.cookies.set("steelpath_token", sapi.tokens["operator"])
+    proto = f"viser-v{viser.__version__}"
+    for origin in ("http://evil.example", "http://testserver:9999", "null"):
+        with (
+            pytest.raises(WebSocketDisconnect) as ei,
+            c.websocket_connect("/scene", subprotocols=[proto], headers={"origin": origin}),
+        ):
+            pass
+        assert ei.value.code == 1008, origin
+    # The console's own origin is fine.
+    with c.websocket_connect(
+        "/scene", subprotocols=[proto], headers={"origin": "http://testserver"}
+    ) as ws:
+        assert len(ws.receive_bytes()) > 0
 
 
 def test_proxy_websocket_carries_the_scene(sapi) -> None:
