@@ -7,6 +7,13 @@ a planner that crashes its process takes only that job down.  Workers report
 turns into stored progress and events; cancellation is cooperative: the
 worker's ``progress`` call raises :class:`planners.errors.CancelledError`
 once the plan's flag is set, so planners stop at their next stage boundary.
+
+Workers run at a lower OS priority (``os.nice(10)``) than the server and its
+robot links, and die with the server: each sets ``PR_SET_PDEATHSIG`` and
+watches its parent pid (:func:`server.cloud_io.die_with_parent`).  The
+kernel sends that signal when the *thread* that forked the child exits, so
+pools (and the manager) are created and their workers started eagerly on
+one long-lived spawner thread, never on a short-lived request thread.
 """
 
 from __future__ import annotations
@@ -14,19 +21,23 @@ from __future__ import annotations
 import contextlib
 import logging
 import multiprocessing as mp
+import os
 import queue as queue_mod
 import threading
 import time
 import traceback
+from collections.abc import Callable
 from concurrent.futures import Executor, Future, ProcessPoolExecutor, ThreadPoolExecutor
 from concurrent.futures.process import BrokenProcessPool
 from dataclasses import dataclass
+from multiprocessing.managers import SyncManager
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from planners.errors import CancelledError, InvalidInputError
+from server.cloud_io import die_with_parent
 from server.events import EventBus
 from server.lifecycle import IllegalTransitionError, PlanState
 from server.store import NotFoundError, Store
@@ -34,6 +45,54 @@ from server.store import NotFoundError, Store
 log = logging.getLogger(__name__)
 
 _STOP = ("__stop__", 0.0, "")
+
+#: Niceness added to planning worker processes (the server and links keep 0).
+WORKER_NICE = 10
+
+
+def _worker_init(parent_pid: int) -> None:
+    """Process-pool initializer: lower priority, exit when the server dies."""
+    die_with_parent(parent_pid)
+    with contextlib.suppress(OSError):
+        os.nice(WORKER_NICE)
+
+
+def _manager_init(parent_pid: int) -> None:
+    """The progress/cancel manager process dies with the server too."""
+    die_with_parent(parent_pid)
+
+
+def _warm(seconds: float) -> None:
+    """A no-op task that makes the pool start one worker per submission."""
+    time.sleep(seconds)
+
+
+class _Spawner:
+    """Runs callables on one long-lived daemon thread (the parent of every worker)."""
+
+    def __init__(self) -> None:
+        self._q: queue_mod.Queue[tuple[Callable[[], Any], Future[Any]] | None] = queue_mod.Queue()
+        self._thread = threading.Thread(target=self._run, name="job-spawner", daemon=True)
+        self._thread.start()
+
+    def call(self, fn: Callable[[], Any]) -> Any:
+        if threading.current_thread() is self._thread:
+            return fn()
+        fut: Future[Any] = Future()
+        self._q.put((fn, fut))
+        return fut.result()
+
+    def _run(self) -> None:
+        while (item := self._q.get()) is not None:
+            fn, fut = item
+            try:
+                fut.set_result(fn())
+            except BaseException as exc:
+                fut.set_exception(exc)
+
+    def stop(self) -> None:
+        self._q.put(None)
+        self._thread.join(timeout=5)
 
 
 class WorkerContext:
@@ -105,14 +164,15 @@ class JobRunner:
         self._queue: Any = None
         self._cancel: Any = None
         self._listener: threading.Thread | None = None
+        self._spawner: _Spawner | None = None
         #: Called with the plan id whenever a job ends (scene redraw, etc.).
         self.on_finished: list[Any] = []
 
     # ---------------------------------------------------------------- control
     def start(self) -> None:
         if self.mode == "process":
-            ctx = mp.get_context("spawn")
-            self._manager = ctx.Manager()
+            self._spawner = _Spawner()
+            self._manager = self._spawner.call(self._start_manager)
             self._queue = self._manager.Queue()
             self._cancel = self._manager.dict()
         else:
@@ -123,10 +183,35 @@ class JobRunner:
         self._listener.start()
         self._recover()
 
+    @staticmethod
+    def _start_manager() -> SyncManager:
+        manager = SyncManager(ctx=mp.get_context("spawn"))
+        manager.start(_manager_init, (os.getpid(),))
+        return manager
+
     def _new_executor(self) -> Executor:
         if self.mode == "process":
-            return ProcessPoolExecutor(self.workers, mp_context=mp.get_context("spawn"))
+            assert self._spawner is not None
+            return self._spawner.call(self._new_pool)
         return ThreadPoolExecutor(self.workers, thread_name_prefix="planner")
+
+    def _new_pool(self) -> ProcessPoolExecutor:
+        """A pool whose workers are all started now, from the spawner thread.
+
+        A spawn-context pool starts a worker inside ``submit`` whenever none is
+        idle; ``workers`` quick tasks submitted back to back (far faster than
+        a worker can start) therefore start all of them here, and later
+        submissions from request threads find the pool full.
+        """
+        pool = ProcessPoolExecutor(
+            self.workers,
+            mp_context=mp.get_context("spawn"),
+            initializer=_worker_init,
+            initargs=(os.getpid(),),
+        )
+        for _ in range(self.workers):
+            pool.submit(_warm, 0.05)
+        return pool
 
     def shutdown(self) -> None:
         with self._lock:
@@ -141,6 +226,8 @@ class JobRunner:
             self._listener.join(timeout=5)
         if self._manager is not None:
             self._manager.shutdown()
+        if self._spawner is not None:
+            self._spawner.stop()
 
     def _recover(self) -> None:
         """Re-queue plans a previous process left queued or planning."""

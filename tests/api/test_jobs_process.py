@@ -2,8 +2,16 @@
 
 from __future__ import annotations
 
+import contextlib
+import os
+import signal
+import socket
+import subprocess
+import sys
 import time
+from pathlib import Path
 
+import httpx
 import pytest
 
 from server.kinds import registry
@@ -52,3 +60,102 @@ def test_worker_crash_fails_plan_and_pool_recovers(papi) -> None:
 def test_unstorable_result_fails_cleanly(papi) -> None:
     plan = papi.wait(papi.submit("test.job", {"mode": "nan"})["id"], timeout=60)
     assert plan["state"] == "failed" and "could not be stored" in plan["error"]
+
+
+# ------------------------------------------------------- issue #12 §1, §6: workers
+def _proc_stat(pid: int) -> tuple[str, int, int] | None:
+    """(state, ppid, nice) from /proc/PID/stat, or None once the process is gone."""
+    try:
+        raw = Path(f"/proc/{pid}/stat").read_text()
+    except (FileNotFoundError, ProcessLookupError):
+        return None
+    fields = raw[raw.rindex(")") + 2 :].split()  # after "pid (comm) "
+    return fields[0], int(fields[1]), int(fields[16])
+
+
+def _cmdline(pid: int) -> str:
+    try:
+        return Path(f"/proc/{pid}/cmdline").read_bytes().replace(b"\0", b" ").decode()
+    except OSError:
+        return ""
+
+
+def _children(ppid: int) -> list[int]:
+    out = []
+    for name in os.listdir("/proc"):
+        if name.isdigit():
+            st = _proc_stat(int(name))
+            if st is not None and st[1] == ppid and st[0] != "Z":
+                out.append(int(name))
+    return out
+
+
+def _alive(pid: int) -> bool:
+    st = _proc_stat(pid)
+    return st is not None and st[0] != "Z"  # a zombie has exited (its reaper is just slow)
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="reads /proc")
+def test_workers_are_niced_and_die_with_a_killed_server(tmp_path) -> None:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    token_file = tmp_path / "admin.token"
+    env = {
+        **os.environ,
+        "STEELPATH_DATA": str(tmp_path / "var"),
+        "STEELPATH_PORT": str(port),
+        "STEELPATH_SCENE_PORT": "0",
+        "STEELPATH_EMULATORS": "false",
+        "STEELPATH_JOB_MODE": "process",
+        "STEELPATH_JOB_WORKERS": "2",
+        "STEELPATH_TOKEN_FILE": str(token_file),
+    }
+    exe = Path(sys.executable).with_name("steelpath")
+    server = subprocess.Popen(
+        [str(exe), "serve"], env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL
+    )
+    spawned: list[int] = []
+    try:
+        base = f"http://127.0.0.1:{port}/api/v1"
+        deadline = time.monotonic() + 90
+        while True:
+            assert server.poll() is None, "the server exited during start-up"
+            try:
+                if httpx.get(f"{base}/health", timeout=2).status_code == 200:
+                    break
+            except httpx.HTTPError:
+                pass
+            assert time.monotonic() < deadline, "server did not start"
+            time.sleep(0.2)
+        auth = {"Authorization": f"Bearer {token_file.read_text().strip()}"}
+        r = httpx.post(f"{base}/plans", json={"kind": "demo.route"}, headers=auth, timeout=30)
+        assert r.status_code == 202, r.text
+        plan_id = r.json()["id"]
+        while httpx.get(f"{base}/plans/{plan_id}", headers=auth, timeout=30).json()["state"] in (
+            "queued",
+            "planning",
+        ):
+            assert time.monotonic() < deadline, "the plan did not finish"
+            time.sleep(0.2)
+        spawned = [p for p in _children(server.pid) if "multiprocessing" in _cmdline(p)]
+        base_nice = os.getpriority(os.PRIO_PROCESS, 0)  # the server inherits ours
+        assert _proc_stat(server.pid)[2] == base_nice  # only the workers are niced
+        nice = min(base_nice + 10, 19)
+        workers = [p for p in spawned if (_proc_stat(p) or ("", 0, 0))[2] == nice]
+        assert len(workers) == 2, [(p, _proc_stat(p), _cmdline(p)) for p in spawned]
+        server.kill()  # SIGKILL: no shutdown code runs
+        server.wait(10)
+        deadline = time.monotonic() + 10
+        while any(_alive(p) for p in spawned) and time.monotonic() < deadline:
+            time.sleep(0.1)
+        left = [(p, _cmdline(p)) for p in spawned if _alive(p)]
+        assert not left, f"processes outlived the killed server: {left}"
+    finally:
+        if server.poll() is None:
+            server.kill()
+            server.wait(10)
+        for p in spawned:  # never leave a process behind, even when the test fails
+            if _alive(p):
+                with contextlib.suppress(ProcessLookupError):
+                    os.kill(p, signal.SIGKILL)
