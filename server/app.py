@@ -28,6 +28,7 @@ from server.scene import proxy
 from server.services import Services
 from server.settings import Settings, get_settings
 from server.store import NotFoundError, Store
+from server.store.cleanup import cleanup_leftovers
 
 log = logging.getLogger(__name__)
 
@@ -106,6 +107,7 @@ def create_app(settings: Settings | None = None, *, start_scene: bool | None = N
     @asynccontextmanager
     async def lifespan(app: FastAPI) -> AsyncIterator[None]:
         store = Store(settings.data)
+        cleanup_leftovers(store)  # crash leftovers (issue #12 §6), before jobs/uploads run
         bus = EventBus()
         jobs = JobRunner(store, bus, mode=settings.job_mode, workers=settings.job_workers)
         services = Services(settings=settings, store=store, events=bus, jobs=jobs)
