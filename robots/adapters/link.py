@@ -13,6 +13,19 @@ frames with ACK/NAK and bounded go-back-N retransmission, watches the robot's
 state reports (the robot → host heartbeat), and reconnects with exponential
 backoff when the link is lost.
 
+Authentication (docs/protocol.md §12, :mod:`robots.protocol.auth`): the
+handshake is a mutual challenge–response with the robot's secret
+(:attr:`LinkConfig.secret`); a robot whose proof is wrong is never streamed
+to (state ``disconnected``, reason "robot failed authentication").  Every
+frame of the session is MAC'd with a per-session key and a strictly
+increasing counter; received frames that do not verify are dropped and
+counted (``stats["frames_unauthenticated"]``).  The only plain frames are
+the ``HELLO``, the robot's ``CHALLENGE`` (or its refusal) and ``ESTOP``,
+which the robot obeys from its controller without a MAC (fail-safe).  A
+robot held by another host refuses the handshake ("line busy");
+:meth:`RobotLink.takeover` (or ``LinkConfig(takeover=True)``) asks it to
+drop that host instead.
+
 Threading, and why not asyncio: pyserial's URL handlers are blocking
 (``select``-based reads with a timeout) and there is no asyncio transport for
 ``socket://``/``rfc2217://``/``loop://`` without an extra dependency.  One
@@ -41,12 +54,14 @@ from typing import Any
 
 import serial
 
+from robots.protocol.auth import AuthError, HostHandshake, SessionMac, check_secret
 from robots.protocol.commands import Command
-from robots.protocol.framing import PROTOCOL_MAJOR, FrameDecoder
+from robots.protocol.framing import PROTOCOL_MAJOR, Frame, FrameDecoder
 from robots.protocol.messages import (
     TRANSIENT_NAKS,
     Abort,
     Ack,
+    Challenge,
     Clear,
     CommandMessage,
     Estop,
@@ -54,6 +69,7 @@ from robots.protocol.messages import (
     Heartbeat,
     Hello,
     HelloAck,
+    HelloFlag,
     HelloStatus,
     Message,
     MessageError,
@@ -105,6 +121,17 @@ class LinkConfig:
     max_in_flight: int = 64
     baudrate: int = 115200
     expected_robot: str | None = None  # refuse a robot announcing another name
+    # The robot's 32-byte secret (robots.protocol.auth).  None: the link opens
+    # the port and sends a latched E-stop, but never gets a session.
+    secret: bytes | None = field(default=None, repr=False)
+    # Ask the robot to drop whichever host controls it now, on every
+    # handshake.  For tools only: two servers with this set would fight over
+    # the robot; a server uses RobotLink.takeover() on an operator's request.
+    takeover: bool = False
+
+    def __post_init__(self) -> None:
+        if self.secret is not None:
+            object.__setattr__(self, "secret", check_secret(self.secret))
 
 
 # --- events ---------------------------------------------------------------------------
@@ -245,6 +272,9 @@ class RobotLink:
         self._estop_seq = 0
         self._estop_last_tx = 0.0
         self._stats = collections.Counter[str]()
+        self._handshake: HostHandshake | None = None  # this port's handshake attempt
+        self._mac: SessionMac | None = None  # set by a valid CHALLENGE; seals every frame
+        self._takeover_requested = False
 
     # --- lifecycle -----------------------------------------------------------------
 
@@ -281,6 +311,26 @@ class RobotLink:
     def reconnect_now(self) -> None:
         """Skip the remaining backoff delay (e.g. after the operator fixed a cable)."""
         with self._lock:
+            self._next_attempt = 0.0
+            self._backoff = self.config.backoff_initial_s
+        self._wake.set()
+
+    def takeover(self) -> None:
+        """Take the robot over from whichever host controls it (an operator's explicit action).
+
+        The next handshakes carry the takeover flag until one opens a session;
+        the robot then drops its current controller (stopping any motion and
+        latching ``LINK_RESET``, as every new session does).  Still needs the
+        secret: a takeover without it is refused like any other stranger.  A
+        link that already has a session keeps it (it holds the line already).
+        """
+        with self._lock:
+            if self._state in CONNECTED_STATES:
+                return
+            self._takeover_requested = True
+            self._stats["takeovers_requested"] += 1
+            # A handshake under way without the flag is restarted by the I/O
+            # thread (_timers_locked); a waiting reconnect starts now.
             self._next_attempt = 0.0
             self._backoff = self.config.backoff_initial_s
         self._wake.set()
@@ -425,7 +475,7 @@ class RobotLink:
             raise LinkDownError(f"{self.name}: {len(self._unacked)} frames unacknowledged")
         self._tx_seq = (self._tx_seq + 1) & 0xFFFF
         seq = self._tx_seq
-        wire = encode_message(msg, seq)
+        wire = self._seal_locked(msg, seq)
         now = time.monotonic()
         self._unacked[seq] = _Pending(seq, msg, wire, now + self.config.ack_timeout_s)
         self._write_locked(wire)
@@ -433,9 +483,24 @@ class RobotLink:
         return seq
 
     def _send_estop_locked(self) -> None:
+        # Plain on purpose (docs/protocol.md §12.5): the robot obeys an ESTOP
+        # from its controller with or without a session, so this frame needs
+        # no key, no handshake and no counter — nothing can hold it up.
         self._estop_seq = (self._estop_seq + 1) & 0xFFFF
         self._estop_last_tx = time.monotonic()
         self._write_locked(encode_message(Estop(), self._estop_seq))
+
+    def _seal_locked(self, msg: Message, seq: int) -> bytes:
+        """Wire bytes of ``msg`` with this session's counter and MAC (a fresh counter per call)."""
+        mac = self._mac
+        if mac is None:
+            raise LinkDownError(f"{self.name}: no session key")
+        try:
+            return mac.seal_message(msg, seq)
+        except AuthError as exc:  # counter exhausted after 2**32 frames: a new session
+            self._lost_reason = self._lost_reason or str(exc)
+            self._wake.set()
+            return b""
 
     def _write_locked(self, wire: bytes) -> None:
         with self._write_lock:
@@ -548,6 +613,13 @@ class RobotLink:
                 return
             self._port = port
             self._decoder.reset()
+            self._mac = None
+            self._handshake = HostHandshake(
+                self.config.secret,
+                heartbeat_ms=round(self.config.heartbeat_s * 1000),
+                watchdog_ms=round(self.config.watchdog_s * 1000),
+                takeover=self.config.takeover or self._takeover_requested,
+            )
             self._unacked.clear()
             self._awaiting_report = False
             self._lost_reason = None
@@ -566,13 +638,25 @@ class RobotLink:
                 self._send_estop_locked()
 
     def _send_hello_locked(self) -> None:
-        cfg = self.config
+        """Send (or repeat) the current handshake step: HELLO, or AUTH once challenged."""
         self._tx_seq = 0
         self._hs_last_hello = time.monotonic()
-        hello = Hello(
-            heartbeat_ms=round(cfg.heartbeat_s * 1000), watchdog_ms=round(cfg.watchdog_s * 1000)
-        )
+        if self._mac is not None:
+            # Challenged already: repeat the AUTH (a fresh counter each time).
+            self._write_locked(HostHandshake.auth_frame(self._mac))
+            return
+        hs = self._handshake
+        hello = hs.hello if hs is not None else Hello()
+        # Repeated verbatim (same nonce): the robot answers it with the same CHALLENGE.
         self._write_locked(encode_message(hello, 0))
+
+    def _refuse_robot_locked(self, reason: str, *, slow: bool) -> None:
+        """The robot's handshake answer rules it out for now: close, and retry later."""
+        self._stats["handshakes_refused"] += 1
+        if slow:
+            self._backoff = self.config.backoff_max_s
+        self._close_port()
+        self._schedule_retry_locked(reason)
 
     def _schedule_retry_locked(self, reason: str) -> None:
         self._next_attempt = time.monotonic() + self._backoff
@@ -586,6 +670,8 @@ class RobotLink:
             with contextlib.suppress(Exception):
                 port.close()
         self._unacked.clear()
+        self._mac = None
+        self._handshake = None
 
     def _lose_locked(self, reason: str) -> None:
         self._stats["links_lost"] += 1
@@ -614,10 +700,8 @@ class RobotLink:
                     if frame.ver != PROTOCOL_MAJOR:
                         self._stats["frames_bad_version"] += 1
                         continue
-                    try:
-                        msg = decode_message(frame)
-                    except MessageError:
-                        self._stats["frames_invalid"] += 1
+                    msg = self._open_locked(frame)
+                    if msg is None:
                         continue
                     self._on_message_locked(msg, now)
                     if self._port is not port:
@@ -637,6 +721,17 @@ class RobotLink:
         ):
             self._send_estop_locked()
         if self._state == LinkState.HANDSHAKING:
+            hs = self._handshake
+            if (
+                self._takeover_requested
+                and hs is not None
+                and not hs.hello.flags & HelloFlag.TAKEOVER
+            ):
+                # takeover() asked during a plain handshake: start again with the flag.
+                self._close_port()
+                self._next_attempt = 0.0
+                self._set_state(LinkState.DISCONNECTED, "taking over the robot")
+                return
             if now - self._hs_started > cfg.handshake_timeout_s:
                 self._lose_locked(f"no handshake answer within {cfg.handshake_timeout_s:.1f} s")
             elif now - self._hs_last_hello >= cfg.hello_interval_s:
@@ -657,7 +752,31 @@ class RobotLink:
                     return
                 self._resend_from_locked(oldest.seq, now)
         if now - self._last_tx >= cfg.heartbeat_s:
-            self._write_locked(encode_message(Heartbeat(), 0))
+            self._write_locked(self._seal_locked(Heartbeat(), 0))
+
+    def _open_locked(self, frame: Frame) -> Message | None:
+        """The message in ``frame`` if it is authentic (or an allowed plain one), else None."""
+        mac = self._mac
+        if mac is not None:
+            try:
+                return mac.open_message(frame)
+            except MessageError:
+                self._stats["frames_invalid"] += 1
+                return None
+            except AuthError:
+                pass  # maybe one of the plain handshake answers
+        try:
+            msg = decode_message(frame)
+        except MessageError:
+            msg = None
+        # Plain: only the robot's handshake answers, and only while handshaking.
+        if self._state == LinkState.HANDSHAKING and (
+            isinstance(msg, Challenge)
+            or (isinstance(msg, HelloAck) and msg.status != HelloStatus.OK)
+        ):
+            return msg
+        self._stats["frames_unauthenticated"] += 1
+        return None
 
     def _resend_from_locked(self, seq: int, now: float) -> None:
         """Go-back-N: resend ``seq`` and every later unacknowledged frame, in order."""
@@ -667,13 +786,16 @@ class RobotLink:
             if found:
                 pending.deadline = now + self.config.ack_timeout_s
                 self._stats["retransmits"] += 1
-                self._write_locked(pending.wire)
+                # Sealed again: the robot drops a repeated counter as a replay.
+                self._write_locked(self._seal_locked(pending.message, pending.seq))
 
     def _on_message_locked(self, msg: Message, now: float) -> None:
         self._last_rx = now
         self._last_rx_wall = time.time()
         self._stats["frames_rx"] += 1
-        if isinstance(msg, HelloAck):
+        if isinstance(msg, Challenge):
+            self._on_challenge_locked(msg)
+        elif isinstance(msg, HelloAck):
             self._on_hello_ack_locked(msg)
         elif self._state == LinkState.HANDSHAKING and not isinstance(msg, State):
             return  # leftovers of an earlier session
@@ -684,6 +806,27 @@ class RobotLink:
         elif isinstance(msg, Nak):
             self._on_nak_locked(msg, now)
         # Host-bound types only; anything else (an echo on loop://) is ignored.
+
+    def _on_challenge_locked(self, msg: Challenge) -> None:
+        if self._state != LinkState.HANDSHAKING or self._mac is not None:
+            return  # a duplicate answer to a repeated HELLO
+        if msg.status == HelloStatus.LINE_BUSY:
+            self._refuse_robot_locked(
+                "robot is controlled by another host (line busy); a takeover is needed",
+                slow=False,
+            )
+            return
+        hs = self._handshake
+        if hs is None:
+            return
+        try:
+            self._mac = hs.accept(msg)
+        except AuthError as exc:
+            # An impostor, or a robot with another secret: never stream to it.
+            self._stats["auth_failures"] += 1
+            self._refuse_robot_locked(str(exc), slow=True)
+            return
+        self._send_hello_locked()  # now the AUTH
 
     def _on_hello_ack_locked(self, msg: HelloAck) -> None:
         if self._state != LinkState.HANDSHAKING:
@@ -710,6 +853,10 @@ class RobotLink:
                 return
             self._session += 1
             self._backoff = self.config.backoff_initial_s
+            self._takeover_requested = False
+            if self._estop_latched and not msg.faults & FaultFlag.ESTOP:
+                # The E-stop sent on opening the port was not (yet) obeyed: repeat it.
+                self._estop_acked = False
             self._set_state(LinkState.READY, "session open")
             self._emit_locked(Connected(self._session, self._hello))
         self._emit_locked(ReportReceived(msg, self._session))

@@ -8,6 +8,11 @@ Prints the endpoints it serves (``socket://…`` and the pty path), one per line
 then runs until SIGINT/SIGTERM (or, with ``--exit-when-orphaned``, until no
 controller has been connected for that long), saving ``--state-file`` on the
 way out.  ``python -m robots.emulator`` is the same.
+
+``--secret-file PATH`` is the robot's link secret (64 hex characters, mode
+0600; created when missing — :func:`robots.protocol.auth.load_or_create_secret`):
+only a host with the same secret can command the emulator.  Without it the
+emulator makes up a random secret it tells nobody, so nobody can control it.
 """
 
 from __future__ import annotations
@@ -44,6 +49,13 @@ def build_parser(prog: str = "steelpath emulate") -> argparse.ArgumentParser:
     p.add_argument("--state-period", type=float, default=0.1, help="state report period, s")
     p.add_argument("--buffer", type=int, default=16, help="command buffer capacity")
     p.add_argument("--log-jsonl", default=None, help="append every executed command to this file")
+    p.add_argument(
+        "--secret-file",
+        default=None,
+        metavar="PATH",
+        help="the robot's link secret (64 hex chars, mode 0600; created if missing); "
+        "without it a random secret is used and no host can control the emulator",
+    )
     s = p.add_argument_group("surviving the server")
     s.add_argument(
         "--state-file",
@@ -137,6 +149,7 @@ def main(argv: list[str] | None = None) -> int:
             state_period_s=args.state_period,
             buffer_capacity=args.buffer,
             log_path=args.log_jsonl,
+            secret=_secret(args.secret_file),
             state_file=args.state_file,
             port_file=args.port_file,
             exit_when_orphaned_s=args.exit_when_orphaned,
@@ -168,6 +181,23 @@ def main(argv: list[str] | None = None) -> int:
         for sig, handler in previous.items():
             signal.signal(sig, handler)
     return 0
+
+
+def _secret(path: str | None) -> bytes | None:
+    """The secret from ``--secret-file`` (SecretFileError is a ValueError: exit 2)."""
+    if path is None:
+        print(
+            "steelpath emulate: no --secret-file: using a random secret, "
+            "so no host can control this emulator",
+            file=sys.stderr,
+        )
+        return None
+    from robots.protocol.auth import load_or_create_secret
+
+    try:
+        return load_or_create_secret(path)
+    except OSError as exc:
+        raise ValueError(f"--secret-file {path}: {exc}") from exc
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -7,10 +7,27 @@ watchdog deadline, a delayed frame) — no polling.  Link fault injection
 (drop, corrupt, delay) happens here; robot faults (NAK, fault mid-motion)
 in the robot.
 
+Authentication and the one-controller rule (docs/protocol.md §12) are
+transport work and live here too, not in the simulated robot: every port
+runs the challenge–response handshake against :attr:`Emulator.secret`
+(random when none is given, so the emulator always enforces it) and every
+frame except ``HELLO``/``AUTH``/``ESTOP`` must carry a valid MAC and a fresh
+counter, or it is dropped and counted (``stats["frames_unauthenticated"]``)
+before the robot sees it.  The authenticated port is the **controller**.  A
+new TCP connection is a *candidate*: it may only handshake, and must
+authenticate within :data:`AUTH_TIMEOUT_S` or it is closed.  While the
+controller is alive (authenticated and heard from within
+:data:`LINE_TIMEOUT_S`) a candidate's ``HELLO`` is refused (``CHALLENGE``
+``LINE_BUSY``, then closed) unless it asks for a takeover, and even then only
+its valid ``AUTH`` drops the old controller.  ``ESTOP`` is honoured without a
+MAC from the controller's port, or from any port while no controller is
+alive — stopping is always safe, and a stranger cannot reach the robot while
+the line is held.
+
 Usage in tests::
 
     with Emulator("denso_vm6083", time_scale=20) as emu:
-        link = RobotLink(emu.url)                # socket://127.0.0.1:<port>
+        link = RobotLink(emu.url, LinkConfig(secret=emu.secret))  # socket://127.0.0.1:<port>
         ...
         assert not check_exactly_once(emu.execution_log(), run_id, len(program))
 """
@@ -40,8 +57,22 @@ from robots.emulator.faults import FaultConfig
 from robots.emulator.persist import OrphanTimer, StateFile, remove_port_file, write_port_file
 from robots.emulator.profiles import RobotProfile, resolve_profile
 from robots.emulator.robot import ExecutionRecord, SimRobot, StopEvent
+from robots.protocol.auth import (
+    AuthError,
+    ReplayError,
+    SessionMac,
+    check_secret,
+    generate_secret,
+    robot_challenge,
+    robot_session,
+)
 from robots.protocol.framing import PROTOCOL_MAJOR, Frame, FrameDecoder
 from robots.protocol.messages import (
+    Ack,
+    Challenge,
+    Hello,
+    HelloAck,
+    HelloFlag,
     HelloStatus,
     Message,
     MessageError,
@@ -52,6 +83,13 @@ from robots.protocol.messages import (
 )
 
 log = logging.getLogger(__name__)
+
+#: A connection that has not authenticated within this long is closed (it never holds the line).
+AUTH_TIMEOUT_S = 2.0
+#: The controller holds the line while its last authentic frame is younger than this.
+LINE_TIMEOUT_S = 1.5
+#: At most this many connections may be handshaking at once; the oldest goes first.
+MAX_CANDIDATES = 4
 
 
 def parse_listen(url: str) -> tuple[str, int]:
@@ -72,6 +110,14 @@ class _Port:
         self.frames_rx = 0
         self.silent_until = 0.0
         self.closed = False
+        self.opened_at = time.monotonic()
+        # Handshake in progress: the HELLO, our CHALLENGE, the session it offers.
+        self.hello: Hello | None = None
+        self.challenge: Challenge | None = None
+        self.pending: SessionMac | None = None
+        # Set once the AUTH verified: only the controller's port has one.
+        self.session: SessionMac | None = None
+        self.last_auth_rx = 0.0
 
     def fileno(self) -> int:
         raise NotImplementedError
@@ -192,6 +238,7 @@ class Emulator:
         state_period_s: float = 0.1,
         buffer_capacity: int = 16,
         log_path: str | os.PathLike[str] | None = None,
+        secret: bytes | None = None,
         state_file: str | os.PathLike[str] | None = None,
         port_file: str | os.PathLike[str] | None = None,
         exit_when_orphaned_s: float | None = None,
@@ -203,6 +250,9 @@ class Emulator:
             raise ValueError("the emulator needs a TCP listen address, a pty, or both")
         if time_scale <= 0:
             raise ValueError(f"time_scale={time_scale}: must be > 0")
+        # No secret given: a random one, so the emulator still refuses everyone
+        # who was not handed ``emu.secret``.
+        self.secret: bytes = generate_secret() if secret is None else check_secret(secret)
         self.profile = profile or resolve_profile(robot, joint_limits)
         self.faults = faults or FaultConfig()
         self._listen = listen
@@ -240,7 +290,9 @@ class Emulator:
         self._wake_r, self._wake_w = socket.socketpair()
         self._wake_r.setblocking(False)
         self._listener: socket.socket | None = None
-        self._tcp: _TcpPort | None = None
+        self._tcp: _TcpPort | None = None  # the controller's TCP connection (authenticated)
+        self._candidates: list[_TcpPort] = []  # connections still handshaking
+        self._controller: _Port | None = None  # the port whose session the robot obeys
         self._pty: _PtyPort | None = None
         self._thread: threading.Thread | None = None
         self._stop = False
@@ -259,6 +311,12 @@ class Emulator:
             "frames_corrupt": 0,
             "drops": 0,
             "bytes_corrupted": 0,
+            "frames_unauthenticated": 0,  # dropped: no session, bad MAC, or replayed
+            "frames_replayed": 0,  # of those: authentic but an old counter
+            "auth_failures": 0,
+            "connections_refused": 0,
+            "sessions": 0,
+            "takeovers": 0,
         }
 
     # --- lifecycle -----------------------------------------------------------------
@@ -308,7 +366,7 @@ class Emulator:
                     log.exception("emulator %s: cannot save its state", self.profile.name)
         if self._port_file is not None:
             remove_port_file(self._port_file)
-        for port in (self._tcp, self._pty):
+        for port in (self._tcp, self._pty, *self._candidates):
             if port is not None:
                 port.close()
         if self._listener is not None:
@@ -412,6 +470,7 @@ class Emulator:
                     actions, self._actions = self._actions, []
                     for action in actions:
                         action(now)
+                    self._expire_candidates(now)
                     self._tick(now)
                     self._cond.notify_all()
         except Exception:  # pragma: no cover - keep the reason visible
@@ -476,28 +535,71 @@ class Emulator:
             sock, peer = self._listener.accept()
         except (BlockingIOError, OSError):
             return
-        if self._tcp is not None:
-            # One host at a time, like a serial line: the newcomer wins.
-            self._close_tcp(now)
-        self._tcp = _TcpPort(sock, f"{peer[0]}:{peer[1]}")
-        self._sel.register(self._tcp, selectors.EVENT_READ, self._tcp)
+        # A newcomer never takes the line: it is a candidate that may only
+        # handshake (see the module docstring).
+        port = _TcpPort(sock, f"{peer[0]}:{peer[1]}")
+        self._candidates.append(port)
+        self._sel.register(port, selectors.EVENT_READ, port)
         self.stats["connections"] += 1
+        while len(self._candidates) > MAX_CANDIDATES:
+            self.stats["connections_refused"] += 1
+            self._close_candidate(self._candidates[0])
 
     def _close_tcp(self, now: float) -> None:
         port, self._tcp = self._tcp, None
         if port is None:
             return
+        if self._controller is port:
+            self._controller = None
+        port.session = None
         with contextlib.suppress(KeyError, ValueError):
             self._sel.unregister(port)
         port.close()
         # A TCP robot knows its link is gone: stop now, do not wait for the watchdog.
         self.robot.link_lost(now)
 
+    def _close_candidate(self, port: _TcpPort) -> None:
+        if port in self._candidates:
+            self._candidates.remove(port)
+        with contextlib.suppress(KeyError, ValueError):
+            self._sel.unregister(port)
+        port.close()
+
+    def _close_port(self, port: _Port, now: float) -> None:
+        if port is self._tcp:
+            self._close_tcp(now)
+        elif isinstance(port, _TcpPort):
+            self._close_candidate(port)
+
+    def _expire_candidates(self, now: float) -> None:
+        """Close connections that did not authenticate in time: nobody squats on the line."""
+        for port in list(self._candidates):
+            if now - port.opened_at > AUTH_TIMEOUT_S:
+                log.info("emulator %s: %s did not authenticate", self.profile.name, port.peer)
+                self.stats["connections_refused"] += 1
+                self._close_candidate(port)
+
+    def _line_held_by_other(self, port: _Port, now: float) -> bool:
+        """Another port is the controller and is alive (authentic frame within LINE_TIMEOUT_S)."""
+        c = self._controller
+        return (
+            c is not None
+            and c is not port
+            and not c.closed
+            and c.session is not None
+            and now - c.last_auth_rx <= LINE_TIMEOUT_S
+        )
+
+    @property
+    def has_controller(self) -> bool:
+        """A port is authenticated as the controller (alive or not)."""
+        with self._lock:
+            return self._controller is not None and self._controller.session is not None
+
     def _on_readable(self, port: _Port, now: float) -> None:
         data = port.read()
         if data is None:
-            if port is self._tcp:
-                self._close_tcp(now)
+            self._close_port(port, now)
             return
         if not data or now < port.silent_until:
             return  # silenced: the bytes vanish on the "cable"
@@ -531,6 +633,35 @@ class Emulator:
             if frame.type == MsgType.HELLO:
                 self._send(port, self.robot.hello_ack(HelloStatus.VERSION_UNSUPPORTED), now)
             return
+        if frame.type == MsgType.HELLO:
+            self._on_hello(port, frame, now)
+            return
+        if frame.type == MsgType.AUTH:
+            self._on_auth(port, frame, now)
+            return
+        if frame.type == MsgType.ESTOP:
+            # Fail-safe: no MAC needed, but only from the controller or while
+            # nobody holds the line (a candidate cannot disturb the controller).
+            if self._line_held_by_other(port, now):
+                self.stats["frames_unauthenticated"] += 1
+                return
+            inner = frame.payload
+        elif port.session is None:
+            self.stats["frames_unauthenticated"] += 1
+            return
+        else:
+            try:
+                inner = port.session.open(frame)
+            except AuthError as exc:
+                self.stats["frames_unauthenticated"] += 1
+                if isinstance(exc, ReplayError):
+                    self.stats["frames_replayed"] += 1
+                return
+            port.last_auth_rx = now
+        self._deliver(port, Frame(frame.type, frame.seq, inner, frame.ver), now)
+
+    def _deliver(self, port: _Port, frame: Frame, now: float) -> None:
+        """Hand an authenticated (or fail-safe) frame to the robot and send its replies."""
         try:
             msg = decode_message(frame)
             replies = self.robot.receive(msg, frame.seq, now)
@@ -545,11 +676,103 @@ class Emulator:
             self._next_state = now + self.robot.state_period_s
             self._send(port, self.robot.report(), now)
 
+    def _on_hello(self, port: _Port, frame: Frame, now: float) -> None:
+        try:
+            hello = decode_message(frame)
+        except MessageError:
+            self.stats["frames_rejected"] += 1
+            return
+        assert isinstance(hello, Hello)
+        if port.hello == hello and port.challenge is not None:
+            # The host repeats its HELLO until answered: the same answer again,
+            # so an AUTH computed from either one verifies.
+            self._send(port, port.challenge, now)
+            return
+        if self._line_held_by_other(port, now) and not hello.flags & HelloFlag.TAKEOVER:
+            self._refuse(port, now)
+            return
+        challenge = robot_challenge(self.secret, hello)
+        port.hello, port.challenge = hello, challenge
+        port.pending = robot_session(self.secret, hello, challenge)
+        self._send(port, challenge, now)
+
+    def _refuse(self, port: _Port, now: float) -> None:
+        """Another controller holds the line: say so once and hang up (a TCP candidate)."""
+        log.info("emulator %s: refused a second controller", self.profile.name)
+        self.stats["connections_refused"] += 1
+        self._send(port, Challenge(status=HelloStatus.LINE_BUSY), now)
+        if isinstance(port, _TcpPort) and port is not self._tcp:
+            self._close_candidate(port)
+
+    def _on_auth(self, port: _Port, frame: Frame, now: float) -> None:
+        session = port.pending
+        if session is None or port.hello is None:
+            self.stats["frames_unauthenticated"] += 1
+            return
+        try:
+            inner = session.open(frame)
+        except AuthError as exc:
+            self.stats["frames_unauthenticated"] += 1
+            if not isinstance(exc, ReplayError):
+                # A wrong key: this is not our server; a TCP candidate goes at once.
+                self.stats["auth_failures"] += 1
+                if isinstance(port, _TcpPort) and port is not self._tcp:
+                    self._close_candidate(port)
+            return
+        if inner:
+            self.stats["frames_rejected"] += 1
+            return
+        if port.session is session:
+            # A repeated AUTH (our HELLO_ACK was lost): answer again, restart nothing.
+            port.last_auth_rx = now
+            self._send(port, self.robot.hello_ack(), now)
+            self._send(port, self.robot.report(), now)
+            return
+        if self._line_held_by_other(port, now):
+            if not port.hello.flags & HelloFlag.TAKEOVER:
+                self._refuse(port, now)
+                return
+            log.info("emulator %s: controller taken over", self.profile.name)
+            self.stats["takeovers"] += 1
+        self._make_controller(port, session, now)
+        self.stats["sessions"] += 1
+        # The robot sees an ordinary new session: motion stops, LINK_RESET if busy.
+        self._deliver(port, Frame(MsgType.HELLO, frame.seq, port.hello.payload()), now)
+
+    def _make_controller(self, port: _Port, session: SessionMac, now: float) -> None:
+        old = self._controller
+        if old is not None and old is not port:
+            old.session = None
+            if old is self._tcp:
+                self._close_tcp(now)  # stops the robot at once (LINK_RESET if busy)
+            self._controller = None
+        if isinstance(port, _TcpPort) and port is not self._tcp:
+            if self._tcp is not None:
+                self._close_tcp(now)
+            if port in self._candidates:
+                self._candidates.remove(port)
+            self._tcp = port
+        port.session = session
+        port.last_auth_rx = now
+        self._controller = port
+
     def _send(self, port: _Port, msg: Message, now: float) -> None:
         if port.closed or now < port.silent_until:
             return
+        # Handshake answers are always plain (the host has no key for them yet,
+        # even when this port still has the session of an earlier handshake).
+        session = None if _handshake_answer(msg) else port.session
+        if session is None and not _plain_ok(msg):
+            return  # nothing but handshake answers goes to a port without a session
         self._tx_seq = (self._tx_seq + 1) & 0xFFFF
-        wire = encode_message(msg, self._tx_seq)
+        if session is not None:
+            try:
+                wire = session.seal_message(msg, self._tx_seq)
+            except AuthError:  # counter exhausted: the host must handshake again
+                port.session = None
+                return
+        else:
+            wire = encode_message(msg, self._tx_seq)
         f = self.faults
         if f.corrupt_rate and f.corrupt_direction in ("tx", "both"):
             wire = self._corrupt(wire)
@@ -562,8 +785,8 @@ class Emulator:
     def _write(self, port: _Port, wire: bytes, now: float) -> None:
         if port.closed or now < port.silent_until:
             return
-        if not port.write(wire) and port is self._tcp:
-            self._close_tcp(now)
+        if not port.write(wire):
+            self._close_port(port, now)
 
     def _later(self, when: float, action: Callable[[float], None]) -> None:
         heapq.heappush(self._delayed, (when, next(self._counter), action))
@@ -599,3 +822,15 @@ class Emulator:
         if self._log_file is not None:
             self._log_file.write(json.dumps(asdict(rec)) + "\n")
             self._log_file.flush()
+
+
+def _handshake_answer(msg: Message) -> bool:
+    """CHALLENGE, or a HELLO_ACK refusing the version: sent before any session key."""
+    return isinstance(msg, Challenge) or (
+        isinstance(msg, HelloAck) and msg.status != HelloStatus.OK
+    )
+
+
+def _plain_ok(msg: Message) -> bool:
+    """Robot → host messages that may go without a MAC: handshake answers, ESTOP's ACK."""
+    return _handshake_answer(msg) or (isinstance(msg, Ack) and msg.ref_type == MsgType.ESTOP)

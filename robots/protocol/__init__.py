@@ -1,11 +1,22 @@
-"""The SteelPath robot protocol v1 (docs/protocol.md): frames, messages, commands, programs.
+"""The SteelPath robot protocol v2 (docs/protocol.md): frames, messages, commands, programs.
 
 - :mod:`~robots.protocol.framing` — COBS framing, CRC-16/CCITT-FALSE, :class:`FrameDecoder`.
+- :mod:`~robots.protocol.auth` — per-robot secret, challenge–response, per-frame HMAC.
 - :mod:`~robots.protocol.messages` — every wire message as a dataclass of integers.
 - :mod:`~robots.protocol.commands` — program commands in SI units (what plans compile to).
 - :mod:`~robots.protocol.program` — :class:`Program`, an immutable list of commands.
 """
 
+from robots.protocol.auth import (
+    AuthError,
+    HostHandshake,
+    SecretError,
+    SecretFileError,
+    SessionMac,
+    generate_secret,
+    load_or_create_secret,
+    parse_secret,
+)
 from robots.protocol.commands import (
     COMMAND_TYPES,
     Command,
@@ -54,12 +65,14 @@ __all__ = [
     "MESSAGE_CLASSES",
     "PROTOCOL_MAJOR",
     "PROTOCOL_MINOR",
+    "AuthError",
     "Command",
     "CommandError",
     "FaultFlag",
     "Frame",
     "FrameDecoder",
     "FrameError",
+    "HostHandshake",
     "JointMove",
     "LiftArm",
     "LimitingPlate",
@@ -71,6 +84,9 @@ __all__ = [
     "Nozzle",
     "Program",
     "ProtocolError",
+    "SecretError",
+    "SecretFileError",
+    "SessionMac",
     "SetMagnet",
     "State",
     "Stop",
@@ -82,4 +98,7 @@ __all__ = [
     "decode_message",
     "encode_frame",
     "encode_message",
+    "generate_secret",
+    "load_or_create_secret",
+    "parse_secret",
 ]

@@ -5,7 +5,7 @@ A frame on the wire is ``COBS(header ‖ payload ‖ crc16) ‖ 0x00``:
 ====== ====  ==========================================================
 offset size  field
 ====== ====  ==========================================================
-0      1     ``ver``  protocol major version (1)
+0      1     ``ver``  protocol major version (2)
 1      1     ``type`` message type (:class:`robots.protocol.messages.MsgType`)
 2      2     ``seq``  sequence number, unsigned little-endian
 4      1     ``len``  payload length ``N`` (0…:data:`MAX_PAYLOAD`)
@@ -20,6 +20,11 @@ buffer and a dozen lines of C to decode it.  CRC-16/CCITT-FALSE (poly 0x1021,
 init 0xFFFF) is ``_crc_xmodem_update`` seeded with 0xFFFF in avr-libc and
 ``binascii.crc_hqx(data, 0xFFFF)`` in Python; it detects every error of up to
 3 bits and every burst up to 16 bits in frames this short.
+
+The CRC only catches line noise.  Authenticity is a separate layer
+(:mod:`robots.protocol.auth`): in protocol 2 every frame of a session ends its
+payload region with a 20-byte trailer (counter ‖ truncated HMAC-SHA256), so a
+message itself may use at most :data:`MAX_MESSAGE_PAYLOAD` bytes.
 """
 
 from __future__ import annotations
@@ -28,11 +33,15 @@ import binascii
 import struct
 from dataclasses import dataclass
 
-PROTOCOL_MAJOR = 1
+PROTOCOL_MAJOR = 2
 PROTOCOL_MINOR = 0
 HEADER_SIZE = 5
 CRC_SIZE = 2
 MAX_PAYLOAD = 240
+#: Bytes an authenticated frame appends to its message: u32 counter ‖ 16-byte MAC.
+AUTH_TRAILER_SIZE = 20
+#: Largest message payload, so that message + trailer always fits ``MAX_PAYLOAD``.
+MAX_MESSAGE_PAYLOAD = MAX_PAYLOAD - AUTH_TRAILER_SIZE
 MAX_RAW_FRAME = HEADER_SIZE + MAX_PAYLOAD + CRC_SIZE  # 247 bytes
 #: Longest COBS-encoded frame, delimiter excluded: one code byte per 254 data bytes.
 MAX_ENCODED_FRAME = MAX_RAW_FRAME + MAX_RAW_FRAME // 254 + 1
@@ -114,15 +123,22 @@ class Frame:
     ver: int = PROTOCOL_MAJOR
 
 
-def encode_frame(msg_type: int, seq: int, payload: bytes = b"", ver: int = PROTOCOL_MAJOR) -> bytes:
-    """Wire bytes of one frame, delimiter included."""
+def frame_header(msg_type: int, seq: int, length: int, ver: int = PROTOCOL_MAJOR) -> bytes:
+    """The 5 header bytes ``ver type seq len`` (validated)."""
     if not 0 <= msg_type <= 0xFF:
         raise ValueError(f"message type {msg_type} outside 0..255")
     if not 0 <= seq <= 0xFFFF:
         raise ValueError(f"sequence number {seq} outside 0..65535")
-    if len(payload) > MAX_PAYLOAD:
-        raise ValueError(f"payload of {len(payload)} bytes exceeds {MAX_PAYLOAD}")
-    raw = _HEADER.pack(ver, msg_type, seq, len(payload)) + payload
+    if not 0 <= length <= MAX_PAYLOAD:
+        raise ValueError(f"payload of {length} bytes exceeds {MAX_PAYLOAD}")
+    if not 0 <= ver <= 0xFF:
+        raise ValueError(f"version {ver} outside 0..255")
+    return _HEADER.pack(ver, msg_type, seq, length)
+
+
+def encode_frame(msg_type: int, seq: int, payload: bytes = b"", ver: int = PROTOCOL_MAJOR) -> bytes:
+    """Wire bytes of one frame, delimiter included."""
+    raw = frame_header(msg_type, seq, len(payload), ver) + payload
     raw += crc16(raw).to_bytes(2, "little")
     return cobs_encode(raw) + DELIMITER
 

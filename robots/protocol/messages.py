@@ -1,4 +1,4 @@
-"""Message types of the SteelPath robot protocol v1 (docs/protocol.md §3–§5).
+"""Message types of the SteelPath robot protocol v2 (docs/protocol.md §3–§5, §11).
 
 Every message is a frozen dataclass holding the integers exactly as they go
 on the wire (fixed point: µrad, ms, µm/s), so encode → decode is exact and a
@@ -8,8 +8,10 @@ lives in :mod:`robots.protocol.commands`.
 Payload layouts are declared as a compact string per class (``name:code``):
 ``B``/``H``/``I`` unsigned 8/16/32-bit, ``h``/``i`` signed 16/32-bit, ``o`` a
 bool byte (0 or 1 only), ``A`` an array (u8 count, then that many i32), ``S``
-an ASCII string (u8 length, then bytes).  All multi-byte fields are
-little-endian.
+an ASCII string (u8 length, then bytes), ``N`` 16 raw bytes (a nonce or a
+proof).  All multi-byte fields are little-endian.  A payload is at most
+:data:`~robots.protocol.framing.MAX_MESSAGE_PAYLOAD` bytes, leaving room for
+the authentication trailer (:mod:`robots.protocol.auth`).
 """
 
 from __future__ import annotations
@@ -20,7 +22,7 @@ from dataclasses import astuple, dataclass, fields
 from typing import Any, ClassVar
 
 from robots.protocol.framing import (
-    MAX_PAYLOAD,
+    MAX_MESSAGE_PAYLOAD,
     PROTOCOL_MAJOR,
     PROTOCOL_MINOR,
     Frame,
@@ -39,6 +41,7 @@ class MsgType(enum.IntEnum):
     HELLO = 0x01
     HEARTBEAT = 0x02
     ESTOP = 0x03
+    AUTH = 0x04
     CMD_JOINTS = 0x10
     CMD_WHEELS = 0x11
     CMD_MAGNET = 0x12
@@ -54,6 +57,7 @@ class MsgType(enum.IntEnum):
     ACK = 0x82
     NAK = 0x83
     STATE = 0x84
+    CHALLENGE = 0x85
 
 
 def is_sequenced(msg_type: int) -> bool:
@@ -112,8 +116,18 @@ class AckStatus(enum.IntEnum):
 
 
 class HelloStatus(enum.IntEnum):
+    """Status of a ``HELLO_ACK`` or ``CHALLENGE``."""
+
     OK = 0
-    VERSION_UNSUPPORTED = 1
+    VERSION_UNSUPPORTED = 1  # HELLO_ACK, plain: another major version
+    LINE_BUSY = 2  # CHALLENGE, plain: another controller holds the line (no takeover asked)
+
+
+class HelloFlag(enum.IntFlag):
+    """Bits of ``HELLO.flags``."""
+
+    NONE = 0
+    TAKEOVER = 0x01  # drop the robot's current controller once this host authenticates
 
 
 class Feature(enum.IntFlag):
@@ -124,6 +138,7 @@ class Feature(enum.IntFlag):
 
 _CODES = {"B": "B", "H": "H", "I": "I", "h": "h", "i": "i", "o": "B"}
 MAX_ARRAY = 32
+NONCE_FIELD_SIZE = 16  # layout code "N"
 
 
 @dataclass(frozen=True)
@@ -153,12 +168,19 @@ class Message:
                     if len(raw) > MAX_ARRAY:
                         raise ValueError(f"{len(raw)} characters > {MAX_ARRAY}")
                     out += struct.pack("<B", len(raw)) + raw
+                elif code == "N":
+                    raw = bytes(value)
+                    if len(raw) != NONCE_FIELD_SIZE:
+                        raise ValueError(f"{len(raw)} bytes, expected {NONCE_FIELD_SIZE}")
+                    out += raw
                 else:
                     out += struct.pack("<" + _CODES[code], int(value))
             except (struct.error, UnicodeEncodeError, TypeError) as exc:
                 raise ValueError(f"{type(self).__name__}.{name}={value!r}: {exc}") from exc
-        if len(out) > MAX_PAYLOAD:
-            raise ValueError(f"{type(self).__name__} payload of {len(out)} bytes > {MAX_PAYLOAD}")
+        if len(out) > MAX_MESSAGE_PAYLOAD:
+            raise ValueError(
+                f"{type(self).__name__} payload of {len(out)} bytes > {MAX_MESSAGE_PAYLOAD}"
+            )
         return bytes(out)
 
     @classmethod
@@ -166,6 +188,10 @@ class Message:
         """Parse a payload; raises :class:`MessageError` unless it matches ``LAYOUT`` exactly."""
         values: dict[str, Any] = {}
         pos = 0
+        if len(data) > MAX_MESSAGE_PAYLOAD:
+            raise MessageError(
+                f"{cls.__name__} payload of {len(data)} bytes > {MAX_MESSAGE_PAYLOAD}"
+            )
         try:
             for name, code in cls._spec:
                 if code == "A":
@@ -181,6 +207,12 @@ class Message:
                         raise MessageError(f"{cls.__name__}.{name}: bad string")
                     values[name] = raw.decode("ascii")
                     pos += 1 + count
+                elif code == "N":
+                    raw = data[pos : pos + NONCE_FIELD_SIZE]
+                    if len(raw) != NONCE_FIELD_SIZE:
+                        raise struct.error("short nonce")
+                    values[name] = bytes(raw)
+                    pos += NONCE_FIELD_SIZE
                 else:
                     fmt = "<" + _CODES[code]
                     (value,) = struct.unpack_from(fmt, data, pos)
@@ -200,16 +232,33 @@ class Message:
 # --- host → robot -------------------------------------------------------------------
 
 
+_ZERO_NONCE = bytes(NONCE_FIELD_SIZE)
+
+
 @dataclass(frozen=True)
 class Hello(Message):
-    """Opens a session: version, host heartbeat period and the watchdog the host asks for."""
+    """Asks for a session: version, timing, flags and the host's challenge nonce.
+
+    Sent without a MAC (the host has no session key yet); the robot answers
+    with :class:`Challenge`, and the session starts only with a valid
+    :class:`Auth`, whose key is bound to these exact bytes (docs/protocol.md §5).
+    """
 
     TYPE = MsgType.HELLO
-    LAYOUT = "major:B minor:B heartbeat_ms:H watchdog_ms:H"
+    LAYOUT = "major:B minor:B heartbeat_ms:H watchdog_ms:H flags:B host_nonce:N"
     major: int = PROTOCOL_MAJOR
     minor: int = PROTOCOL_MINOR
     heartbeat_ms: int = 100
     watchdog_ms: int = 500
+    flags: int = 0
+    host_nonce: bytes = _ZERO_NONCE
+
+
+@dataclass(frozen=True)
+class Auth(Message):
+    """Host's proof (its MAC under the new session key); opens the session on the robot."""
+
+    TYPE = MsgType.AUTH
 
 
 @dataclass(frozen=True)
@@ -335,6 +384,23 @@ class Clear(Message):
 
 
 @dataclass(frozen=True)
+class Challenge(Message):
+    """Answer to :class:`Hello`: the robot's nonce and its proof that it knows the secret.
+
+    ``status`` :attr:`HelloStatus.LINE_BUSY` refuses the HELLO (another
+    controller holds the line); nonce and proof are then zero.
+    """
+
+    TYPE = MsgType.CHALLENGE
+    LAYOUT = "major:B minor:B status:B robot_nonce:N proof:N"
+    major: int = PROTOCOL_MAJOR
+    minor: int = PROTOCOL_MINOR
+    status: int = HelloStatus.OK
+    robot_nonce: bytes = _ZERO_NONCE
+    proof: bytes = _ZERO_NONCE
+
+
+@dataclass(frozen=True)
 class HelloAck(Message):
     """Answer to :class:`Hello`: the robot's version, limits of the session and progress."""
 
@@ -423,6 +489,7 @@ MESSAGE_CLASSES: dict[int, type[Message]] = {
         Hello,
         Heartbeat,
         Estop,
+        Auth,
         JointsCmd,
         WheelsCmd,
         MagnetCmd,
@@ -438,6 +505,7 @@ MESSAGE_CLASSES: dict[int, type[Message]] = {
         Ack,
         Nak,
         State,
+        Challenge,
     )
 }
 

@@ -2,13 +2,160 @@
 
 from __future__ import annotations
 
+import socket
 import time
 from dataclasses import dataclass, field
+from typing import Any
 
-from robots.adapters import TERMINAL_STATES, ExecState, Outcome, RobotLink, Streamer, StreamFault
+from robots.adapters import (
+    TERMINAL_STATES,
+    ExecState,
+    LinkConfig,
+    Outcome,
+    RobotLink,
+    Streamer,
+    StreamFault,
+)
+from robots.emulator import Emulator
 from robots.protocol import JointMove, LiftArm, Nozzle, Program, SetMagnet, Stop, WheelSpeeds
+from robots.protocol.auth import AuthError, Direction, HostHandshake, SessionMac, session_key
+from robots.protocol.framing import Frame, FrameDecoder
+from robots.protocol.messages import (
+    Challenge,
+    HelloStatus,
+    Message,
+    decode_message,
+    encode_message,
+)
 
 STOPPED = TERMINAL_STATES | {ExecState.INTERRUPTED, ExecState.FAULTED}
+
+
+def link_config(emu: Emulator, **kw: Any) -> LinkConfig:
+    """The link configuration of the host that owns ``emu`` (its secret)."""
+    return LinkConfig(secret=emu.secret, **kw)
+
+
+def authed_link(emu: Emulator, url: str | None = None, **kw: Any) -> RobotLink:
+    """A (not yet started) link to ``emu`` with its secret; ``url`` defaults to its TCP URL."""
+    return RobotLink(url or emu.url, link_config(emu, **kw))
+
+
+class RawHost:
+    """A hand-driven host over a raw TCP socket, for tests that speak the protocol
+    frame by frame: it records every byte it sends (``sent``) so a test can
+    replay them, and keeps the session's MAC state to seal and open frames.
+    """
+
+    def __init__(self, address: tuple[str, int], timeout: float = 5.0) -> None:
+        self.sock = socket.create_connection(address, timeout=timeout)
+        self.sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+        self.decoder = FrameDecoder()
+        self.sent: list[bytes] = []  # wire bytes, one frame each, in order
+        self.received: list[Frame] = []
+        self.mac: SessionMac | None = None
+
+    def close(self) -> None:
+        self.sock.close()
+
+    def __enter__(self) -> RawHost:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    def send_wire(self, wire: bytes) -> None:
+        self.sent.append(wire)
+        self.sock.sendall(wire)
+
+    def send(self, msg: Message, seq: int = 0) -> None:
+        """``msg`` sealed with the session (a fresh counter)."""
+        assert self.mac is not None, "no session"
+        self.send_wire(self.mac.seal_message(msg, seq))
+
+    def frames(self, timeout: float) -> list[Frame]:
+        """Frames that arrive within ``timeout`` (stops early on EOF)."""
+        out: list[Frame] = []
+        deadline = time.monotonic() + timeout
+        while (left := deadline - time.monotonic()) > 0:
+            self.sock.settimeout(left)
+            try:
+                data = self.sock.recv(4096)
+            except TimeoutError:
+                break
+            except OSError:
+                break
+            if not data:
+                break
+            out += self.decoder.feed(data)
+        self.received += out
+        return out
+
+    def messages(self, timeout: float) -> list[Message]:
+        """Authentic messages received within ``timeout`` (plain handshake answers too)."""
+        out: list[Message] = []
+        for f in self.frames(timeout):
+            if self.mac is not None:
+                try:
+                    out.append(self.mac.open_message(f))
+                    continue
+                except AuthError:
+                    pass
+            out.append(decode_message(f))
+        return out
+
+    def until(self, predicate: Any, timeout: float = 5.0) -> Message:
+        """Receive until a message satisfies ``predicate``; fails the test otherwise."""
+        deadline = time.monotonic() + timeout
+        while (left := deadline - time.monotonic()) > 0:
+            for m in self.messages(min(left, 0.2)):
+                if predicate(m):
+                    return m
+        raise AssertionError("expected message did not arrive")
+
+    def closed_by_peer(self, timeout: float = 5.0) -> bool:
+        """True when the robot hangs up within ``timeout``."""
+        deadline = time.monotonic() + timeout
+        while (left := deadline - time.monotonic()) > 0:
+            self.sock.settimeout(left)
+            try:
+                data = self.sock.recv(4096)
+            except TimeoutError:
+                return False
+            except OSError:
+                return True
+            if not data:
+                return True
+            self.received += self.decoder.feed(data)
+        return False
+
+    def handshake(
+        self,
+        secret: bytes | None,
+        *,
+        watchdog_ms: int = 500,
+        takeover: bool = False,
+        verify_robot: bool = True,
+    ) -> Challenge:
+        """HELLO → CHALLENGE → AUTH; with the right secret the session is open after it.
+
+        ``verify_robot=False`` skips checking the robot's proof, as an attacker
+        with a wrong key would, and sends its AUTH anyway.  Returns the robot's
+        CHALLENGE (status LINE_BUSY when refused).
+        """
+        hs = HostHandshake(secret, watchdog_ms=watchdog_ms, takeover=takeover)
+        self.send_wire(encode_message(hs.hello, 0))
+        challenge = self.until(lambda m: isinstance(m, Challenge))
+        assert isinstance(challenge, Challenge)
+        if challenge.status != HelloStatus.OK or secret is None:
+            return challenge
+        if verify_robot:
+            self.mac = hs.accept(challenge)
+        else:
+            key = session_key(secret, hs.hello, challenge)
+            self.mac = SessionMac(key, Direction.HOST_TO_ROBOT)
+        self.send_wire(HostHandshake.auth_frame(self.mac))
+        return challenge
 
 
 def generic_program(n_moves: int = 24, step_s: float = 0.1) -> Program:

@@ -9,7 +9,7 @@ import pytest
 from robots.adapters import FaultKind, RobotLink
 from robots.emulator import Emulator, FaultConfig, check_exactly_once
 
-from .helpers import Run, generic_program
+from .helpers import Run, generic_program, link_config
 
 FAULTS: dict[str, FaultConfig] = {
     "none": FaultConfig(),
@@ -60,7 +60,7 @@ def test_fault_matrix_nothing_lost_nothing_twice(transport: str, fault: str) -> 
     kw = {"listen": None, "pty": True} if transport == "pty" else {}
     with Emulator("generic", faults=FAULTS[fault], time_scale=4, **kw) as emu:
         url = emu.pty_path if transport == "pty" else emu.url
-        with RobotLink(url) as link:
+        with RobotLink(url, link_config(emu)) as link:
             run = run_to_completion(link, program, run_id)
             with emu._lock:
                 check_evidence(fault, emu, link, run)

@@ -15,7 +15,9 @@ from robots.adapters import (
     RobotLink,
 )
 from robots.emulator import Emulator
-from robots.protocol import FaultFlag, JointMove, Mode
+from robots.protocol import FaultFlag, JointMove, Mode, generate_secret
+
+from .helpers import link_config
 
 
 def free_port() -> int:
@@ -26,7 +28,7 @@ def free_port() -> int:
 
 def test_handshake_and_ready_over_tcp() -> None:
     events: list = []
-    with Emulator("generic") as emu, RobotLink(emu.url, name="gen") as link:
+    with Emulator("generic") as emu, RobotLink(emu.url, link_config(emu), name="gen") as link:
         link.subscribe(events.append)
         assert link.wait_connected(5)
         info = link.robot_info
@@ -42,7 +44,7 @@ def test_handshake_and_ready_over_tcp() -> None:
 
 def test_state_machine_through_streaming_and_fault() -> None:
     seen: list[LinkState] = []
-    with Emulator("generic", time_scale=5) as emu, RobotLink(emu.url) as link:
+    with Emulator("generic", time_scale=5) as emu, RobotLink(emu.url, link_config(emu)) as link:
         assert link.wait_connected(5)
         link.subscribe(lambda e: isinstance(e, LinkStateChanged) and seen.append(e.new))
         link.send_command(JointMove((0.1,) * 6, 1.0), run_id=3, index=0)
@@ -59,13 +61,14 @@ def test_state_machine_through_streaming_and_fault() -> None:
 
 def test_reconnects_with_backoff_until_the_robot_appears() -> None:
     port = free_port()
-    cfg = LinkConfig(backoff_initial_s=0.05, backoff_max_s=0.2)
+    secret = generate_secret()
+    cfg = LinkConfig(backoff_initial_s=0.05, backoff_max_s=0.2, secret=secret)
     with RobotLink(f"socket://127.0.0.1:{port}", cfg) as link:
         assert link.wait_for(lambda lk: "cannot open" in lk.status().reason, 5)
         assert link.state == LinkState.DISCONNECTED
         with pytest.raises(LinkDownError):
             link.pause()
-        with Emulator("generic", listen=f"tcp://127.0.0.1:{port}"):
+        with Emulator("generic", listen=f"tcp://127.0.0.1:{port}", secret=secret):
             assert link.wait_connected(5)
         # The emulator went away: the link notices and goes back to reconnecting.
         assert link.wait_for(lambda lk: lk.state == LinkState.DISCONNECTED, 5)
@@ -74,7 +77,7 @@ def test_reconnects_with_backoff_until_the_robot_appears() -> None:
 def test_reconnect_after_drop_opens_a_new_session() -> None:
     events: list = []
     with Emulator("generic") as emu:
-        link = RobotLink(emu.url)
+        link = RobotLink(emu.url, link_config(emu))
         link.subscribe(events.append)
         with link:
             assert link.wait_connected(5)
@@ -94,14 +97,16 @@ def test_loop_url_never_completes_a_handshake() -> None:
 
 
 def test_wrong_robot_is_refused() -> None:
-    cfg = LinkConfig(expected_robot="cmbot", backoff_initial_s=0.05)
-    with Emulator("generic") as emu, RobotLink(emu.url, cfg) as link:
+    with (
+        Emulator("generic") as emu,
+        RobotLink(emu.url, link_config(emu, expected_robot="cmbot", backoff_initial_s=0.05)) as link,
+    ):
         assert link.wait_for(lambda lk: "expected 'cmbot'" in lk.status().reason, 5)
         assert not link.connected
 
 
 def test_pty_serial_device() -> None:
-    with Emulator("generic", listen=None, pty=True) as emu, RobotLink(emu.pty_path) as link:
+    with Emulator("generic", listen=None, pty=True) as emu, RobotLink(emu.pty_path, link_config(emu)) as link:
         assert emu.pty_path.startswith("/dev/pts/")
         assert link.wait_connected(5)
         link.send_command(JointMove((0.2,) * 6, 0.0), run_id=1, index=0)

@@ -10,6 +10,7 @@ import time
 from robots.adapters import ExecState, LinkConfig, LinkState, Outcome, RobotLink, Streamer
 from robots.emulator import Emulator, FaultConfig, check_exactly_once
 from robots.protocol import FaultFlag, JointMove, Mode, Program
+from robots.protocol.auth import generate_secret
 from robots.protocol.framing import FrameDecoder, encode_frame
 from robots.protocol.messages import (
     Heartbeat,
@@ -18,11 +19,12 @@ from robots.protocol.messages import (
     HelloStatus,
     JointsCmd,
     MsgType,
+    State,
     decode_message,
     encode_message,
 )
 
-from .helpers import STOPPED
+from .helpers import STOPPED, RawHost, link_config
 
 FUNCTIONAL_BOUND_S = 2.0
 
@@ -48,11 +50,12 @@ def executing(index: int):
 
 
 def test_watchdog_stops_motion_when_heartbeats_stop() -> None:
-    """A raw client that goes silent mid-motion: the robot stops by itself."""
-    with Emulator("generic") as emu, socket.create_connection(emu.address, timeout=5) as sock:
-        sock.sendall(encode_message(Hello(watchdog_ms=300), 0))
+    """A raw (authenticated) client that goes silent mid-motion: the robot stops by itself."""
+    with Emulator("generic") as emu, RawHost(emu.address) as host:
+        host.handshake(emu.secret, watchdog_ms=300)
+        host.until(lambda m: isinstance(m, State))
         cmd = JointsCmd(run_id=1, index=0, duration_ms=20_000, q_urad=(500_000,) * 6)
-        sock.sendall(encode_message(cmd, 1))
+        host.send(cmd, 1)
         last_frame = time.monotonic()
         assert emu.wait_for(lambda e: e.robot.stops, 5)
         stop = emu.stop_events()[0]
@@ -64,7 +67,7 @@ def test_watchdog_stops_motion_when_heartbeats_stop() -> None:
 
 
 def test_heartbeats_keep_a_long_motion_going() -> None:
-    with Emulator("generic") as emu, RobotLink(emu.url) as link:
+    with Emulator("generic") as emu, RobotLink(emu.url, link_config(emu)) as link:
         assert link.wait_connected(5)
         link.send_command(JointMove((0.5,) * 6, 20.0), run_id=1, index=0)
         assert emu.wait_for(lambda e: e.robot.current is not None, 5)
@@ -80,7 +83,7 @@ def test_watchdog_on_a_silent_serial_line() -> None:
     persisted: list[int] = []
     with (
         Emulator("generic", listen=None, pty=True, time_scale=3) as emu,
-        RobotLink(emu.pty_path) as link,
+        RobotLink(emu.pty_path, link_config(emu)) as link,
     ):
         with Streamer(prog, link, run_id=8, on_ack=persisted.append) as s:
             assert emu.wait_for(executing(2), 10)
@@ -97,7 +100,7 @@ def test_estop_mid_motion_then_clear_and_resume() -> None:
     prog = long_program(20, 0.3, long_index=2, long_s=4.5)  # 1.5 s of wall time
     persisted: list[int] = []
     done: list[Outcome] = []
-    with Emulator("generic", time_scale=3) as emu, RobotLink(emu.url) as link:
+    with Emulator("generic", time_scale=3) as emu, RobotLink(emu.url, link_config(emu)) as link:
         with Streamer(prog, link, run_id=21, on_ack=persisted.append, on_done=done.append) as s:
             assert emu.wait_for(executing(2), 10)
             t0 = time.monotonic()
@@ -125,7 +128,7 @@ def test_estop_mid_motion_then_clear_and_resume() -> None:
 
 def test_estop_while_the_link_is_reconnecting() -> None:
     prog = long_program(20, 0.3, long_index=0, long_s=20.0)
-    with Emulator("generic") as emu, RobotLink(emu.url) as link:
+    with Emulator("generic") as emu, RobotLink(emu.url, link_config(emu)) as link:
         with Streamer(prog, link, run_id=5) as s:
             assert emu.wait_for(executing(0), 10)
             emu.drop_link(silence_s=2.5)  # the cable is pulled, TCP stays open
@@ -144,30 +147,31 @@ def test_estop_with_no_robot_is_delivered_when_it_appears() -> None:
     with socket.socket() as probe:
         probe.bind(("127.0.0.1", 0))
         port = probe.getsockname()[1]
-    cfg = LinkConfig(backoff_initial_s=0.05, backoff_max_s=0.2)
+    secret = generate_secret()
+    cfg = LinkConfig(backoff_initial_s=0.05, backoff_max_s=0.2, secret=secret)
     with RobotLink(f"socket://127.0.0.1:{port}", cfg) as link:
         link.estop()
         assert link.estop_latched and link.state == LinkState.DISCONNECTED
-        with Emulator("generic", listen=f"tcp://127.0.0.1:{port}") as emu:
+        with Emulator("generic", listen=f"tcp://127.0.0.1:{port}", secret=secret) as emu:
             assert emu.wait_for(lambda e: e.robot.faults & FaultFlag.ESTOP, 5)
 
 
 def test_robot_answers_an_unknown_major_version() -> None:
     with Emulator("generic") as emu, socket.create_connection(emu.address, timeout=5) as sock:
-        sock.sendall(encode_frame(MsgType.HELLO, 0, Hello(major=2).payload(), ver=2))
+        sock.sendall(encode_frame(MsgType.HELLO, 0, Hello(major=3).payload(), ver=3))
         dec = FrameDecoder()
         replies: list = []
         deadline = time.monotonic() + 5
         while not any(isinstance(r, HelloAck) for r in replies) and time.monotonic() < deadline:
             replies += [decode_message(f) for f in dec.feed(sock.recv(4096))]
         ack = next(r for r in replies if isinstance(r, HelloAck))
-        assert ack.status == HelloStatus.VERSION_UNSUPPORTED and ack.major == 1
+        assert ack.status == HelloStatus.VERSION_UNSUPPORTED and ack.major == 2
         sock.sendall(encode_message(Heartbeat(), 0))
 
 
 def test_emulator_refusal_of_out_of_limit_targets_from_robot_description() -> None:
     # denso_vm6083: J2 is limited to −90…135° (DESIGN §7) whichever source the limits come from.
-    with Emulator("denso_vm6083", faults=FaultConfig()) as emu, RobotLink(emu.url) as link:
+    with Emulator("denso_vm6083", faults=FaultConfig()) as emu, RobotLink(emu.url, link_config(emu)) as link:
         assert link.wait_connected(5)
         prog = Program((JointMove((0.0, -2.0, 0.0, 0.0, 0.0, 0.0), 0.0),))
         with Streamer(prog, link, run_id=1) as s:

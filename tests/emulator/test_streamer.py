@@ -8,7 +8,7 @@ from robots.adapters import ExecState, FaultKind, Outcome, RobotLink, Streamer
 from robots.emulator import Emulator, check_exactly_once
 from robots.protocol import JointMove, Mode, Nozzle, Program
 
-from .helpers import STOPPED, generic_program
+from .helpers import STOPPED, generic_program, link_config
 
 
 def moves(n: int, step_s: float = 0.1) -> Program:
@@ -20,7 +20,7 @@ def test_completes_with_one_ack_per_command_in_order() -> None:
     acks: list[int] = []
     states: list = []
     done: list[Outcome] = []
-    with Emulator("generic", time_scale=20) as emu, RobotLink(emu.url) as link:
+    with Emulator("generic", time_scale=20) as emu, RobotLink(emu.url, link_config(emu)) as link:
         s = Streamer(
             prog, link, run_id=11, on_ack=acks.append, on_state=states.append, on_done=done.append
         )
@@ -37,7 +37,7 @@ def test_completes_with_one_ack_per_command_in_order() -> None:
 def test_window_bounds_what_is_ahead_of_the_persisted_ack() -> None:
     prog = moves(30, 0.05)
     worst = [0]
-    with Emulator("generic", time_scale=5) as emu, RobotLink(emu.url) as link:
+    with Emulator("generic", time_scale=5) as emu, RobotLink(emu.url, link_config(emu)) as link:
         acked = [-1]
 
         def on_ack(i: int) -> None:
@@ -54,7 +54,7 @@ def test_window_bounds_what_is_ahead_of_the_persisted_ack() -> None:
 
 def test_pause_holds_and_resume_finishes() -> None:
     prog = moves(20)
-    with Emulator("generic", time_scale=2) as emu, RobotLink(emu.url) as link:
+    with Emulator("generic", time_scale=2) as emu, RobotLink(emu.url, link_config(emu)) as link:
         with Streamer(prog, link, run_id=5) as s:
             assert emu.wait_for(lambda e: e.robot.last_done >= 1, 10)
             s.pause()
@@ -71,7 +71,7 @@ def test_pause_holds_and_resume_finishes() -> None:
 def test_abort_stops_the_robot_and_ends_the_run() -> None:
     prog = moves(50, 0.2)
     done: list[Outcome] = []
-    with Emulator("generic") as emu, RobotLink(emu.url) as link:
+    with Emulator("generic") as emu, RobotLink(emu.url, link_config(emu)) as link:
         with Streamer(prog, link, run_id=6, on_done=done.append) as s:
             assert emu.wait_for(lambda e: e.robot.current is not None, 5)
             s.abort()
@@ -89,13 +89,13 @@ def test_new_streamer_resumes_from_persisted_index_after_host_restart() -> None:
     prog = moves(40, 0.1)
     persisted: list[int] = []
     with Emulator("generic", time_scale=4) as emu:
-        link = RobotLink(emu.url).start()
+        link = RobotLink(emu.url, link_config(emu)).start()
         s = Streamer(prog, link, run_id=77, on_ack=persisted.append).start()
         assert emu.wait_for(lambda e: e.robot.last_done >= 10, 20)
         s.close()  # the process dies: nothing is said to the robot …
         link.close()  # … and the TCP connection drops, so the robot stops at once.
         assert emu.wait_for(lambda e: not e.robot.busy, 5)
-        with RobotLink(emu.url) as link2:
+        with RobotLink(emu.url, link_config(emu)) as link2:
             start = persisted[-1] + 1
             with Streamer(prog, link2, run_id=77, start=start, on_ack=persisted.append) as s2:
                 assert s2.wait(timeout=30) == ExecState.COMPLETED
@@ -108,7 +108,7 @@ def test_new_streamer_resumes_from_persisted_index_after_host_restart() -> None:
 def test_stale_resume_point_does_not_repeat_commands() -> None:
     """The robot completed more than the host persisted: ALREADY_DONE, not again."""
     prog = moves(12, 0.0)
-    with Emulator("generic") as emu, RobotLink(emu.url) as link:
+    with Emulator("generic") as emu, RobotLink(emu.url, link_config(emu)) as link:
         with Streamer(prog, link, run_id=9) as s:
             assert s.wait(timeout=10) == ExecState.COMPLETED
         acks: list[int] = []
@@ -125,7 +125,7 @@ def test_out_of_limits_command_is_refused_with_its_index() -> None:
     faults = []
     with (
         Emulator("generic") as emu,
-        RobotLink(emu.url) as link,
+        RobotLink(emu.url, link_config(emu)) as link,
         Streamer(prog, link, run_id=3, on_fault=faults.append) as s,
     ):
         assert s.wait(STOPPED, 10) == ExecState.FAULTED
@@ -146,7 +146,7 @@ def test_failing_on_ack_holds_the_robot_and_resume_retries_it() -> None:
             raise OSError("disk full")
         calls.append(i)
 
-    with Emulator("generic") as emu, RobotLink(emu.url) as link:
+    with Emulator("generic") as emu, RobotLink(emu.url, link_config(emu)) as link:
         with Streamer(prog, link, run_id=4, on_ack=on_ack) as s:
             assert s.wait(STOPPED, 10) == ExecState.FAULTED
             assert s.fault.kind == FaultKind.HOST and "disk full" in s.fault.message
@@ -157,7 +157,7 @@ def test_failing_on_ack_holds_the_robot_and_resume_retries_it() -> None:
 
 
 def test_busy_robot_refuses_another_run() -> None:
-    with Emulator("generic") as emu, RobotLink(emu.url) as link:
+    with Emulator("generic") as emu, RobotLink(emu.url, link_config(emu)) as link:
         with Streamer(moves(30, 0.2), link, run_id=1) as first:
             assert emu.wait_for(lambda e: e.robot.current is not None, 5)
             with Streamer(moves(3), link, run_id=2) as second:
@@ -173,7 +173,7 @@ def test_busy_robot_refuses_another_run() -> None:
 def test_empty_program_completes_at_once() -> None:
     with (
         Emulator("generic") as emu,
-        RobotLink(emu.url) as link,
+        RobotLink(emu.url, link_config(emu)) as link,
         Streamer(Program(()), link, run_id=1) as s,
     ):
         assert s.wait(timeout=5) == ExecState.COMPLETED
@@ -206,7 +206,7 @@ def test_faulted_refusal_before_the_report_is_classified_by_its_bits() -> None:
         faults: list = []
         with (
             Emulator("generic") as emu,
-            RobotLink(emu.url) as link,
+            RobotLink(emu.url, link_config(emu)) as link,
             Streamer(prog, link, run_id=40 + k, on_fault=faults.append) as s,
         ):
             assert emu.wait_for(lambda e: e.robot.last_done >= 0, 10)

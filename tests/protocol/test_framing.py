@@ -75,13 +75,14 @@ def test_cobs_rejects_malformed(bad: bytes) -> None:
 
 
 def test_worked_example_from_docs() -> None:
-    # docs/protocol.md §2.4: HEARTBEAT with seq 0, and a 2-joint way-point.
-    assert encode_message(Heartbeat(), 0).hex(" ") == "03 01 02 01 01 03 35 56 00"
+    # docs/protocol.md §2.4: HEARTBEAT with seq 0, and a 2-joint way-point (plain
+    # frames, before the authentication trailer of §12 is added).
+    assert encode_message(Heartbeat(), 0).hex(" ") == "03 02 02 01 01 03 e7 b8 00"
     wire = encode_message(
         JointsCmd(run_id=7, index=3, duration_ms=500, q_urad=(1_570_796, -785_398)), 5
     )
     assert wire.hex(" ") == (
-        "04 01 10 05 03 15 07 01 01 02 03 01 01 03 f4 01 01 05 02 ec f7 17 07 0a 04 f4 ff 87 c7 00"
+        "04 02 10 05 03 15 07 01 01 02 03 01 01 03 f4 01 01 05 02 ec f7 17 07 0a 04 f4 ff 05 23 00"
     )
     frame = decode_frame(wire)
     assert (frame.type, frame.seq, len(frame.payload)) == (0x10, 5, 21)
@@ -117,10 +118,10 @@ def test_encode_rejects_out_of_range() -> None:
 
 
 def test_other_major_version_is_rejected_unless_asked() -> None:
-    wire = encode_frame(0x01, 0, b"", ver=2)
+    wire = encode_frame(0x01, 0, b"", ver=3)
     with pytest.raises(FrameError, match="version"):
         decode_frame(wire)
-    assert FrameDecoder(accept_any_version=True).feed(wire)[0].ver == 2
+    assert FrameDecoder(accept_any_version=True).feed(wire)[0].ver == 3
     dec = FrameDecoder()
     assert dec.feed(wire) == [] and dec.errors == 1
 

@@ -34,9 +34,11 @@ _FIELD = {
     "h": st.integers(-(2**15), 2**15 - 1),
     "i": st.integers(-(2**31), 2**31 - 1),
     "o": st.booleans(),
-    # 26 elements keeps the largest message (State, two arrays) within MAX_PAYLOAD.
-    "A": st.lists(st.integers(-(2**31), 2**31 - 1), max_size=26).map(tuple),
+    # 23 elements keeps the largest message (State, two arrays) within
+    # MAX_MESSAGE_PAYLOAD (the payload region less the authentication trailer).
+    "A": st.lists(st.integers(-(2**31), 2**31 - 1), max_size=23).map(tuple),
     "S": st.text(st.characters(min_codepoint=32, max_codepoint=126), max_size=32),
+    "N": st.binary(min_size=16, max_size=16),
 }
 
 
