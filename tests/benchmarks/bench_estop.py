@@ -39,13 +39,14 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
 from robots.adapters import (
     ExecState,
     FrameAcked,
+    LinkConfig,
     LinkEvent,
     ReportReceived,
     RobotLink,
     Streamer,
 )
 from robots.emulator import Emulator
-from robots.protocol import JointMove, Mode, Program
+from robots.protocol import JointMove, Mode, Program, load_or_create_secret
 
 
 def summary(name: str, values_s: list[float]) -> str:
@@ -83,9 +84,11 @@ def run(trials: int, use_subprocess: bool, seed: int) -> None:
     program = Program(tuple(JointMove((0.001 * (k % 500),) * 6, 0.2) for k in range(2000)))
     tmp = tempfile.TemporaryDirectory()
     log_path = Path(tmp.name) / "exec.jsonl"
+    key_path = Path(tmp.name) / "robot.key"
     proc = None
     emu = None
     if use_subprocess:
+        secret = load_or_create_secret(key_path)  # the emulator reads the same file
         proc = subprocess.Popen(
             [
                 sys.executable,
@@ -97,6 +100,8 @@ def run(trials: int, use_subprocess: bool, seed: int) -> None:
                 "tcp://127.0.0.1:0",
                 "--log-jsonl",
                 str(log_path),
+                "--secret-file",
+                str(key_path),
             ],
             stdout=subprocess.PIPE,
             stderr=subprocess.DEVNULL,
@@ -109,11 +114,12 @@ def run(trials: int, use_subprocess: bool, seed: int) -> None:
     else:
         emu = Emulator("denso_vm6083").start()
         url = emu.url
+        secret = emu.secret
     watch = Watch()
     to_stop: list[float] = []
     to_host: list[float] = []
     rtt: list[float] = []
-    link = RobotLink(url)
+    link = RobotLink(url, LinkConfig(secret=secret))
     link.subscribe(watch)
     link.start()
     try:
