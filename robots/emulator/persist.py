@@ -11,8 +11,9 @@ honestly.  Three pieces, used by :class:`robots.emulator.server.Emulator`:
   (:class:`~robots.emulator.robot.Interrupted`).  A snapshot is *captured*
   (in memory, cheap) at each moment the robot comes to rest or changes its
   kept state at rest — halt, completion of a command, pause, clear — and the
-  latest one is *written* at the end of the emulator's loop turn and on clean
-  exit, atomically (temporary file in the same directory, ``fsync``,
+  latest one is *written* by a writer thread of its own (an ``fsync`` can
+  take long on a busy disk; it must never hold up the emulator's loop, which
+  also serves the E-stop) and synchronously on clean exit, atomically (temporary file in the same directory, ``fsync``,
   ``rename``, ``fsync`` of the directory), so a reader sees either the old or
   the new file, never a torn one.  States at rest are exact, so an emulator
   started from the file continues precisely.  Like a real robot whose
@@ -31,8 +32,10 @@ from __future__ import annotations
 
 import contextlib
 import json
+import logging
 import os
 import tempfile
+import threading
 from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
@@ -42,6 +45,8 @@ import numpy as np
 
 from robots.emulator.robot import Interrupted, SimRobot
 from robots.protocol.messages import MESSAGE_CLASSES, CommandMessage, MessageError
+
+log = logging.getLogger(__name__)
 
 STATE_FORMAT = "steelpath-emulator-state"
 STATE_VERSION = 1
@@ -218,11 +223,22 @@ def restore_robot_state(robot: SimRobot, state: Mapping[str, Any], source: str =
 
 
 class StateFile:
-    """The robot's state file: load at start, capture at rest, write atomically."""
+    """The robot's state file: load at start, capture at rest, write atomically.
+
+    :meth:`capture` only stores a snapshot; it is written by :meth:`flush`, which
+    the writer thread (:meth:`start` … :meth:`close`) calls whenever a new
+    snapshot is waiting.  Only the latest snapshot is written — an older one
+    is superseded — and writes never interleave, so the file always ends up
+    holding the last state captured.
+    """
 
     def __init__(self, path: str | os.PathLike[str]) -> None:
         self.path = Path(path)
         self._captured: dict[str, Any] | None = None
+        self._cond = threading.Condition()
+        self._write_lock = threading.Lock()
+        self._thread: threading.Thread | None = None
+        self._closing = False
         self.writes = 0
 
     def load_into(self, robot: SimRobot) -> bool:
@@ -235,20 +251,56 @@ class StateFile:
 
     def capture(self, robot: SimRobot) -> None:
         """Remember the robot's state now (called at rest; written by :meth:`flush`)."""
-        self._captured = robot_state(robot)
+        data = robot_state(robot)
+        with self._cond:
+            self._captured = data
+            self._cond.notify()
 
     def flush(self) -> bool:
         """Write the latest captured state, if any since the last write."""
-        data, self._captured = self._captured, None
-        if data is None:
-            return False
-        write_json_atomic(self.path, data)
-        self.writes += 1
-        return True
+        with self._write_lock:
+            with self._cond:
+                data, self._captured = self._captured, None
+            if data is None:
+                return False
+            write_json_atomic(self.path, data)
+            self.writes += 1
+            return True
 
     def save(self, robot: SimRobot) -> None:
         self.capture(robot)
         self.flush()
+
+    def start(self) -> None:
+        """Write captured states from a background thread until :meth:`close`."""
+        if self._thread is not None:
+            return
+        self._closing = False
+        self._thread = threading.Thread(
+            target=self._writer, name=f"state writer {self.path.name}", daemon=True
+        )
+        self._thread.start()
+
+    def close(self, timeout: float = 5.0) -> None:
+        """Stop the writer thread, then write whatever is still waiting."""
+        with self._cond:
+            self._closing = True
+            self._cond.notify()
+        if self._thread is not None:
+            self._thread.join(timeout)
+            self._thread = None
+        self.flush()
+
+    def _writer(self) -> None:
+        while True:
+            with self._cond:
+                self._cond.wait_for(lambda: self._captured is not None or self._closing)
+                if self._closing:
+                    return  # close() writes the rest itself
+            try:
+                self.flush()
+            except OSError:
+                log.exception("cannot write the emulator state file %s", self.path)
 
 
 # --- port file ---------------------------------------------------------------------------

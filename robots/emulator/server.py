@@ -335,6 +335,8 @@ class Emulator:
         if self._want_pty:
             self._pty = _PtyPort()
             self._sel.register(self._pty, selectors.EVENT_READ, self._pty)
+        if self._state_file is not None:
+            self._state_file.start()
         if self._orphan_after is not None:
             self._orphan = OrphanTimer(self._orphan_after, time.monotonic())
         if self._port_file is not None:
@@ -360,10 +362,12 @@ class Emulator:
             # Come to rest, then keep that state: what a robot does when switched off.
             self.robot.power_down(time.monotonic())
             if self._state_file is not None:
-                try:
-                    self._state_file.save(self.robot)
-                except OSError:
-                    log.exception("emulator %s: cannot save its state", self.profile.name)
+                self._state_file.capture(self.robot)
+        if self._state_file is not None:
+            try:
+                self._state_file.close()  # joins the writer, then writes the last state
+            except OSError:
+                log.exception("emulator %s: cannot save its state", self.profile.name)
         if self._port_file is not None:
             remove_port_file(self._port_file)
         for port in (self._tcp, self._pty, *self._candidates):
@@ -505,12 +509,7 @@ class Emulator:
             self._state_file.capture(self.robot)
 
     def _persist_tick(self, now: float) -> None:
-        """Write the state captured at the last rest; end the loop when orphaned."""
-        if self._state_file is not None:
-            try:
-                self._state_file.flush()
-            except OSError:
-                log.exception("emulator %s: cannot save its state", self.profile.name)
+        """End the loop when orphaned (the state file's own thread writes the state)."""
         if self._orphan is not None and not self.orphaned:
             robot = self.robot
             if self._orphan.expired(
