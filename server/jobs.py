@@ -132,10 +132,13 @@ def execute_job(
 ) -> tuple[dict[str, Any], dict[str, np.ndarray], list[dict[str, Any]], dict[str, float]]:
     """Run one plan (in a worker).  Module-level so process pools can pickle it."""
     from server.kinds import get_kind
+    from server.kinds.base import drop_unknown_keys
 
     kind = get_kind(kind_name)
     ctx = WorkerContext(plan_id, Path(clouds_dir), progress_q, cancel_flags)
     progress_q.put((plan_id, 0.0, "start"))
+    # Rows stored before params forbade unknown keys still run (the keys are ignored).
+    params, _legacy = drop_unknown_keys(kind.params_model, params)
     model = kind.params_model.model_validate(params)
     t0 = time.perf_counter()
     out = kind.run(model, ctx)

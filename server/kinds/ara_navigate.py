@@ -22,17 +22,17 @@ import time
 from typing import Any, Literal
 
 import numpy as np
-from pydantic import BaseModel, Field
+from pydantic import Field
 
 from planners.errors import InvalidInputError
 from planners.navigation import NavigationParams, NavigationResult, plan_navigation
 from planners.navigation.pibc import steel_union, swept_on_steel
 from planners.navigation.synthetic import SAMPLES, SHAPES
-from server.kinds.base import Check, JobContext, KindOutput, PlanKind, check_ge
+from server.kinds.base import Check, JobContext, KindOutput, PlanKind, StrictParams, check_ge
 from server.kinds.programs import wheel_steps
 
 
-class AraNavigateParams(BaseModel):
+class AraNavigateParams(StrictParams):
     """Cloud, route end points and method choices of an ARA navigation plan."""
 
     cloud_id: str | None = Field(

@@ -16,18 +16,26 @@ from typing import Any
 
 import numpy as np
 import shapely
-from pydantic import BaseModel, Field
+from pydantic import Field
 
 from planners.errors import InvalidInputError, PlannerError
 from planners.switching import SwitchingParams, decide_mode
 from planners.switching.jump import JumpParams, plan_inchworm_jump
 from planners.switching.scenes import SCENES, make_scene
-from server.kinds.base import Check, JobContext, KindOutput, PlanKind, check_ge, check_le
+from server.kinds.base import (
+    Check,
+    JobContext,
+    KindOutput,
+    PlanKind,
+    StrictParams,
+    check_ge,
+    check_le,
+)
 
 SAMPLE_PREFIX = "switch_"
 
 
-class AraSwitchParams(BaseModel):
+class AraSwitchParams(StrictParams):
     """Scan, robot base and tolerances of an ARA switching decision + jump."""
 
     cloud_id: str | None = Field(

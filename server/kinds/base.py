@@ -8,15 +8,57 @@ to robot commands.  Adding a kind touches one new module plus one line in
 
 from __future__ import annotations
 
+import copy
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any, Protocol
 
 import numpy as np
-from pydantic import BaseModel, Field
+from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
 if TYPE_CHECKING:
     from server.scene.context import DrawContext
+
+
+class StrictParams(BaseModel):
+    """Base of every kind's params model (and its nested parts): unknown keys
+    are refused with a 422 naming them, so a misspelt key (``strat`` for
+    ``start``) cannot silently plan the defaults."""
+
+    model_config = ConfigDict(extra="forbid")
+
+
+def drop_unknown_keys(
+    model: type[BaseModel], params: dict[str, Any], only: Callable[[str], bool] | None = None
+) -> tuple[dict[str, Any], list[str]]:
+    """``params`` without the keys ``model`` forbids, and their dotted names.
+
+    For params *stored* before models forbade unknown keys (old rows must still
+    load and re-run) and for keys a revision inherits from its parent; ``only``
+    limits the dropping to top-level keys it accepts, so keys a caller typed
+    now are still refused.  Other validation errors are left for the caller's
+    own ``model_validate`` to report.
+    """
+    try:
+        model.model_validate(params)
+        return params, []
+    except ValidationError as exc:
+        locs = [
+            e["loc"]
+            for e in exc.errors()
+            if e["type"] == "extra_forbidden"
+            and e["loc"]
+            and (only is None or (isinstance(e["loc"][0], str) and only(e["loc"][0])))
+        ]
+    if not locs:
+        return params, []
+    cleaned = copy.deepcopy(params)
+    for loc in locs:
+        node: Any = cleaned
+        for part in loc[:-1]:
+            node = node[part]
+        node.pop(loc[-1], None)
+    return cleaned, [".".join(str(p) for p in loc) for loc in locs]
 
 
 class Check(BaseModel):
@@ -120,7 +162,7 @@ class PlanKind:
     validate: Callable[[Any], None] | None = None
 
 
-class CloudRef(BaseModel):
+class CloudRef(StrictParams):
     """Convenience params fragment: a stored cloud id or a sample name."""
 
     cloud_id: str | None = Field(None, description="id of a stored cloud (POST /clouds)")

@@ -16,18 +16,18 @@ import time
 from typing import Any, Literal
 
 import numpy as np
-from pydantic import BaseModel, Field, field_validator
+from pydantic import Field, field_validator
 
 from planners.blasting import Box, Surface, plan_blasting, scenes
 from planners.blasting.nozzle import check_stream_length
 from planners.errors import InvalidInputError, NoPlaneError
-from server.kinds.base import Check, JobContext, KindOutput, PlanKind
+from server.kinds.base import Check, JobContext, KindOutput, PlanKind, StrictParams
 
 ROBOT = "denso_vm6083"
 FACING_DEG = 30.0  # chosen: a plane point whose local normal is further off is not of the patch
 
 
-class PolygonSurface(BaseModel):
+class PolygonSurface(StrictParams):
     """A planar surface: outline in the plane frame (DESIGN §5)."""
 
     origin_m: list[float] = Field(
@@ -54,7 +54,7 @@ class PolygonSurface(BaseModel):
         )  # fmt: skip
 
 
-class BoxObstacle(BaseModel):
+class BoxObstacle(StrictParams):
     """An axis-aligned box obstacle (world frame, m)."""
 
     lo_m: list[float] = Field(
@@ -73,7 +73,7 @@ def _channel() -> list[BoxObstacle]:
     ]
 
 
-class BlastParams(BaseModel):
+class BlastParams(StrictParams):
     """Surface, nozzle, sequencer, obstacles and robot base of one blasting plan."""
 
     seed_surface: int | None = Field(

@@ -17,17 +17,17 @@ import math
 from typing import Any
 
 import numpy as np
-from pydantic import BaseModel, Field, model_validator
+from pydantic import Field, model_validator
 
 from planners.cmbot import SEED_CLIMB_GOAL_X, SEED_CLIMB_START_X, GaitParams, plan_climb
 from planners.cmbot.gait import chain_limits, plan_footholds
 from planners.cmbot.guardrail import SEED_POSTS, SEED_SEGMENTS, Guardrail, GuardrailParams
-from server.kinds.base import Check, JobContext, KindOutput, PlanKind
+from server.kinds.base import Check, JobContext, KindOutput, PlanKind, StrictParams
 
 ROBOT = "cmbot"
 
 
-class GuardrailSpec(BaseModel):
+class GuardrailSpec(StrictParams):
     """The guardrail along which CMBOT works (defaults: the sample scene)."""
 
     segments_m: list[tuple[float, float]] = Field(
@@ -125,7 +125,7 @@ def gate_checks(gate: Any, prefix: str = "") -> list[Check]:
     return out
 
 
-class CmbotClimbParams(BaseModel):
+class CmbotClimbParams(StrictParams):
     """Walk of CMBOT along the guardrail: positions of the rear sole (metres)."""
 
     guardrail: GuardrailSpec = Field(default_factory=GuardrailSpec, description="the guardrail")

@@ -18,7 +18,7 @@ import math
 from typing import Any, Literal
 
 import numpy as np
-from pydantic import BaseModel, Field
+from pydantic import Field
 
 from planners.cmbot import (
     SEED_WORK_REAR_X,
@@ -29,7 +29,7 @@ from planners.cmbot import (
 )
 from planners.cmbot.scene import work_stance
 from planners.errors import InvalidInputError
-from server.kinds.base import Check, JobContext, KindOutput, PlanKind
+from server.kinds.base import Check, JobContext, KindOutput, PlanKind, StrictParams
 from server.kinds.cmbot_climb import (
     GuardrailSpec,
     boxes_result,
@@ -42,7 +42,7 @@ from server.kinds.cmbot_climb import (
 ROBOT = "cmbot"
 
 
-class CmbotManipulateParams(BaseModel):
+class CmbotManipulateParams(StrictParams):
     """Work stance, trajectory reading, avoidance and gate limits of one arm motion."""
 
     guardrail: GuardrailSpec = Field(default_factory=GuardrailSpec, description="the guardrail")

@@ -14,10 +14,10 @@ from typing import Any
 
 import networkx as nx
 import numpy as np
-from pydantic import BaseModel, Field, model_validator
+from pydantic import Field, model_validator
 
 from planners.errors import InfeasibleError, InvalidInputError, UnknownVertexError
-from server.kinds.base import Check, JobContext, KindOutput, PlanKind, check_le
+from server.kinds.base import Check, JobContext, KindOutput, PlanKind, StrictParams, check_le
 
 
 def _default_nodes() -> dict[str, list[float]]:
@@ -35,7 +35,7 @@ def _default_edges() -> list[tuple[str, str]]:
     ]
 
 
-class DemoRouteParams(BaseModel):
+class DemoRouteParams(StrictParams):
     """Graph, endpoints and limits of a demo route."""
 
     nodes: dict[str, list[float]] = Field(

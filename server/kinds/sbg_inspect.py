@@ -15,7 +15,7 @@ from dataclasses import asdict, fields
 from typing import Any, Literal
 
 import numpy as np
-from pydantic import BaseModel, Field, create_model
+from pydantic import Field, create_model
 
 from planners.sbg import (
     ControllerConfig,
@@ -29,13 +29,13 @@ from planners.sbg import (
 from planners.sbg import corner as corner_mod
 from planners.sbg import experiments as ex
 from planners.sbg.robot import ClimberParams
-from server.kinds.base import Check, JobContext, KindOutput, PlanKind
+from server.kinds.base import Check, JobContext, KindOutput, PlanKind, StrictParams
 
 DEG = math.pi / 180.0
 _DEFAULT_GIRDER = sample_girders()["seed_lab"]
 
 
-class GirderParams(BaseModel):
+class GirderParams(StrictParams):
     """Girder bay geometry (metres); defaults: the 3-lane ``seed_lab`` mock-up."""
 
     length_m: float = Field(
@@ -78,7 +78,7 @@ class GirderParams(BaseModel):
         return Girder(**self.model_dump())
 
 
-class RobotOverrides(BaseModel):
+class RobotOverrides(StrictParams):
     """Changes to the climber's parameters (robots/sbg_climber/params.toml);
     ``null`` keeps the file's value."""
 
@@ -162,6 +162,7 @@ _NOISE_HELP = {
 _NOISE_DEFAULT = NoiseModel()
 NoiseParams = create_model(
     "NoiseParams",
+    __base__=StrictParams,
     __doc__="Noise model of the simulation (planners.sbg.NoiseModel; all chosen, see docs/sbg.md).",
     **{
         f.name: (
@@ -175,7 +176,7 @@ NoiseParams = create_model(
 )
 
 
-class SbgInspectParams(BaseModel):
+class SbgInspectParams(StrictParams):
     """Girder, robot, operator choices, controller and noise of one inspection plan."""
 
     girder: GirderParams = Field(default_factory=GirderParams, description="girder bay geometry")

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import io
+import logging
 from typing import Annotated, Any
 
 import numpy as np
@@ -12,11 +13,13 @@ from pydantic import BaseModel, Field, ValidationError
 from planners.errors import PlannerError
 from server.auth import Operator, Viewer
 from server.kinds import get_kind
-from server.kinds.base import PlanKind
+from server.kinds.base import PlanKind, drop_unknown_keys
 from server.lifecycle import PlanState
 from server.services import Services, get_services
 from server.store import NotFoundError, PlanRecord
 from server.store.database import utcnow
+
+log = logging.getLogger(__name__)
 
 router = APIRouter(prefix="/plans", tags=["plans"])
 
@@ -75,6 +78,17 @@ def submit_plan(
         kind = get_kind(kind_name)
     except KeyError as exc:
         raise HTTPException(422, detail=str(exc)) from None
+    if parent_id is not None:
+        # Keys a revision inherits unchanged from a parent stored before params
+        # forbade unknown keys are dropped; keys typed now are still checked.
+        parent = services.store.get_plan(parent_id).params
+        params, dropped = drop_unknown_keys(
+            kind.params_model,
+            params,
+            only=lambda key: key in parent and params.get(key) == parent[key],
+        )
+        if dropped:
+            log.info("revision of %s drops legacy params keys %s", parent_id, dropped)
     clean = validate_params(services, kind, params)
     plan = services.store.create_plan(kind.name, clean, actor, parent_id=parent_id)
     services.jobs.submit(plan.id)

@@ -193,3 +193,69 @@ def test_kinds_endpoint(api) -> None:
     assert demo["defaults"]["start"] == "a0"
     assert "max_length_m" in demo["params_schema"]["properties"]
     assert "demo_plane" in demo["samples"]
+
+
+# ------------------------------------------------------- issue #12 §5: unknown params keys
+def test_misspelt_params_key_is_refused_naming_it(api) -> None:
+    r = api.post("/api/v1/plans", json={"kind": "demo.route", "params": {"strat": "b1"}})
+    assert r.status_code == 422, r.text
+    detail = r.json()["detail"]
+    assert isinstance(detail, list)
+    assert [e["loc"] for e in detail] == [["strat"]] and "strat" in r.text
+    assert api.get("/api/v1/plans", "viewer").json() == []  # nothing was queued
+
+
+def test_every_kind_forbids_unknown_params_keys(api) -> None:
+    from server.kinds import registry
+
+    kinds = sorted(registry())
+    assert len(kinds) >= 7
+    for kind in kinds:
+        r = api.post("/api/v1/plans", json={"kind": kind, "params": {"no_such_key": 1}})
+        assert r.status_code == 422, (kind, r.text)
+        locs = [e["loc"] for e in r.json()["detail"]]
+        assert ["no_such_key"] in locs, (kind, locs)
+        assert {e["type"] for e in r.json()["detail"]} == {"extra_forbidden"}, kind
+
+
+def test_nested_params_models_forbid_unknown_keys() -> None:
+    """Nested parts (girder, robot overrides, surfaces, guardrail…) are strict too."""
+    import typing
+
+    from pydantic import BaseModel
+
+    from server.kinds import registry
+
+    seen: set[type] = set()
+
+    def walk(model: type[BaseModel]) -> None:
+        if model in seen:
+            return
+        seen.add(model)
+        assert model.model_config.get("extra") == "forbid", model.__name__
+        for field in model.model_fields.values():
+            stack = [field.annotation]
+            while stack:
+                t = stack.pop()
+                stack.extend(typing.get_args(t))
+                if isinstance(t, type) and issubclass(t, BaseModel):
+                    walk(t)
+
+    for kind in registry().values():
+        walk(kind.params_model)
+    assert len(seen) > len(registry())  # nested models were found and checked
+
+
+def test_legacy_rows_with_unknown_keys_still_load_run_and_revise(api) -> None:
+    """A plan stored before params were strict (extra key in its row) is not broken."""
+    store = api.services.store
+    legacy = store.create_plan("demo.route", {"start": "a0", "old_knob": 3}, "test")
+    api.services.jobs.submit(legacy.id)
+    done = api.wait(legacy.id)
+    assert done["state"] == "planned", done
+    assert done["params"]["old_knob"] == 3  # the stored row is shown as it is
+    r = api.post(f"/api/v1/plans/{legacy.id}/revise", json={"params": {"end": "c1"}})
+    assert r.status_code == 202, r.text
+    assert "old_knob" not in r.json()["params"] and r.json()["params"]["end"] == "c1"
+    r = api.post(f"/api/v1/plans/{legacy.id}/revise", json={"params": {"ned": "c1"}})
+    assert r.status_code == 422 and [e["loc"] for e in r.json()["detail"]] == [["ned"]]
