@@ -63,6 +63,16 @@ def cmd_serve(args: argparse.Namespace) -> int:
 
 
 # ----------------------------------------------------------------------- token
+def _duration(text: str) -> float:
+    """argparse type for ``--expires-in``: ``30d``, ``12h``, ``15m``, ``90s``."""
+    from server.auth import parse_duration
+
+    try:
+        return parse_duration(text)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+
+
 def cmd_token(args: argparse.Namespace) -> int:
     from server.auth import create_token
     from server.store import NotFoundError, Store
@@ -71,15 +81,24 @@ def cmd_token(args: argparse.Namespace) -> int:
     store = Store(settings.data)
     try:
         if args.token_cmd == "create":
-            tid, secret = create_token(store, args.name or f"{args.role} token", args.role, "cli")
-            print(
-                f"created {args.role} token {tid} ({args.name or args.role + ' token'}) in {settings.data}"
+            name = args.name or f"{args.role} token"
+            tid, secret = create_token(
+                store, name, args.role, "cli", expires_in_s=args.expires_in
             )
+            expiry = store.get_token(tid).expires_at
+            until = f", expires {expiry}" if expiry else ", never expires"
+            print(f"created {args.role} token {tid} ({name}) in {settings.data}{until}")
             print(secret)
         elif args.token_cmd == "list":
             for t in store.list_tokens():
-                state = f"revoked {t.revoked_at}" if t.revoked_at else "active"
-                print(f"{t.id}\t{t.role}\t{state}\t{t.name}")
+                if t.revoked_at:
+                    state = f"revoked {t.revoked_at}"
+                elif t.expired():
+                    state = f"expired {t.expires_at}"
+                else:
+                    state = "active"
+                expires = f"expires {t.expires_at}" if t.expires_at else "no expiry"
+                print(f"{t.id}\t{t.role}\t{state}\t{expires}\t{t.name}")
         elif args.token_cmd == "revoke":
             try:
                 store.revoke_token(args.id, "cli")
@@ -233,6 +252,12 @@ def build_parser() -> argparse.ArgumentParser:
     tc = tsub.add_parser("create", help="create a token and print it (last line)")
     tc.add_argument("--role", choices=["viewer", "operator", "admin"], default="operator")
     tc.add_argument("--name", help="who holds it")
+    tc.add_argument(
+        "--expires-in",
+        type=_duration,
+        metavar="DURATION",
+        help="lifetime, a number with a unit s, m, h or d (e.g. 30d); default: never expires",
+    )
     tc.add_argument("--data", type=Path, help="data directory (default ./var)")
     tl = tsub.add_parser("list", help="list tokens (never their secrets)")
     tl.add_argument("--data", type=Path)

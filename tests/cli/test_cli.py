@@ -6,6 +6,7 @@ import json
 import os
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 import pytest
@@ -64,6 +65,28 @@ def test_token_create_prints_token_last(tmp_path: Path) -> None:
     assert steelpath("token", "revoke", rec.id, "--data", str(tmp_path)).returncode == 0
     assert store.find_token(hash_token(token)) is None
     assert steelpath("token", "create", "--role", "root", "--data", str(tmp_path)).returncode == 2
+
+
+def test_token_create_with_expiry(tmp_path: Path) -> None:
+    r = steelpath(
+        "token", "create", "--role", "operator", "--expires-in", "30d", "--data", str(tmp_path)
+    )
+    assert r.returncode == 0, r.stderr
+    token = r.stdout.strip().splitlines()[-1]
+    store = Store(tmp_path)
+    rec = store.find_token(hash_token(token))
+    assert rec is not None and rec.expires_ts is not None
+    assert abs(rec.expires_ts - (time.time() + 30 * 86400)) < 120
+    assert "expires" in r.stdout
+    listed = steelpath("token", "list", "--data", str(tmp_path)).stdout
+    line = next(ln for ln in listed.splitlines() if rec.id in ln)
+    assert f"expires {rec.expires_at}" in line and "active" in line
+    for bad in ("30", "30x", "0d", "soon"):
+        r = steelpath("token", "create", "--expires-in", bad, "--data", str(tmp_path))
+        assert r.returncode == 2, bad
+        assert "--expires-in" in r.stderr
+        assert "s, m, h or d" in r.stderr or "lifetime" in r.stderr
+    assert len(store.list_tokens()) == 1  # the refused ones made nothing
 
 
 def test_plan_submit_and_show_against_a_running_server(tmp_path: Path) -> None:
