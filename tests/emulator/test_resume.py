@@ -33,6 +33,7 @@ from robots.emulator.persist import (
     StateFile,
     StateFileError,
     read_port_file,
+    restore_robot_state,
     robot_state,
     write_json_atomic,
 )
@@ -47,7 +48,8 @@ from robots.protocol import (
     Stop,
     WheelSpeeds,
 )
-from robots.protocol.messages import FaultFlag, Heartbeat, Hello, State, WheelsCmd
+from robots.protocol.auth import load_or_create_secret
+from robots.protocol.messages import Clear, FaultFlag, Heartbeat, Hello, State, WheelsCmd
 
 from .helpers import Run
 
@@ -174,9 +176,8 @@ def assert_continued_not_repeated(
 # --- host side: links and streamers as a (restarted) server makes them -----------------
 
 
-def link_config(secret: bytes | None) -> LinkConfig | None:
-    # The protocol is gaining authentication; a secret, when the robot has one.
-    return LinkConfig(secret=secret) if secret is not None else None  # type: ignore[call-arg]
+def link_config(secret: bytes) -> LinkConfig:
+    return LinkConfig(secret=secret)
 
 
 def _executing_at(robot: SimRobot, run_id: int, index: int, fraction: float) -> bool:
@@ -191,7 +192,7 @@ def stream_until_cut(
     emu: Emulator, scenario: Scenario, run_id: int, run: Run, cut: int, fraction: float
 ) -> None:
     """A server streams until ``cut`` is ``fraction`` done, then its link closes."""
-    config = link_config(getattr(emu, "secret", None))
+    config = link_config(emu.secret)
     with RobotLink(emu.url, config) as link:
         streamer = Streamer(
             scenario.program,
@@ -208,8 +209,9 @@ def stream_until_cut(
     assert emu.wait_for(lambda e: not e.robot.busy, 5)
 
 
-def stream_to_completion(url: str, secret: bytes | None, scenario: Scenario, run_id: int,
-                         run: Run) -> None:
+def stream_to_completion(
+    url: str, secret: bytes, scenario: Scenario, run_id: int, run: Run
+) -> None:
     with RobotLink(url, link_config(secret)) as link:
         streamer = Streamer(
             scenario.program,
@@ -237,7 +239,7 @@ def test_interrupted_motion_is_continued_not_repeated(name: str) -> None:
             stream_until_cut(emu, scenario, run_id, run, cut, rng.uniform(0.2, 0.5))
             assert emu.robot.interrupted is not None
         # The "restarted server": a new link and streamer from the last recorded ack.
-        stream_to_completion(emu.url, getattr(emu, "secret", None), scenario, run_id, run)
+        stream_to_completion(emu.url, emu.secret, scenario, run_id, run)
         assert emu.wait_for(lambda e: not e.robot.busy, 5)
         assert_at_end(emu.snapshot(), want)
         log = emu.execution_log()
@@ -260,15 +262,11 @@ def test_state_file_round_trip_continues_exactly() -> None:
     robot.link_lost(now=1.03)
     data = json.loads(json.dumps(robot_state(robot)))  # what goes through the file
     again = SimRobot(profile, clock=lambda: 10.0)
-    from robots.emulator.persist import restore_robot_state
-
     restore_robot_state(again, data)
     assert again.interrupted == robot.interrupted and again.last_done == -1
     assert again.odometry == pytest.approx([0.2575, 0.2575])
     assert again.faults == FaultFlag.LINK_RESET and again.run_id == 7
     again.receive(Hello(watchdog_ms=2000), 0, now=10.0)
-    from robots.protocol.messages import Clear
-
     again.receive(Clear(faults=FaultFlag.LINK_RESET), 1, now=10.0)
     again.receive(cmd, 2, now=10.0)
     for k in range(1, 20):
@@ -292,6 +290,60 @@ def test_state_file_refuses_another_robot_and_corrupt_files(tmp_path: Path) -> N
     assert build_parser().parse_args(["--state-file", str(path)]).state_file == str(path)
 
 
+def test_state_file_written_at_rest_and_loaded_by_the_next_emulator(tmp_path: Path) -> None:
+    scenario, run_id, cut = SCENARIOS["wheels"], 31, 1
+    path = tmp_path / "state.json"
+    with Emulator("ara", time_scale=8, state_file=path) as emu:
+        assert not emu.state_loaded
+        want = expected_end(scenario.program, emu.snapshot())
+        run = Run()
+        stream_until_cut(emu, scenario, run_id, run, cut, 0.3)
+        (rec,) = [r for r in emu.execution_log() if r.outcome == "interrupted"]
+        # Written when the robot stopped, while the emulator keeps running.
+        deadline = time.monotonic() + 10
+        while True:
+            saved = json.loads(path.read_text()) if path.exists() else {}
+            if saved.get("interrupted") is not None:
+                break
+            assert time.monotonic() < deadline, "state not written at rest"
+            time.sleep(0.02)
+        assert saved["interrupted"]["progress"] == pytest.approx(rec.progress)
+        assert saved["last_done"] == 0 and saved["faults"] == FaultFlag.LINK_RESET
+        kept = emu.snapshot()
+        memory = emu.robot.interrupted
+    with Emulator("ara", time_scale=8, state_file=path) as emu:
+        assert emu.state_loaded and emu.robot.interrupted == memory
+        now = emu.snapshot()
+        assert (now.odometry_um, now.run_id, now.last_done) == (
+            kept.odometry_um,
+            kept.run_id,
+            kept.last_done,
+        )
+        stream_to_completion(emu.url, emu.secret, scenario, run_id, run)
+        assert_at_end(emu.snapshot(), want)
+        log = emu.execution_log()
+    # The second emulator's log holds only the continuation; its first part is upstream.
+    assert [(r.index, r.continued_from is not None) for r in log] == [
+        (1, True),
+        (2, False),
+        (3, False),
+    ]
+
+
+def test_state_writer_keeps_the_last_capture(tmp_path: Path) -> None:
+    robot = SimRobot(resolve_profile("ara"))
+    state = StateFile(tmp_path / "s.json")
+    state.start()
+    try:
+        for k in range(20):
+            robot.odometry[:] = k
+            state.capture(robot)
+    finally:
+        state.close()
+    assert json.loads((tmp_path / "s.json").read_text())["odometry_m"] == [19.0, 19.0]
+    assert state.flush() is False  # nothing left waiting
+
+
 def _emulator_cmd(tmp_path: Path, *extra: str) -> list[str]:
     return [
         sys.executable,
@@ -311,11 +363,7 @@ def _emulator_cmd(tmp_path: Path, *extra: str) -> list[str]:
     ]
 
 
-def _secret_args(tmp_path: Path) -> tuple[list[str], bytes | None]:
-    if "--secret-file" not in build_parser().format_help():
-        return [], None
-    from robots.protocol.auth import load_or_create_secret  # type: ignore[attr-defined]
-
+def _secret_args(tmp_path: Path) -> tuple[list[str], bytes]:
     path = tmp_path / "robot.secret"
     return ["--secret-file", str(path)], load_or_create_secret(path)
 
