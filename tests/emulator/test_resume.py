@@ -28,7 +28,7 @@ import pytest
 
 from robots.adapters import ExecState, LinkConfig, RobotLink, Streamer
 from robots.emulator import Emulator, ExecutionRecord, SimRobot, check_exactly_once
-from robots.emulator.cli import build_parser
+from robots.emulator.cli import main
 from robots.emulator.persist import (
     StateFile,
     StateFileError,
@@ -287,7 +287,18 @@ def test_state_file_refuses_another_robot_and_corrupt_files(tmp_path: Path) -> N
     with pytest.raises(StateFileError, match="not an emulator state file"):
         Emulator("ara", state_file=path)
     assert sorted(p.name for p in tmp_path.iterdir()) == ["state.json"]  # no temp files left
-    assert build_parser().parse_args(["--state-file", str(path)]).state_file == str(path)
+
+
+def test_cli_refuses_bad_state_file_and_orphan_delay(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    path = tmp_path / "state.json"
+    StateFile(path).save(SimRobot(resolve_profile("ara")))
+    assert main(["--robot", "cmbot", "--state-file", str(path)]) == 2
+    assert "robot 'ara', not 'cmbot'" in capsys.readouterr().err
+    assert main(["--robot", "ara", "--exit-when-orphaned", "0"]) == 2
+    assert "must be > 0" in capsys.readouterr().err
+    assert not list(tmp_path.glob(".*.tmp"))
 
 
 def test_state_file_written_at_rest_and_loaded_by_the_next_emulator(tmp_path: Path) -> None:
