@@ -99,3 +99,28 @@ def test_console_session_cookie(api) -> None:
     c.delete("/api/v1/session")
     c.cookies.clear()
     assert c.get("/api/v1/plans").status_code == 401
+
+
+def test_refusals_say_revoked_or_expired(api) -> None:
+    store = api.services.store
+    r = api.post("/api/v1/tokens", "admin", json={"name": "t", "role": "viewer"})
+    revoked = r.json()
+    api.delete(f"/api/v1/tokens/{revoked['id']}", "admin")
+    h = {"Authorization": f"Bearer {revoked['token']}"}
+    r = api.client.get("/api/v1/plans", headers=h)
+    assert r.status_code == 401 and "revoked" in r.json()["detail"]
+    r = api.post(
+        "/api/v1/tokens", "admin", json={"name": "t2", "role": "viewer", "expires_in_s": 3600}
+    )
+    assert r.status_code == 201 and r.json()["expires_at"] and r.json()["expired"] is False
+    expiring = r.json()
+    h = {"Authorization": f"Bearer {expiring['token']}"}
+    assert api.client.get("/api/v1/plans", headers=h).status_code == 200
+    past = "2000-01-01T00:00:00.000+00:00"
+    store.db.query("UPDATE tokens SET expires_at = ? WHERE id = ?", (past, expiring["id"]))
+    r = api.client.get("/api/v1/plans", headers=h)
+    assert r.status_code == 401 and r.json()["detail"].startswith(f"token expired at {past}")
+    assert r.headers["www-authenticate"] == "Bearer"
+    listed = {t["id"]: t for t in api.get("/api/v1/tokens", "admin").json()}
+    assert listed[expiring["id"]]["expired"] is True
+    assert listed[expiring["id"]]["expires_at"] == past
