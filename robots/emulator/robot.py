@@ -233,6 +233,7 @@ class SimRobot:
     faults_injected: FaultConfig = field(default_factory=FaultConfig)
     clock: Callable[[], float] = time.monotonic
     on_record: Callable[[ExecutionRecord], None] | None = None
+    on_stop: Callable[[StopEvent], None] | None = None  # each StopEvent, as it happens
     # Called whenever the robot comes to rest or its kept state changes at rest
     # (halt, completion of a command, pause, clear): where a robot saves to NV memory.
     on_rest: Callable[[], None] | None = None
@@ -548,7 +549,10 @@ class SimRobot:
         self.faults |= latch
         if code:
             self.fault_code = code
-        self.stops.append(StopEvent(now, reason, moving, index))
+        stop = StopEvent(now, reason, moving, index)
+        self.stops.append(stop)
+        if self.on_stop is not None:
+            self.on_stop(stop)
         self.changed = True
         self._rested()
 

@@ -267,6 +267,7 @@ class Emulator:
             state_period_s=state_period_s,
             faults_injected=self.faults,
             on_record=self._write_record if self._log_file else None,
+            on_stop=self._write_stop if self._log_file else None,
         )
         self._state_file = StateFile(state_file) if state_file is not None else None
         self.state_loaded = False  # the robot's state came from ``state_file``
@@ -818,8 +819,16 @@ class Emulator:
                 self._drop(port, now, silence_s)
 
     def _write_record(self, rec: ExecutionRecord) -> None:
+        # One JSON object a line: "command" records (ExecutionRecord) and "stop"
+        # records (StopEvent; ``t`` is this process's time.monotonic(), which on
+        # Linux is system-wide, so other processes can time a stop against it).
         if self._log_file is not None:
-            self._log_file.write(json.dumps(asdict(rec)) + "\n")
+            self._log_file.write(json.dumps({"record": "command", **asdict(rec)}) + "\n")
+            self._log_file.flush()
+
+    def _write_stop(self, stop: StopEvent) -> None:
+        if self._log_file is not None:
+            self._log_file.write(json.dumps({"record": "stop", **asdict(stop)}) + "\n")
             self._log_file.flush()
 
 

@@ -400,8 +400,17 @@ def emulator_process(cmd: list[str], port_file: Path) -> Iterator[tuple[subproce
         proc.wait(10)
 
 
+def _log_lines(path: Path) -> list[dict]:
+    return [json.loads(line) for line in path.read_text().splitlines()]
+
+
 def _log_records(path: Path) -> list[ExecutionRecord]:
-    return [ExecutionRecord(**json.loads(line)) for line in path.read_text().splitlines()]
+    """The command records of a ``--log-jsonl`` file (it also holds stop records)."""
+    return [
+        ExecutionRecord(**{k: v for k, v in d.items() if k != "record"})
+        for d in _log_lines(path)
+        if d["record"] == "command"
+    ]
 
 
 def test_emulator_process_restarted_from_its_state_file(tmp_path: Path) -> None:
@@ -442,6 +451,9 @@ def test_emulator_process_restarted_from_its_state_file(tmp_path: Path) -> None:
     assert saved["interrupted"] is not None and saved["last_done"] == 0
     (cut_rec,) = [r for r in _log_records(tmp_path / "exec.jsonl") if r.outcome == "interrupted"]
     assert cut_rec.reason == "link_lost"
+    stops = [d for d in _log_lines(tmp_path / "exec.jsonl") if d["record"] == "stop"]
+    assert [(d["reason"], d["moving"], d["index"]) for d in stops] == [("link_lost", True, cut)]
+    assert stops[0]["t"] == pytest.approx(cut_rec.wall_end)
     assert saved["interrupted"]["progress"] == pytest.approx(cut_rec.progress)
     assert run.acked == [0]
 
