@@ -307,6 +307,40 @@ async function showInScene(id) {
   } catch (e) { $("#scene-msg").textContent = e.message; }
 }
 
+// -------------------------------------------------------- scene proposals
+// Scene clicks (start/end vertex, surface…) only propose; an operator decides here.
+async function loadProposals() {
+  let items = [];
+  try { items = await api("GET", "/scene/proposals?state=pending"); } catch (e) { return; }
+  const tb = $("#proposals tbody");
+  tb.innerHTML = "";
+  const canDecide = state.me && state.me.role !== "viewer";
+  for (const p of items) {
+    const accept = el("button", { class: "accept", onclick: () => decideProposal(p.id, "accept") }, "Accept");
+    const dismiss = el("button", { class: "secondary dismiss", onclick: () => decideProposal(p.id, "dismiss") }, "Dismiss");
+    accept.disabled = dismiss.disabled = !canDecide;
+    tb.append(el("tr", { "data-proposal": p.id },
+      el("td", {}, p.created_at.replace("T", " ").slice(11, 19)),
+      el("td", {}, `${p.kind} from ${p.plan_id}`),
+      el("td", {}, el("code", {}, JSON.stringify(p.patch))),
+      el("td", { class: "muted" }, p.source),
+      el("td", { class: "actions" }, accept, " ", dismiss)));
+  }
+  $("#proposals-empty").hidden = items.length > 0;
+}
+
+async function decideProposal(id, action) {
+  try {
+    const r = await api("POST", `/scene/proposals/${id}/${action}`);
+    if (action === "accept") {
+      flash(`proposal ${id} accepted: planning ${r.id}`);
+      upsertPlan(r);
+      await select(r.id);
+    } else flash(`proposal ${id} dismissed`);
+  } catch (e) { flash(e.message, true); }
+  loadProposals();
+}
+
 // ---------------------------------------------------------- robots & runs
 state.robots = [];
 state.execution = null;
@@ -419,6 +453,14 @@ function openEvents() {
     }
     if (!["planning"].includes(d.state)) refreshAudit();
   });
+  es.addEventListener("proposal", () => loadProposals());
+  // The server ends the stream when this session's token is revoked or expires.
+  es.addEventListener("auth", (m) => {
+    es.close();
+    $("#conn").classList.remove("live");
+    $("#login-error").textContent = JSON.parse(m.data).detail || "signed out";
+    showLogin();
+  });
   let robotTimer = null;
   const refreshRobots = () => { if (!robotTimer) robotTimer = setTimeout(() => { robotTimer = null; loadRobots(); }, 500); };
   for (const t of ["estop", "cloud", "execution", "robot"]) {
@@ -441,7 +483,7 @@ async function start() {
   $("#whoami").textContent = `${me.name} (${me.role})`;
   $("#logout").hidden = false;
   const health = await fetch(API + "/health").then((r) => r.json());
-  await Promise.all([loadKinds(), loadSamples(), loadClouds(), loadPlans(), loadAudit(), loadRobots()]);
+  await Promise.all([loadKinds(), loadSamples(), loadClouds(), loadPlans(), loadAudit(), loadRobots(), loadProposals()]);
   setInterval(loadRobots, 3000);  // heartbeat ages keep moving even when nothing else does
   openEvents();
   if (health.scene.running && me.role !== "viewer") $("#scene").src = "/scene/";

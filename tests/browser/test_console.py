@@ -45,7 +45,7 @@ def browser():
 
 def test_console_plan_approve_and_scene(browser, tmp_path: Path) -> None:
     settings = make_settings(tmp_path / "var", port=free_port(), scene_port=free_port())
-    with live_server(settings) as (url, tokens, _app):
+    with live_server(settings) as (url, tokens, app):
         page = browser.new_page(viewport={"width": 1400, "height": 1000})
         errors: list[str] = []
         page.on("pageerror", lambda e: errors.append(str(e)))
@@ -80,6 +80,33 @@ def test_console_plan_approve_and_scene(browser, tmp_path: Path) -> None:
         page.wait_for_function("document.querySelector('#scene').src.endsWith('/scene/')")
         frame = frame_el.content_frame()
         frame.wait_for_selector("canvas", timeout=60_000)
+
+        # Two vertex clicks in the scene (through viser's own callback path)
+        # only propose a plan; the console lists it and Accept plans it.
+        import types
+
+        scene = app.state.services.scene
+        nodes = list(app.state.services.store.get_plan(plan_id).result["nodes"])
+        handle = None
+        for _ in range(100):
+            handle = scene.server.scene.get_handle_by_name("/plan/vertices")
+            if handle is not None:
+                break
+            page.wait_for_timeout(100)
+        assert handle is not None
+        for name in ("b1", "c0"):
+            for entry in handle._impl.click_cb:
+                entry.callback(types.SimpleNamespace(instance_index=nodes.index(name), client_id=0))
+        assert app.state.services.store.list_plans(parent_id=plan_id) == []
+        page.wait_for_selector("#proposals tr[data-proposal]")
+        assert '"start":"b1"' in page.inner_text("#proposals")
+        page.click("#proposals tr[data-proposal] button.accept")
+        page.wait_for_function(
+            f"document.querySelector('#d-title').textContent.includes('revision of {plan_id}')"
+        )
+        page.wait_for_selector("#proposals tr[data-proposal]", state="detached")
+        (child,) = app.state.services.store.list_plans(parent_id=plan_id)
+        assert child.params["start"] == "b1" and child.created_by.startswith("live-operator")
 
         # The E-stop answers and is recorded.
         page.click("#estop")
