@@ -131,7 +131,7 @@ class StopEvent:
     """The robot stopped moving (or was told to while idle): when and why."""
 
     t: float  # time.monotonic() at the moment motion stopped
-    reason: str  # "estop" | "watchdog" | "link_lost" | "link_reset" | "abort" | "fault"
+    reason: str  # "estop" | "watchdog" | "link_lost" | "link_reset" | "abort" | "fault" | "shutdown"
     moving: bool  # a command was executing
     index: int  # the command interrupted, −1 when none
 
