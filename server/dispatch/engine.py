@@ -184,12 +184,24 @@ class DispatchEngine:
             "stats": dict(st.stats),
         }
 
-    def set_connection(self, name: str, url: str, actor: str) -> dict[str, Any]:
-        """Persist a robot's URL and reconnect; a latched E-stop carries over."""
+    def set_connection(
+        self,
+        name: str,
+        url: str,
+        actor: str,
+        secret_writer: Callable[[str], None] | None = None,
+    ) -> dict[str, Any]:
+        """Persist a robot's URL (and, for real hardware, its link secret) and reconnect.
+
+        ``secret_writer(name)`` stores a new secret before the link is rebuilt,
+        so the new link authenticates with it.  A latched E-stop carries over.
+        """
         r = self._robot(name)
         if self._active_execution_for(name, running_only=True):
             raise DispatchError(f"robot {name} is executing; pause or abort it before reconnecting")
         was_latched = r.link.estop_latched
+        if secret_writer is not None:
+            secret_writer(name)
         self.store.set_robot_url(name, url, actor)
         with self._lock:
             r.link.close(timeout=2)
@@ -198,6 +210,20 @@ class DispatchEngine:
             if was_latched:
                 r.link.estop()
         self.events.publish("robot", {"name": name, "url": url, "state": str(r.link.state)})
+        return self.robot_status(name)
+
+    def takeover(self, name: str, actor: str) -> dict[str, Any]:
+        """Take the robot's line over from another controller (an operator's explicit act).
+
+        The robot accepts it only with this server's secret; it drops the other
+        controller, stopping any motion it was making (``LINK_RESET``).
+        """
+        r = self._robot(name)
+        if r.link.state in CONNECTED_STATES:
+            raise DispatchError(f"robot {name} is already controlled by this server")
+        r.link.takeover()
+        self.store.audit(actor, "robot", name, "takeover", f"take over the line at {r.url}")
+        self.events.publish("robot", {"name": name, "takeover": True})
         return self.robot_status(name)
 
     def clear_estop(self, name: str, actor: str) -> dict[str, Any]:

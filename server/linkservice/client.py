@@ -256,8 +256,22 @@ class LinkServiceClient:
     def robot_status(self, name: str) -> dict[str, Any]:
         return dict(self._call("robot_status", {"name": name}))
 
-    def set_connection(self, name: str, url: str, actor: str) -> dict[str, Any]:
-        return dict(self._call("set_connection", {"name": name, "url": url, "actor": actor}))
+    def set_connection(
+        self, name: str, url: str, actor: str, secret: str | None = None
+    ) -> dict[str, Any]:
+        """Reconnect ``name`` at ``url``; ``secret`` (64 hex chars) replaces its link secret."""
+        if secret is not None:
+            from robots.protocol.auth import SecretError, parse_secret
+
+            try:
+                parse_secret(secret)
+            except SecretError as exc:
+                raise DispatchError(f"secret: {exc}", 422) from None
+        args = {"name": name, "url": url, "actor": actor, "secret": secret}
+        return dict(self._call("set_connection", args))
+
+    def takeover(self, name: str, actor: str) -> dict[str, Any]:
+        return dict(self._call("takeover", {"name": name, "actor": actor}))
 
     def clear_estop(self, name: str, actor: str) -> dict[str, Any]:
         return dict(self._call("clear_estop", {"name": name, "actor": actor}))

@@ -126,6 +126,7 @@ class LinkService:
         "robot_names",
         "robot_status",
         "set_connection",
+        "takeover",
         "clear_estop",
         "wait_connected",
         "dispatch",
@@ -226,7 +227,16 @@ class LinkService:
         if op == "robot_status":
             return eng.robot_status(args["name"])
         if op == "set_connection":
-            return eng.set_connection(args["name"], args["url"], args["actor"])
+            secret = args.get("secret")
+            writer = None
+            if secret is not None:
+
+                def writer(name: str) -> None:
+                    write_secret(robot_key_path(self.settings.data, name), str(secret))
+
+            return eng.set_connection(args["name"], args["url"], args["actor"], writer)
+        if op == "takeover":
+            return eng.takeover(args["name"], args["actor"])
         if op == "clear_estop":
             return eng.clear_estop(args["name"], args["actor"])
         if op == "wait_connected":
@@ -273,6 +283,23 @@ class LinkService:
         self._book.shutdown(wait=False, cancel_futures=True)
         self.outbox.close()
         self.store.close()
+
+
+def write_secret(path: Path, hex_secret: str) -> None:
+    """Replace a robot's secret file atomically (mode 0600): for real hardware."""
+    from robots.protocol.auth import format_secret, parse_secret
+
+    text = format_secret(parse_secret(hex_secret)) + "\n"
+    path.parent.mkdir(parents=True, exist_ok=True, mode=0o700)
+    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
+    fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o600)
+    try:
+        os.fchmod(fd, 0o600)
+        os.write(fd, text.encode("ascii"))
+        os.fsync(fd)
+    finally:
+        os.close(fd)
+    os.replace(tmp, path)
 
 
 def robot_key_path(data: Path, robot: str) -> Path:

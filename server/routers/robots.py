@@ -8,7 +8,8 @@ from fastapi import APIRouter, Depends, HTTPException
 from pydantic import BaseModel, Field, field_validator
 
 from server.auth import Admin, Operator, Viewer
-from server.dispatch import DispatchEngine, DispatchError
+from server.dispatch import DispatchError
+from server.linkservice import LinkServiceClient
 from server.services import Services, get_services
 
 router = APIRouter(tags=["robots"])
@@ -16,7 +17,7 @@ router = APIRouter(tags=["robots"])
 Svc = Annotated[Services, Depends(get_services)]
 
 
-def engine(services: Services) -> DispatchEngine:
+def engine(services: Services) -> LinkServiceClient:
     if services.dispatch is None:
         raise HTTPException(503, detail="dispatch is not running")
     return services.dispatch
@@ -31,6 +32,14 @@ class ConnectionRequest(BaseModel):
         ...,
         description="pyserial URL: /dev/ttyUSB0, socket://host:port, loop://, rfc2217://host:port",
         examples=["socket://127.0.0.1:5000"],
+    )
+    secret: str | None = Field(
+        None,
+        description="the robot's link secret as 64 hex characters (real hardware: the same "
+        "secret the robot holds); omitted: keep the stored one. Never returned.",
+        min_length=64,
+        max_length=64,
+        pattern="^[0-9a-fA-F]{64}$",
     )
 
     @field_validator("url")
@@ -81,7 +90,21 @@ def robot_state(name: str, services: Svc, _: Viewer) -> dict[str, Any]:
 def set_connection(name: str, req: ConnectionRequest, services: Svc, who: Admin) -> dict[str, Any]:
     """Persist the robot's connection URL and reconnect."""
     try:
-        return engine(services).set_connection(name, req.url, who.actor)
+        return engine(services).set_connection(name, req.url, who.actor, req.secret)
+    except DispatchError as exc:
+        raise _refuse(exc) from None
+
+
+@router.post("/robots/{name}/takeover")
+def takeover(name: str, services: Svc, who: Operator) -> dict[str, Any]:
+    """Take the robot's line over from another controller that holds it.
+
+    The robot refuses every second controller while one is alive; this is the
+    explicit operator action that makes it drop the other one (stopping any
+    motion) and accept this server.  It still needs this server's secret.
+    """
+    try:
+        return engine(services).takeover(name, who.actor)
     except DispatchError as exc:
         raise _refuse(exc) from None
 

@@ -45,7 +45,7 @@ def wait_execution(api, eid: str, states: tuple[str, ...], timeout: float = 60.0
 
 
 def exactly_once(api, robot: str, ex: dict) -> list[str]:
-    emulator = api.services.dispatch._robots[robot].emulator
+    emulator = api.services.emulators[robot]
     return check_exactly_once(emulator.execution_log(), ex["run_id"], ex["total"])
 
 
@@ -128,7 +128,7 @@ def test_estop_stops_the_emulator_and_blocks_until_cleared(dapi) -> None:
     plan = approved_demo(dapi)
     eid = dapi.post(f"/api/v1/plans/{plan['id']}/dispatch", json={"robot": "ara"}).json()["id"]
     wait_execution(dapi, eid, ("running",))
-    emulator = dapi.services.dispatch._robots["ara"].emulator
+    emulator = dapi.services.emulators["ara"]
     r = dapi.post("/api/v1/estop", json={"reason": "person on the girder"})
     assert r.status_code == 200 and r.json()["errors"] == []
     _wait(lambda: emulator.stop_events(), 5, "emulator stop event")
@@ -153,12 +153,15 @@ def test_server_restart_mid_run_resumes_without_loss(make_api, tmp_path) -> None
     plan = approved_demo(first)
     eid = first.post(f"/api/v1/plans/{plan['id']}/dispatch", json={"robot": "ara"}).json()["id"]
     _wait(lambda: first.get(f"/api/v1/executions/{eid}").json()["acked"] >= 2, 60, "two acks")
-    # Keep the emulator (the robot) alive across the server restart.
-    emulator = first.services.dispatch._robots["ara"].emulator
-    first.services.dispatch._robots["ara"].emulator = None
+    # The emulators are processes of their own: like robots, they outlive the
+    # server (detach them so the clean exit below does not stop them either).
+    emulators = first.services.emulators
+    first.services.emulators = None
+    emulator = emulators["ara"]
     first.client.__exit__(None, None, None)
-    second = make_api(data=data, emulators=False)
-    second.put("/api/v1/robots/ara/connection", "admin", json={"url": emulator.url})
+    assert emulator.alive()
+    second = make_api(data=data, emulators=True, emulator_time_scale=10.0)
+    assert second.services.emulators["ara"].pid == emulator.pid  # found and reused
     ex = second.get(f"/api/v1/executions/{eid}").json()
     assert ex["state"] == "interrupted"
     assert second.get(f"/api/v1/plans/{plan['id']}").json()["state"] == "interrupted"
@@ -168,12 +171,11 @@ def test_server_restart_mid_run_resumes_without_loss(make_api, tmp_path) -> None
     done = wait_execution(second, eid, ("completed",), timeout=120)
     assert check_exactly_once(emulator.execution_log(), done["run_id"], done["total"]) == []
     assert second.services.store.list_acks(eid) == list(range(done["total"]))
-    emulator.close()
 
 
 def test_estop_while_reconnecting_reaches_the_robot_when_it_returns(dapi) -> None:
     eng = dapi.services.dispatch
-    emulator = eng._robots["ara"].emulator
+    emulator = dapi.services.emulators["ara"]
     dapi.put("/api/v1/robots/ara/connection", "admin", json={"url": "socket://127.0.0.1:9"})
     assert not eng.wait_connected("ara", 0.5)
     r = dapi.post("/api/v1/robots/ara/estop")
@@ -183,6 +185,6 @@ def test_estop_while_reconnecting_reaches_the_robot_when_it_returns(dapi) -> Non
     # The robot comes back: the latched E-stop is delivered first.
     dapi.put("/api/v1/robots/ara/connection", "admin", json={"url": emulator.url})
     _wait(lambda: len(emulator.stop_events()) > n, 10, "E-stop delivered on reconnect")
-    assert emulator.stop_events()[-1].reason == "estop"
+    assert emulator.stop_events()[-1]["reason"] == "estop"
     # Other robots were not stopped by a per-robot E-stop.
     assert not dapi.get("/api/v1/robots/cmbot/state").json()["estop_latched"]

@@ -13,9 +13,11 @@ from fastapi.testclient import TestClient
 from robots.emulator.faults import FaultConfig
 from robots.emulator.robot import check_exactly_once
 from robots.emulator.server import Emulator
+from robots.protocol.auth import load_or_create_secret
 from server.app import create_app
 from server.auth import create_token
 from server.kinds import registry
+from server.linkservice import robot_key_path
 from tests.conftest import Api, make_settings
 
 pytestmark = pytest.mark.slow
@@ -90,7 +92,9 @@ def test_fault_matrix(mapi, base_plans, kind: str, fault: str) -> None:
     duration = sum(c.get("duration_s", 0.0) for c in base_plans[kind]["program"])
     scale = max(duration / 3.0, 1.0)
     plan = _fresh_approved(mapi, base_plans[kind])
-    emulator = Emulator(robot, faults=FAULTS[fault], time_scale=scale).start()
+    # The robot holds the secret this server's link service uses for it.
+    secret = load_or_create_secret(robot_key_path(mapi.services.settings.data, robot))
+    emulator = Emulator(robot, faults=FAULTS[fault], time_scale=scale, secret=secret).start()
     try:
         r = mapi.put(f"/api/v1/robots/{robot}/connection", "admin", json={"url": emulator.url})
         assert r.status_code == 200, r.text
@@ -131,7 +135,7 @@ def test_fault_matrix(mapi, base_plans, kind: str, fault: str) -> None:
         elif fault in ("reject", "robot_fault"):
             assert resumes >= 1
         elif fault == "nak":
-            link_stats = mapi.services.dispatch._robots[robot].link.status().stats
+            link_stats = mapi.services.dispatch.robot_status(robot)["stats"]
             assert link_stats.get("naks", 0) >= 1, link_stats
     finally:
         emulator.close()

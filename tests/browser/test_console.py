@@ -219,7 +219,7 @@ def test_dispatch_to_emulator_then_estop(browser, tmp_path: Path) -> None:
         )
         ARTIFACTS.mkdir(exist_ok=True)
         page.screenshot(path=str(ARTIFACTS / "console-dispatch.png"), full_page=True)
-        emulator = app.state.services.dispatch._robots["ara"].emulator
+        emulator = app.state.services.emulators["ara"]
         assert emulator.stop_events(), "the emulator never saw the stop"
         assert not errors, errors
         store = app.state.services.store

@@ -1,0 +1,268 @@
+"""``kill -9`` of the server mid-command, restart, Resume: the robot ends where
+the plan says, not further (issue #12 §2), for every command type that moves.
+
+A real ``steelpath serve`` runs as a subprocess on a temporary data directory
+with its built-in emulators, which are processes of their own (as robots are,
+they outlive the server).  Each test dispatches a kind's default plan, kills
+the server with SIGKILL while a command of the named type executes, starts a
+new server on the same data directory (it finds the running emulators again),
+resumes the interrupted execution and compares the robot's final state with
+the end of the plan's program; the emulator's own log must show every command
+completed exactly once, the interrupted one continued rather than repeated.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import math
+import os
+import signal
+import subprocess
+import sys
+import time
+from collections.abc import Iterator
+from pathlib import Path
+from typing import Any
+
+import httpx
+import pytest
+
+from robots.emulator.robot import check_exactly_once
+from server.linkservice.emulators import EmulatorProcess
+from tests.support.live import free_port
+
+pytestmark = pytest.mark.slow
+
+ROOT = Path(__file__).resolve().parents[2]
+
+
+class Server:
+    """One ``steelpath serve`` process on ``data``."""
+
+    def __init__(self, data: Path, time_scale: float) -> None:
+        self.data = data
+        self.port = free_port()
+        self.url = f"http://127.0.0.1:{self.port}"
+        env = {
+            **os.environ,
+            "STEELPATH_DATA": str(data),
+            "STEELPATH_PORT": str(self.port),
+            "STEELPATH_SCENE_PORT": "0",
+            "STEELPATH_TOKEN_FILE": str(data.parent / "admin.token"),
+            "STEELPATH_EMULATOR_TIME_SCALE": str(time_scale),
+            "STEELPATH_LOG_LEVEL": "warning",
+            "PYTHONPATH": str(ROOT),
+        }
+        self.log = open(data.parent / f"server-{self.port}.log", "wb")  # noqa: SIM115
+        self.proc = subprocess.Popen(
+            [sys.executable, "-m", "server.cli", "serve"],
+            env=env,
+            stdout=self.log,
+            stderr=subprocess.STDOUT,
+            cwd=str(data.parent),
+        )
+        deadline = time.monotonic() + 90
+        while True:
+            with contextlib.suppress(httpx.HTTPError):
+                if httpx.get(f"{self.url}/api/v1/health", timeout=2).status_code == 200:
+                    break
+            if self.proc.poll() is not None or time.monotonic() > deadline:
+                raise AssertionError(f"server did not start: {self.tail()}")
+            time.sleep(0.1)
+        token = (data.parent / "admin.token").read_text().strip().splitlines()[-1]
+        self.http = httpx.Client(
+            base_url=f"{self.url}/api/v1", headers={"Authorization": f"Bearer {token}"}, timeout=60
+        )
+
+    def tail(self) -> str:
+        self.log.flush()
+        return Path(self.log.name).read_text(errors="replace")[-3000:]
+
+    def get(self, path: str) -> Any:
+        r = self.http.get(path)
+        assert r.status_code == 200, (path, r.status_code, r.text)
+        return r.json()
+
+    def post(self, path: str, body: dict[str, Any] | None = None, status: int = 200) -> Any:
+        r = self.http.post(path, json=body or {})
+        assert r.status_code == status, (path, r.status_code, r.text)
+        return r.json()
+
+    def robot(self, name: str) -> dict[str, Any]:
+        return self.get(f"/robots/{name}/state")
+
+    def wait_connected(self, name: str, timeout: float = 60) -> dict[str, Any]:
+        return _wait(lambda: (r := self.robot(name))["connected"] and r, timeout, f"{name} up")
+
+    def kill9(self) -> None:
+        self.proc.send_signal(signal.SIGKILL)
+        self.proc.wait(timeout=10)
+        self.http.close()
+
+    def stop(self) -> None:
+        if self.proc.poll() is None:
+            self.proc.send_signal(signal.SIGTERM)
+            try:
+                self.proc.wait(timeout=20)
+            except subprocess.TimeoutExpired:
+                self.proc.kill()
+                self.proc.wait()
+        self.http.close()
+        self.log.close()
+
+
+def _wait(predicate, timeout: float, what: str):
+    deadline = time.monotonic() + timeout
+    while True:
+        value = predicate()
+        if value:
+            return value
+        if time.monotonic() > deadline:
+            raise AssertionError(f"timed out waiting for {what}")
+        time.sleep(0.02)
+
+
+def _emulators_stopped(data: Path) -> None:
+    """Stop emulator processes a test left (they run in sessions of their own)."""
+    import json
+
+    for port_file in (data / "emulators").glob("*.port.json"):
+        with contextlib.suppress(Exception):
+            os.kill(int(json.loads(port_file.read_text())["pid"]), signal.SIGTERM)
+
+
+@pytest.fixture
+def servers(tmp_path) -> Iterator[list[Server]]:
+    started: list[Server] = []
+    yield started
+    for s in started:
+        s.stop()
+    _emulators_stopped(tmp_path / "var")
+
+
+def planned_end(program: list[dict[str, Any]], odometry0: list[float]) -> dict[str, Any]:
+    """Where the program leaves the robot: last joint target, wheel distances, last lift
+    angle, magnet and plate states (quantised as on the wire: µm/s, ms, µrad)."""
+    q: list[float] | None = None
+    lift: float | None = None
+    odo = list(odometry0)
+    magnets: dict[int, bool] = {}
+    plates: dict[int, bool] = {}
+    for c in program:
+        if c["op"] == "joints":
+            q = [round(v * 1e6) * 1e-6 for v in c["q_rad"]]
+        elif c["op"] == "wheels":
+            ms = round(c["duration_s"] * 1e3)
+            for i, v in enumerate(c["speeds_m_s"]):
+                odo[i] += round(v * 1e6) * ms * 1e-9
+        elif c["op"] == "lift":
+            lift = round(c["angle_rad"] * 1e6) * 1e-6
+        elif c["op"] == "magnet":
+            magnets[c["magnet"]] = bool(c["touched"])
+        elif c["op"] == "plate":
+            plates[c["plate"]] = bool(c["engaged"])
+    return {"q": q, "odometry": odo, "lift": lift, "magnets": magnets, "plates": plates}
+
+
+CASES = {
+    # name: (kind, robot, params, emulator time scale, command type to kill in)
+    "wheels": ("demo.route", "ara", {}, 4.0, "wheels"),
+    "joint_waypoints": ("cmbot.manipulate", "cmbot", {}, 2.0, "joints"),
+    "climbing_steps": ("cmbot.climb", "cmbot", {}, 16.0, "joints"),
+    "blast_sweep": ("blast", "denso_vm6083", {}, 4.0, "joints"),
+    "lift_and_wheels": ("sbg.inspect", "sbg_climber", {}, 40.0, "wheels"),
+}
+
+
+@pytest.mark.parametrize("case", sorted(CASES))
+def test_kill9_mid_command_restart_resume_ends_on_the_plan(servers, tmp_path, case) -> None:
+    kind, robot, params, scale, op = CASES[case]
+    data = tmp_path / "var"
+    first = Server(data, scale)
+    servers.append(first)
+    plan = first.post("/plans", {"kind": kind, "params": params}, status=202)
+    plan = _wait(
+        lambda: (
+            (p := first.get(f"/plans/{plan['id']}"))["state"] not in ("queued", "planning") and p
+        ),
+        300,
+        "planned",
+    )
+    assert plan["state"] == "planned", plan.get("error")
+    program = plan["program"]
+    first.post(f"/plans/{plan['id']}/approve")
+    before = first.wait_connected(robot)["report"]
+    end = planned_end(program, before["odometry_m"])
+    ex = first.post(f"/plans/{plan['id']}/dispatch", {"robot": robot}, status=201)
+    # Wait for a long-enough command of the named type, past its first third
+    # but not its end, then kill the server with SIGKILL.
+    longest = max(c.get("duration_s", 0.0) for c in program if c["op"] == op)
+    floor = min(longest, 0.05 if op == "joints" else 1.0)
+
+    def executing_target() -> int | None:
+        k = first.robot(robot)["report"]["executing"]
+        if k >= 1 and program[k]["op"] == op and program[k].get("duration_s", 0) >= floor:
+            return k
+        return None
+
+    k = _wait(executing_target, 120, f"a {op} command executing")
+    time.sleep(program[k]["duration_s"] / scale * 0.4)
+    first.kill9()
+    emu = EmulatorProcess(
+        robot,
+        "",
+        0,
+        data / "emulators" / f"{robot}.log.jsonl",
+        data / "emulators" / f"{robot}.state.json",
+        False,
+    )
+    interrupted = _wait(
+        lambda: [
+            r
+            for r in emu.execution_log()
+            if r.run_id == ex["run_id"] and r.outcome == "interrupted"
+        ],
+        20,
+        "the robot to stop when its controller vanished",
+    )
+    assert interrupted[-1].index >= 1
+
+    second = Server(data, scale)
+    servers.append(second)
+    emulator = second.get("/robots")
+    assert all(r["emulated"] for r in emulator if r["name"] == robot)
+    got = second.get(f"/executions/{ex['id']}")
+    assert got["state"] == "interrupted", got
+    second.wait_connected(robot)
+    second.post(f"/executions/{ex['id']}/resume")
+    done = _wait(
+        lambda: (
+            (e := second.get(f"/executions/{ex['id']}"))["state"]
+            in ("completed", "aborted", "faulted", "interrupted")
+            and e
+        ),
+        300,
+        "the resumed run to finish",
+    )
+    assert done["state"] == "completed", done
+    log = emu.execution_log()
+    assert check_exactly_once(log, done["run_id"], done["total"]) == []
+    # The interrupted command was continued, not run again from its start.
+    cont = [r for r in log if r.run_id == done["run_id"] and r.index == interrupted[-1].index]
+    assert [r.outcome for r in cont] == ["interrupted", "done"], cont
+    report = _wait(
+        lambda: (r := second.robot(robot)["report"]) and r["executing"] == -1 and r,
+        30,
+        "the robot at rest",
+    )
+    if end["q"] is not None:
+        worst = max(abs(a - b) for a, b in zip(report["q_rad"], end["q"], strict=True))
+        assert worst <= math.radians(0.1), (worst, report["q_rad"], end["q"])
+    for got_m, want_m in zip(report["odometry_m"], end["odometry"], strict=True):
+        assert abs(got_m - want_m) <= 1e-3, (report["odometry_m"], end["odometry"])
+    if end["lift"] is not None:
+        assert abs(report["lift_rad"] - end["lift"]) <= math.radians(0.1)
+    for i, on in end["magnets"].items():
+        assert bool(report["magnets"] >> i & 1) == on, ("magnet", i, report["magnets"])
+    for i, on in end["plates"].items():
+        assert bool(report["plates"] >> i & 1) == on, ("plate", i, report["plates"])
