@@ -336,3 +336,12 @@ def test_host_drops_unauthenticated_frames_from_the_robot_side(held: Any) -> Non
     time.sleep(0.3)
     assert link.last_report.run_id != 4242 and link.state == LinkState.READY
     assert_still_works(emu, link, run_id=13)
+
+
+def test_link_without_a_secret_gets_no_session_but_its_estop_still_stops() -> None:
+    """A server missing the robot's key file cannot command it, yet can always stop it."""
+    with Emulator("generic") as emu, RobotLink(emu.url, LinkConfig(backoff_max_s=0.2)) as link:
+        assert link.wait_for(lambda lk: "no secret configured" in lk.status().reason, 5)
+        assert not link.connected and emu.stats["sessions"] == 0
+        link.estop()
+        assert emu.wait_for(lambda e: e.robot.faults & FaultFlag.ESTOP, 5)
