@@ -36,6 +36,7 @@ from pydantic import BaseModel, model_validator
 from starlette.websockets import WebSocketDisconnect
 
 from server.auth import Operator, TokenRefused, Viewer, resolve, until_invalid
+from server.routers.responses import errors
 from server.scene.proposals import STATES, ProposalBook, ProposalDecidedError
 from server.scene.wsguard import TICKET_HEADER
 from server.services import Services, get_services
@@ -225,7 +226,7 @@ def _decided(exc: ProposalDecidedError) -> HTTPException:
     return HTTPException(409, detail=f"{exc}; only pending proposals can be decided")
 
 
-@api_router.get("/proposals")
+@api_router.get("/proposals", responses=errors(401, 403, 422))
 def list_proposals(
     services: Svc,
     _: Viewer,
@@ -239,7 +240,7 @@ def list_proposals(
     return [] if book is None else [p.public() for p in book.list(state)]
 
 
-@api_router.get("/proposals/{proposal_id}", responses={404: {"description": "no such proposal"}})
+@api_router.get("/proposals/{proposal_id}", responses=errors(401, 403, 404))
 def get_proposal(proposal_id: str, services: Svc, _: Viewer) -> dict[str, Any]:
     return _require_book(services).get(proposal_id).public()
 
@@ -254,7 +255,7 @@ def _require_book(services: Services) -> ProposalBook:
 @api_router.post(
     "/proposals/{proposal_id}/accept",
     status_code=202,
-    responses={404: {"description": "no such proposal"}, 409: {"description": "decided"}},
+    responses=errors(401, 403, 404, 409, 422),
 )
 def accept_proposal(
     proposal_id: str, services: Svc, who: Operator, response: Response
@@ -292,7 +293,7 @@ def accept_proposal(
 
 @api_router.post(
     "/proposals/{proposal_id}/dismiss",
-    responses={404: {"description": "no such proposal"}, 409: {"description": "decided"}},
+    responses=errors(401, 403, 404, 409),
 )
 def dismiss_proposal(proposal_id: str, services: Svc, who: Operator) -> dict[str, Any]:
     try:
