@@ -24,6 +24,7 @@ from server.jobs import JobRunner
 from server.kinds import registry
 from server.lifecycle import IllegalTransitionError
 from server.routers import clouds, events, health, plans, robots, safety, tokens
+from server.routers.responses import conform_openapi
 from server.scene import proxy
 from server.services import Services
 from server.settings import Settings, get_settings
@@ -192,6 +193,7 @@ def create_app(settings: Settings | None = None, *, start_scene: bool | None = N
         app.include_router(r, prefix=API)
     app.include_router(proxy.api_router, prefix=API)
     app.include_router(proxy.proxy_router)
+    conform_openapi(app)  # every route's error codes in /openapi.json (issue #12 §5)
 
     @app.get("/", include_in_schema=False)
     def console() -> FileResponse:

@@ -7,7 +7,7 @@ import json
 from collections.abc import AsyncIterator
 from typing import Annotated
 
-from fastapi import APIRouter, Depends, Request
+from fastapi import APIRouter, Depends, Query, Request
 from fastapi.responses import StreamingResponse
 
 from server.auth import Viewer, until_invalid
@@ -21,7 +21,10 @@ async def events(
     request: Request,
     services: Annotated[Services, Depends(get_services)],
     who: Viewer,
-    heartbeat_s: float = 15.0,
+    # Bounded: heartbeat_s=0 made the stream loop without waiting (a busy core per client).
+    heartbeat_s: Annotated[
+        float, Query(ge=0.5, le=300, description="seconds between heartbeats")
+    ] = 15.0,
     once: bool = False,
 ) -> StreamingResponse:
     """A ``text/event-stream``: ``event: plan|execution|robot|estop|cloud|proposal``,

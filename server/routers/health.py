@@ -9,6 +9,7 @@ from fastapi import APIRouter, Depends
 from server import __version__
 from server.auth import Viewer
 from server.kinds import import_errors, registry
+from server.routers.responses import AUTH
 from server.services import Services, get_services
 from server.store.migrations import SCHEMA_VERSION
 
@@ -30,7 +31,7 @@ def health(services: Annotated[Services, Depends(get_services)]) -> dict[str, An
     }
 
 
-@router.get("/kinds")
+@router.get("/kinds", responses=AUTH)
 def kinds(_: Viewer) -> list[dict[str, Any]]:
     """Every plan kind with its params JSON schema and defaults."""
     out = []

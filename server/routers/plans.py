@@ -15,13 +15,14 @@ from server.auth import Operator, Viewer
 from server.kinds import get_kind
 from server.kinds.base import PlanKind, drop_unknown_keys
 from server.lifecycle import PlanState
+from server.routers.responses import AUTH, errors
 from server.services import Services, get_services
 from server.store import NotFoundError, PlanRecord
 from server.store.database import utcnow
 
 log = logging.getLogger(__name__)
 
-router = APIRouter(prefix="/plans", tags=["plans"])
+router = APIRouter(prefix="/plans", tags=["plans"], responses=AUTH)
 
 Svc = Annotated[Services, Depends(get_services)]
 
@@ -96,7 +97,7 @@ def submit_plan(
     return plan
 
 
-@router.post("", status_code=status.HTTP_202_ACCEPTED)
+@router.post("", status_code=status.HTTP_202_ACCEPTED, responses=errors(404))
 def create_plan(
     req: PlanRequest, services: Svc, who: Operator, response: Response
 ) -> dict[str, Any]:
@@ -113,23 +114,23 @@ def list_plans(
     services: Svc,
     _: Viewer,
     kind: str | None = None,
-    state: str | None = None,
+    state: Annotated[PlanState | None, Query(description="only plans in this state")] = None,
     parent_id: str | None = None,
     limit: Annotated[int, Query(ge=1, le=500)] = 50,
-    offset: Annotated[int, Query(ge=0)] = 0,
+    offset: Annotated[int, Query(ge=0, le=10**9)] = 0,
 ) -> list[dict[str, Any]]:
     """Plans, newest first, without their (possibly large) results."""
-    if state is not None and state not in {s.value for s in PlanState}:
-        raise HTTPException(
-            422, detail=f"unknown state {state!r}; states: {', '.join(s.value for s in PlanState)}"
-        )
     plans = services.store.list_plans(
-        kind=kind, state=state, parent_id=parent_id, limit=limit, offset=offset
+        kind=kind,
+        state=None if state is None else state.value,
+        parent_id=parent_id,
+        limit=limit,
+        offset=offset,
     )
     return [p.public(include_result=False) for p in plans]
 
 
-@router.get("/{plan_id}")
+@router.get("/{plan_id}", responses=errors(404))
 def get_plan(plan_id: str, services: Svc, _: Viewer) -> dict[str, Any]:
     plan = services.store.get_plan(plan_id)
     out = plan.public()
@@ -138,7 +139,7 @@ def get_plan(plan_id: str, services: Svc, _: Viewer) -> dict[str, Any]:
     return out
 
 
-@router.post("/{plan_id}/revise", status_code=status.HTTP_202_ACCEPTED)
+@router.post("/{plan_id}/revise", status_code=status.HTTP_202_ACCEPTED, responses=errors(404))
 def revise_plan(
     plan_id: str, services: Svc, who: Operator, req: ReviseRequest | None = None
 ) -> dict[str, Any]:
@@ -149,14 +150,14 @@ def revise_plan(
     return plan.public()
 
 
-@router.post("/{plan_id}/cancel")
+@router.post("/{plan_id}/cancel", responses=errors(404, 409))
 def cancel_plan(plan_id: str, services: Svc, who: Operator) -> dict[str, Any]:
     outcome = services.jobs.cancel(plan_id, who.actor)
     plan = services.store.get_plan(plan_id)
     return {"outcome": outcome, **plan.public(include_result=False)}
 
 
-@router.post("/{plan_id}/approve")
+@router.post("/{plan_id}/approve", responses=errors(404, 409))
 def approve_plan(
     plan_id: str, services: Svc, who: Operator, req: ApproveRequest | None = None
 ) -> dict[str, Any]:
@@ -188,14 +189,23 @@ def approve_plan(
     return plan.public()
 
 
-@router.delete("/{plan_id}", status_code=204)
+@router.delete("/{plan_id}", status_code=204, responses=errors(404, 409))
 def delete_plan(plan_id: str, services: Svc, who: Operator) -> Response:
     services.store.delete_plan(plan_id, who.actor)
     services.events.publish("plan", {"id": plan_id, "state": "deleted"})
     return Response(status_code=204)
 
 
-@router.get("/{plan_id}/arrays/{name}")
+@router.get(
+    "/{plan_id}/arrays/{name}",
+    responses={
+        200: {
+            "content": {"application/octet-stream": {}, "application/json": {}},
+            "description": "the array as .npy, or JSON {shape, dtype, data}",
+        },
+        **errors(404, 413),
+    },
+)
 def get_array(plan_id: str, name: str, services: Svc, _: Viewer, format: str = "npy") -> Response:
     """A stored result array as ``.npy`` (default) or JSON (``?format=json``)."""
     plan = services.store.get_plan(plan_id)

@@ -7,10 +7,11 @@ import logging
 from concurrent.futures import ThreadPoolExecutor
 from typing import Annotated, Any
 
-from fastapi import APIRouter, Depends, HTTPException, Request, status
+from fastapi import APIRouter, Depends, HTTPException, Query, Request, status
 from pydantic import BaseModel, Field
 
 from server.auth import Principal, Viewer, authenticate, token_from_request
+from server.routers.responses import AUTH
 from server.services import Services, get_services
 from server.store import NotFoundError
 
@@ -106,13 +107,14 @@ async def estop_robot(robot: str, request: Request) -> dict[str, Any]:
     return await _estop_first(request, robot, "operator E-stop")
 
 
-@router.get("/audit")
+@router.get("/audit", responses=AUTH)
 def audit(
     services: Svc,
     _: Viewer,
     entity: str | None = None,
     entity_id: str | None = None,
-    limit: int = 200,
+    # Bounded: a huge value overflowed SQLite's integer (500), -1 meant "no limit".
+    limit: Annotated[int, Query(ge=1, le=2000, description="at most this many")] = 200,
 ) -> list[dict[str, Any]]:
     """Audit events, newest first: who did what, when, from which state to which."""
-    return [e.public() for e in services.store.list_audit(entity, entity_id, min(limit, 2000))]
+    return [e.public() for e in services.store.list_audit(entity, entity_id, limit)]
