@@ -138,10 +138,12 @@ class DispatchEngine:
         with self._lock:
             streamers = list(self._streamers.values())
             robots = list(self._robots.values())
-        for s in streamers:
-            s.close(timeout=2)
+        # Links first: a closed connection stops a TCP robot at once (and a
+        # serial one within its watchdog), whatever its streamer is doing.
         for r in robots:
             r.link.close(timeout=2)
+        for s in streamers:
+            s.close(timeout=2)
         self._mirror_q.put(None)
         if self._mirror_thread is not None:
             self._mirror_thread.join(timeout=2)
