@@ -4,6 +4,8 @@ executed twice (asserted from the emulator's own execution log)."""
 
 from __future__ import annotations
 
+import os
+import signal
 import time
 from collections.abc import Iterator
 
@@ -33,6 +35,10 @@ FAULTS: dict[str, FaultConfig] = {
     "nak": FaultConfig(nak_index=2, nak_times=2),
     "reject": FaultConfig(nak_index=3, nak_permanent=True),
     "robot_fault": FaultConfig(fault_at_index=3),
+    # The robot-link service is killed (SIGKILL) mid-run: its links close, the
+    # robot stops mid-command, a new service starts and marks the run
+    # interrupted; the resume continues the interrupted command.
+    "host_crash": FaultConfig(),
 }
 
 #: Small seed experiments per kind, so each run streams its whole program quickly.
@@ -112,6 +118,10 @@ def test_fault_matrix(mapi, base_plans, kind: str, fault: str) -> None:
             if fault in MID_RUN_DROPS and not dropped and ex["acked"] >= 1:
                 emulator.drop_link(MID_RUN_DROPS[fault])
                 dropped = True
+            if fault == "host_crash" and not dropped and ex["acked"] >= 1:
+                killed_pid = mapi.services.dispatch.pid
+                os.kill(killed_pid, signal.SIGKILL)
+                dropped = True
             if ex["state"] == "completed":
                 break
             assert ex["state"] != "aborted", ex
@@ -130,6 +140,8 @@ def test_fault_matrix(mapi, base_plans, kind: str, fault: str) -> None:
         # The fault really happened (no vacuous pass).
         if fault in MID_RUN_DROPS:
             assert dropped and resumes >= 1
+        elif fault == "host_crash":
+            assert dropped and resumes >= 1 and mapi.services.dispatch.pid != killed_pid
         elif fault == "corrupt":
             assert stats["bytes_corrupted"] > 0
         elif fault in ("reject", "robot_fault"):
