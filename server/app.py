@@ -135,10 +135,26 @@ def create_app(settings: Settings | None = None, *, start_scene: bool | None = N
             scene.start()
             services.scene = scene
             jobs.on_finished.append(scene.plan_finished)
-        from server.dispatch import DispatchEngine
+        from robots import ROBOT_NAMES
+        from server.linkservice import EmulatorSupervisor, LinkServiceClient
 
-        dispatch = DispatchEngine(store, bus, settings, scene=services.scene)
-        dispatch.start()
+        if settings.emulators:
+            services.emulators = EmulatorSupervisor(
+                settings.data, list(ROBOT_NAMES), time_scale=settings.emulator_time_scale
+            ).start()
+
+        def kind_robot(kind: str) -> str | None:
+            spec = registry().get(kind)
+            return spec.robot if spec is not None else None
+
+        dispatch = LinkServiceClient(
+            store,
+            bus,
+            settings,
+            scene=services.scene,
+            emulators=services.emulators,
+            kind_robot=kind_robot,
+        ).start()
         services.dispatch = dispatch
 
         def estop_robots(robot: str | None, reason: str) -> None:
@@ -152,6 +168,8 @@ def create_app(settings: Settings | None = None, *, start_scene: bool | None = N
             jobs.shutdown()
             if services.dispatch is not None:
                 services.dispatch.shutdown()
+            if services.emulators is not None:
+                services.emulators.stop()
             if services.scene is not None:
                 services.scene.stop()
             store.close()
