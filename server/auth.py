@@ -11,8 +11,8 @@ websockets) are checked for the whole of their life, not only at the
 handshake: :func:`until_invalid` returns once the token is revoked or expired.
 It compares the expiry with the clock and the store's in-process revocation
 counter every ``poll_s`` (0.25 s), and re-reads the token row on a change of
-that counter or every ``recheck_s`` (2 s, which also catches a revocation made
-by another process such as ``steelpath token revoke``).
+that counter or every ``recheck_s`` (0.75 s, so a revocation made
+by another process such as ``steelpath token revoke`` closes it within 1 s too).
 """
 
 from __future__ import annotations
@@ -176,7 +176,7 @@ class CredentialWatch:
     :func:`until_invalid` does).
     """
 
-    def __init__(self, store: Store, principal: Principal, *, recheck_s: float = 2.0) -> None:
+    def __init__(self, store: Store, principal: Principal, *, recheck_s: float = 0.75) -> None:
         self.store = store
         self.principal = principal
         self.recheck_s = recheck_s
@@ -206,7 +206,7 @@ class CredentialWatch:
 
 
 async def until_invalid(
-    store: Store, principal: Principal, *, poll_s: float = 0.25, recheck_s: float = 2.0
+    store: Store, principal: Principal, *, poll_s: float = 0.25, recheck_s: float = 0.75
 ) -> str:
     """Return (``"token revoked"`` / ``"token expired"`` …) once the token stops being valid.
 

@@ -31,7 +31,14 @@ from dataclasses import asdict, dataclass, is_dataclass
 from typing import Any
 
 from robots import ROBOT_NAMES
-from robots.adapters.link import CONNECTED_STATES, LinkConfig, LinkState, RobotLink
+from robots.adapters.link import (
+    CONNECTED_STATES,
+    LinkConfig,
+    LinkState,
+    LinkStateChanged,
+    ReportReceived,
+    RobotLink,
+)
 from robots.adapters.streamer import ExecState, Outcome, Streamer, StreamFault
 from robots.protocol.commands import CommandError
 from robots.protocol.messages import LINK_FAULTS, FaultFlag, State
@@ -440,8 +447,7 @@ class DispatchEngine:
         self._transition(execution_id, action, "robot", str(fault), fault=str(fault))
 
     def _on_link_event(self, name: str, event: Any) -> None:
-        from robots.adapters.link import LinkStateChanged, ReportReceived
-
+        # On the link's I/O thread: no import, no SQLite, no blocking call here.
         r = self._robots.get(name)
         if r is None:
             return
