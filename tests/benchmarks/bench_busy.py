@@ -79,7 +79,7 @@ from tests.benchmarks._load import (  # noqa: E402
 ESTOP_P95_MS = 100.0
 ESTOP_P99_MS = 200.0
 READ_P95_MS = 250.0
-MODE_ESTOP = 4  # robots.protocol.messages.Mode.ESTOP
+MODE_MOVING, MODE_ESTOP = 1, 4  # robots.protocol.messages.Mode
 TERMINAL_EXEC_STATES = frozenset({"completed", "aborted", "faulted", "interrupted"})
 HEAVY_KINDS = ("cmbot.climb", "blast", "sbg.inspect", "ara.navigate")
 ESTOP_ROBOT = "ara"
@@ -298,34 +298,51 @@ class Api:
         self.c.close()
 
 
-def wait_plans(
-    api: Api, ids: list[str], timeout: float, planning_s: dict[str, float] | None = None
-) -> dict[str, dict[str, Any]]:
-    """Poll until every plan in ``ids`` is terminal; returns id → plan (without result).
+class PlanWatch:
+    """Polls plans until they are terminal, noting how long each spent ``planning``.
 
-    With ``planning_s``, also notes each plan's time from first seen ``planning``
-    to first seen terminal (±0.5 s, the poll period).
+    ``secs[id]`` runs from the first poll that saw it planning to the first
+    that saw it terminal (±0.5 s, the poll period); ``running(id)`` is how long
+    it has been planning so far.
     """
-    pending, done = set(ids), {}
-    started: dict[str, float] = {}
-    deadline = time.monotonic() + timeout
-    while pending:
-        listed = {p["id"]: p for p in api.get("/plans", params={"limit": 500})}
-        for pid in list(pending):
-            plan = listed.get(pid) or api.get(f"/plans/{pid}")
+
+    def __init__(self, api: Api) -> None:
+        self.api = api
+        self.started: dict[str, float] = {}
+        self.done: dict[str, dict[str, Any]] = {}
+        self.secs: dict[str, float] = {}
+
+    def running(self, pid: str) -> float:
+        t = self.started.get(pid)
+        return 0.0 if t is None else time.monotonic() - t
+
+    def poll(self, ids: list[str]) -> None:
+        pending = [p for p in ids if p not in self.done]
+        if not pending:
+            return
+        listed = {p["id"]: p for p in self.api.get("/plans", params={"limit": 500})}
+        for pid in pending:
+            plan = listed.get(pid) or self.api.get(f"/plans/{pid}")
             now = time.monotonic()
             if plan["state"] == "planning":
-                started.setdefault(pid, now)
-            if plan["state"] in TERMINAL_PLAN_STATES:
-                done[pid] = plan
-                pending.discard(pid)
-                if planning_s is not None:
-                    planning_s[pid] = round(now - started.get(pid, now), 1)
-        if pending and time.monotonic() > deadline:
-            raise BenchError(f"{len(pending)} plan(s) still planning after {timeout:.0f} s")
-        if pending:
+                self.started.setdefault(pid, now)
+            elif plan["state"] in TERMINAL_PLAN_STATES:
+                self.done[pid] = plan
+                self.secs[pid] = round(now - self.started.get(pid, now), 1)
+
+    def wait(
+        self, ids: list[str], timeout: float, until: Callable[[], bool] | None = None
+    ) -> None:
+        """Until every plan in ``ids`` is terminal (or ``until()`` holds)."""
+        deadline = time.monotonic() + timeout
+        while True:
+            self.poll(ids)
+            if all(p in self.done for p in ids) or (until is not None and until()):
+                return
+            if time.monotonic() > deadline:
+                left = [p for p in ids if p not in self.done]
+                raise BenchError(f"{len(left)} plan(s) still planning after {timeout:.0f} s")
             time.sleep(0.5)
-    return done
 
 
 def robot_state(api: Api, robot: str) -> dict[str, Any]:
@@ -333,11 +350,23 @@ def robot_state(api: Api, robot: str) -> dict[str, Any]:
 
 
 def wait_ready(api: Api, robot: str, timeout: float = 60.0) -> None:
-    def ready() -> bool:
-        st = robot_state(api, robot)
-        return bool(st.get("connected")) and not st.get("estop_latched")
+    last: dict[str, Any] = {}
 
-    wait_for(f"robot {robot} connected with no E-stop latched", ready, timeout, 0.05)
+    def ready() -> bool:
+        last.update(robot_state(api, robot))
+        # The robot's own report must have left ESTOP too: right after clear-estop
+        # the host is clear while the robot may still report its latch, and a run
+        # dispatched in that instant faults at once ("E-stop is latched").
+        mode = (last.get("report") or {}).get("mode")
+        return bool(last.get("connected")) and not last.get("estop_latched") and mode != MODE_ESTOP
+
+    try:
+        wait_for(f"robot {robot} connected with no E-stop latched", ready, timeout, 0.05)
+    except BenchError as exc:
+        keys = ("state", "reason", "connected", "estop_latched", "faults", "execution")
+        seen = {k: last.get(k) for k in keys}
+        seen["mode"] = (last.get("report") or {}).get("mode")
+        raise BenchError(f"{exc}; last state: {seen}") from None
 
 
 def clear_all(api: Api, robots: list[str]) -> None:
@@ -359,13 +388,42 @@ class Prepared:
     estop_plans: list[str]
 
 
-def prepare(api: Api, n_dispatches: int, n_estop: int, extra_max_s: float) -> Prepared:
+def estop_route_params(length_m: float) -> dict[str, Any]:
+    """A straight demo route of ``length_m``: long enough to be moving when the E-stop lands."""
+    half = length_m / 2
+    return {
+        "nodes": {"s": [0.0, 0.0, 0.0], "m": [half, 0.0, 0.0], "e": [length_m, 0.0, 0.0]},
+        "edges": [["s", "m"], ["m", "e"]],
+        "start": "s",
+        "end": "e",
+        "max_length_m": length_m + 1.0,
+    }
+
+
+def why_not_dispatchable(plan: dict[str, Any], robot: str, robots: list[str]) -> str | None:
+    failed = [c["name"] for c in plan.get("checks") or [] if not c.get("passed")]
+    if plan["state"] != "planned":
+        return f"plan {plan['id']} ended {plan['state']}: {plan.get('error')}"
+    if failed:
+        return f"plan {plan['id']} failed checks {failed}"
+    if not plan.get("program_length"):
+        return f"plan {plan['id']} has an empty program"
+    if robot not in robots:
+        return f"its robot {robot!r} is not among {robots}"
+    return None
+
+
+def prepare(
+    api: Api, n_dispatches: int, n_estop: int, extra_max_s: float, route_m: float
+) -> Prepared:
     """Plan and approve every plan the run dispatches, before anything is measured.
 
     Each dispatchable kind's default plan is its first dispatch; the other
     ``n_dispatches - kinds`` dispatches are fresh revisions spread round robin
-    over the kinds whose default plan took at most ``extra_max_s`` to plan
-    (cheapest first), so set-up stays within minutes on two cores.
+    over the kinds whose default plan planned within ``extra_max_s`` (cheapest
+    first), submitted as soon as that set is known (every default plan done or
+    planning longer than that), so set-up stays within minutes on two cores.
+    The E-stop plans are straight ``route_m`` demo routes.
     """
     robots = [r["name"] for r in api.get("/robots")]
     kinds = api.get("/kinds")
@@ -377,49 +435,53 @@ def prepare(api: Api, n_dispatches: int, n_estop: int, extra_max_s: float) -> Pr
         kind: api.post("/plans", {"kind": kind, "params": {}}, expect=(202,))["id"]
         for kind in sorted(compiling)
     }
-    # Queued behind the defaults, these keep the second worker busy meanwhile.
-    estop_ids = [
-        api.post("/plans", {"kind": "demo.route", "params": {}}, expect=(202,))["id"]
-        for _ in range(n_estop)
-    ]
-    secs: dict[str, float] = {}
-    plans = wait_plans(api, list(submitted.values()), 1800, secs)
-    plan_s = {k: secs[pid] for k, pid in submitted.items()}
-    dispatchable, why_not = {}, {}
-    for kind, pid in submitted.items():
-        plan = plans[pid]
-        robot = compiling[kind]
-        failed = [c["name"] for c in plan.get("checks") or [] if not c.get("passed")]
-        if plan["state"] != "planned":
-            why_not[kind] = f"plan {pid} ended {plan['state']}: {plan.get('error')}"
-        elif failed:
-            why_not[kind] = f"plan {pid} failed checks {failed}"
-        elif not plan.get("program_length"):
-            why_not[kind] = f"plan {pid} has an empty program"
-        elif robot not in robots:
-            why_not[kind] = f"its robot {robot!r} is not among {robots}"
-        else:
-            dispatchable[kind] = robot
-    if "demo.route" not in dispatchable:
-        raise BenchError(f"demo.route is not dispatchable: {why_not.get('demo.route')}")
-    cheap = sorted((k for k in dispatchable if plan_s[k] <= extra_max_s), key=plan_s.__getitem__)
-    n_extra = max(0, n_dispatches - len(dispatchable))
-    extra_kinds = [cheap[i % len(cheap)] for i in range(n_extra)] if cheap else []
-    log(
-        f"dispatchable: {sorted(dispatchable)} (planning s: {plan_s}); "
-        f"{n_extra} more dispatch plans of {sorted(set(extra_kinds))}"
+    route = {"kind": "demo.route", "params": estop_route_params(route_m)}
+    estop_ids = [api.post("/plans", route, expect=(202,))["id"] for _ in range(n_estop)]
+    watch = PlanWatch(api)
+    tids = list(submitted.values())
+    watch.wait(
+        tids,
+        1800,
+        until=lambda: all(p in watch.done or watch.running(p) > extra_max_s for p in tids),
     )
+    cheap = sorted(
+        (
+            k
+            for k, pid in submitted.items()
+            if pid in watch.done
+            and watch.secs[pid] <= extra_max_s
+            and why_not_dispatchable(watch.done[pid], compiling[k], robots) is None
+        ),
+        key=lambda k: watch.secs[submitted[k]],
+    )
+    n_extra = max(0, n_dispatches - len(compiling))
+    extra_kinds = [cheap[i % len(cheap)] for i in range(n_extra)] if cheap else []
+    log(f"{n_extra} more dispatch plans of {sorted(set(extra_kinds))} (planned within {extra_max_s} s)")
     revised = [
         (k, api.post(f"/plans/{submitted[k]}/revise", {"params": {}}, expect=(202,))["id"])
         for k in extra_kinds
     ]
-    done = wait_plans(api, [p for _, p in revised] + estop_ids, 1800)
+    watch.wait(tids + [p for _, p in revised] + estop_ids, 1800)
+    plan_s = {k: watch.secs[pid] for k, pid in submitted.items()}
+    dispatchable, why_not = {}, {}
+    for kind, pid in submitted.items():
+        why = why_not_dispatchable(watch.done[pid], compiling[kind], robots)
+        if why is None:
+            dispatchable[kind] = compiling[kind]
+        else:
+            why_not[kind] = why
+    log(f"dispatchable: {sorted(dispatchable)}; default plans' planning s: {plan_s}")
+    for pid in estop_ids:
+        why = why_not_dispatchable(watch.done[pid], ESTOP_ROBOT, robots)
+        if why is not None:
+            raise BenchError(f"the E-stop route {route['params']} is not dispatchable: {why}")
     jobs = [(k, submitted[k]) for k in sorted(dispatchable)] + revised
-    jobs = jobs[:n_dispatches] if n_dispatches < len(jobs) else jobs
+    jobs = jobs[:n_dispatches]
+    for k, pid in jobs:
+        why = why_not_dispatchable(watch.done[pid], compiling[k], robots)
+        if why is not None:
+            raise BenchError(f"a {k} dispatch plan is not dispatchable: {why}")
     for pid in [p for _, p in jobs] + estop_ids:
-        plan = done.get(pid) or plans[pid]
-        if plan["state"] != "planned":
-            raise BenchError(f"plan {pid} ended {plan['state']}: {plan.get('error')}")
         api.post(f"/plans/{pid}/approve", {"comment": "bench_busy"})
     # Interleave kinds so each robot's queue mixes them and every robot starts at once.
     order = {k: i for i, k in enumerate(sorted(dispatchable))}
@@ -480,7 +542,7 @@ class Trial:
     moving: bool
     upload_in_flight: bool
     plans_in_flight: int
-    execution_state: str
+    execution: str
 
 
 @dataclass
@@ -488,6 +550,26 @@ class EstopRun:
     trials: list[Trial] = field(default_factory=list)
     method: str = "emulator log"
     probed: bool = False  # the first trial of a run tells whether stop records exist
+    skipped: int = 0  # routes that finished before the host saw them execute
+
+
+MAX_SKIPS = 5
+
+
+class RouteFinished(Exception):
+    """The E-stop route completed before the host saw it execute (the host is that slow)."""
+
+
+def dispatch_when_free(api: Api, pid: str, robot: str, timeout: float = 30.0) -> dict[str, Any]:
+    """``POST /plans/{pid}/dispatch``, retrying while the robot still winds up its last run."""
+    deadline = time.monotonic() + timeout
+    while True:
+        r = api.c.post(f"/plans/{pid}/dispatch", json={"robot": robot})
+        if r.status_code == 201:
+            return dict(r.json())
+        if r.status_code != 409 or time.monotonic() > deadline:
+            raise BenchError(f"dispatch {pid} to {robot}: HTTP {r.status_code}: {r.text[:400]}")
+        time.sleep(0.05)
 
 
 def estop_trials(
@@ -501,27 +583,43 @@ def estop_trials(
     plans_flag: Any,
     label: str,
 ) -> None:
+    """Append ``n`` E-stop trials to ``run`` (see the module docstring for one trial)."""
     target = len(run.trials) + n
     i = 0
     while len(run.trials) < target:
         i += 1
+        if not plans:
+            raise BenchError("ran out of prepared E-stop plans")
         pid = plans.pop()
         wait_ready(api, ESTOP_ROBOT)
-        ex = api.post(f"/plans/{pid}/dispatch", {"robot": ESTOP_ROBOT}, expect=(201,))
+        ex = dispatch_when_free(api, pid, ESTOP_ROBOT)
 
-        def executing(ex_id: str = ex["id"]) -> bool:
+        def executing(ex: dict[str, Any] = ex) -> bool:
             rep = robot_state(api, ESTOP_ROBOT).get("report") or {}
-            if rep.get("executing", -1) >= 0:
+            if rep.get("executing", -1) >= 0 and rep.get("run_id") in (None, 0, ex.get("run_id")):
                 return True
-            state = api.get(f"/executions/{ex_id}")["state"]
-            if state in TERMINAL_EXEC_STATES:
-                raise BenchError(
-                    f"execution {ex_id} ended {state} before a command was seen executing: "
-                    "lower --time-scale so the demo route runs longer"
-                )
+            if rep.get("mode") != MODE_MOVING:
+                cur = api.get(f"/executions/{ex['id']}")
+                if cur["state"] == "completed":
+                    raise RouteFinished(ex["id"])
+                if cur["state"] in TERMINAL_EXEC_STATES:
+                    raise BenchError(
+                        f"E-stop route {ex['id']} ended {cur['state']} before it was stopped: "
+                        f"fault={cur.get('fault')!r} error={cur.get('error')!r}"
+                    )
             return False
 
-        wait_for("the ARA to execute a command", executing, 60, 0.01)
+        try:
+            wait_for("the ARA to execute a command", executing, 60, 0.01)
+        except RouteFinished:
+            run.skipped += 1
+            log(f"{label}: execution {ex['id']} finished before it was seen executing")
+            if run.skipped > MAX_SKIPS:
+                raise BenchError(
+                    f"{run.skipped} E-stop routes finished before the host saw them execute: "
+                    "lengthen --estop-route-m or lower --time-scale"
+                ) from None
+            continue
         time.sleep(rng.uniform(0.0, 0.05))
         tail.new()  # everything before the E-stop is not its evidence
         upload, planning = bool(upload_flag.value), int(plans_flag.value)
@@ -543,13 +641,6 @@ def estop_trials(
                 # The probe found no stop records: this trial measured nothing, drop it.
                 run.method = "host sees ESTOP (fallback: the emulator log has no stop records)"
                 log(f"no 'record: stop' line in {tail.path}: falling back to {run.method}")
-                wait_for(
-                    f"execution {ex['id']} to end",
-                    lambda ex_id=ex["id"]: api.get(f"/executions/{ex_id}")["state"]
-                    in TERMINAL_EXEC_STATES,
-                    60,
-                    0.05,
-                )
                 api.post(f"/robots/{ESTOP_ROBOT}/clear-estop")
                 continue
             if rec is None:
@@ -565,17 +656,19 @@ def estop_trials(
 
             latency = (wait_for("mode ESTOP in the state report", host_sees, 30, 0.0) - t0) * 1e3
             moving = True
-        state = wait_for(
-            f"execution {ex['id']} to end",
-            lambda ex_id=ex["id"]: (
-                (s := api.get(f"/executions/{ex_id}")["state"]) in TERMINAL_EXEC_STATES and s
-            ),
+        run.trials.append(Trial(latency, http_ms, moving, upload, planning, ex["id"]))
+        # Clear only once the execution is aborted: the link service finishes an
+        # E-stop's bookkeeping after it has answered, and that bookkeeping latches
+        # the link again (Streamer.estop), undoing a clear that overtook it.
+        wait_for(
+            f"E-stopped execution {ex['id']} to end",
+            lambda ex_id=ex["id"]: api.get(f"/executions/{ex_id}")["state"]
+            in TERMINAL_EXEC_STATES,
             60,
-            0.05,
+            0.02,
         )
-        run.trials.append(Trial(latency, http_ms, moving, upload, planning, state))
         api.post(f"/robots/{ESTOP_ROBOT}/clear-estop")
-    log(f"{label}: {n} E-stop trials done")
+    log(f"{label}: {n} E-stop trials done" + (f", {run.skipped} skipped" if run.skipped else ""))
 
 
 # --------------------------------------------------------------- dispatches
@@ -731,8 +824,11 @@ def main() -> int:
     ap.add_argument(
         "--extra-plan-max-s",
         type=float,
-        default=45.0,
+        default=60.0,
         help="dispatches beyond one per kind go to kinds that plan within this many seconds",
+    )
+    ap.add_argument(
+        "--estop-route-m", type=float, default=6.0, help="length of the E-stop trials' route"
     )
     ap.add_argument("--dispatch-timeout", type=float, default=300.0, help="s per dispatch")
     ap.add_argument("--seed", type=int, default=0)
@@ -786,7 +882,9 @@ def run(args: argparse.Namespace, quiet_trials: int, tmp: Path, servers: list[Se
         for r in [r["name"] for r in api.get("/robots")]:
             wait_ready(api, r, 120)
         n_estop = quiet_trials + args.trials + 1  # +1: the probe may be dropped
-        prep = prepare(api, args.dispatches, n_estop, args.extra_plan_max_s)
+        prep = prepare(
+            api, args.dispatches, n_estop, args.extra_plan_max_s, args.estop_route_m
+        )
         writer.join(600)
     finally:
         if writer.is_alive():
@@ -867,6 +965,12 @@ def run(args: argparse.Namespace, quiet_trials: int, tmp: Path, servers: list[Se
     sampler.halt.set()
     sampler.join(5)
     results = {lp.name: lp.result() for lp in procs}
+    ex_state = {e["id"]: e["state"] for e in api.get("/executions")}
+    trial_states: dict[str, int] = {}
+    for t in quiet_run.trials + loaded_run.trials:
+        st = ex_state.get(t.execution, "missing")
+        trial_states[st] = trial_states.get(st, 0) + 1
+    results["estop_executions"] = trial_states
     loaded_reads = read_stats(results.get("reads", {}).get("samples", []), t_loaded, t_end)
     api.close()
 
@@ -947,6 +1051,15 @@ def report(
         f"loaded E-stop trials with the upload in flight: {n_up}/{len(loaded_run.trials)}, "
         f"with {args.planning} plans in flight: {n_pl}/{len(loaded_run.trials)}"
         + (f"; trials where the robot was not moving: {not_moving}" if not_moving else "")
+    )
+    print(
+        "E-stop trial executions: "
+        + ", ".join(f"{v} {k}" for k, v in sorted(results["estop_executions"].items()))
+        + (
+            f"; routes skipped (done before seen moving): {quiet_run.skipped + loaded_run.skipped}"
+            if quiet_run.skipped + loaded_run.skipped
+            else ""
+        )
     )
     states: dict[str, int] = {}
     for d in dispatches:
