@@ -22,7 +22,6 @@ line with the outcome.
 from __future__ import annotations
 
 import contextlib
-import ctypes
 import io
 import itertools
 import json
@@ -30,17 +29,16 @@ import math
 import os
 import re
 import resource
-import signal
 import sys
 import tempfile
-import threading
-import time
 from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Protocol
 
 import numpy as np
+
+from server.lifetime import die_with_parent
 
 FORMATS = ("ply", "pcd", "xyz", "csv", "txt", "npy")
 
@@ -598,34 +596,6 @@ def parse_upload(raw: Path, content_type: str, out: Path) -> dict[str, Any]:
 
 
 # ------------------------------------------------------------------ child process
-PR_SET_PDEATHSIG = 1
-
-
-def die_with_parent(parent_pid: int) -> None:
-    """Make this process exit when ``parent_pid`` dies.
-
-    Linux: ``prctl(PR_SET_PDEATHSIG, SIGKILL)`` (the kernel kills us when the
-    thread that started us exits — callers start children from long-lived
-    threads).  Everywhere: a daemon thread that watches ``getppid()``, which
-    changes to a reaper when the parent dies.  Checked once right away, for a
-    parent that died before the prctl took effect.
-    """
-    if sys.platform.startswith("linux"):
-        with contextlib.suppress(OSError, AttributeError):
-            libc = ctypes.CDLL(None, use_errno=True)
-            libc.prctl(PR_SET_PDEATHSIG, int(signal.SIGKILL), 0, 0, 0)
-    if os.getppid() != parent_pid:
-        os._exit(1)
-
-    def watch() -> None:
-        while True:
-            time.sleep(1.0)
-            if os.getppid() != parent_pid:
-                os._exit(1)
-
-    threading.Thread(target=watch, name="parent-watch", daemon=True).start()
-
-
 def main(argv: list[str]) -> int:
     """``upload RAW CONTENT_TYPE OUT PARENT_PID``: one JSON line on stdout."""
     if len(argv) != 5 or argv[0] != "upload":

@@ -10,7 +10,7 @@ once the plan's flag is set, so planners stop at their next stage boundary.
 
 Workers run at a lower OS priority (``os.nice(10)``) than the server and its
 robot links, and die with the server: each sets ``PR_SET_PDEATHSIG`` and
-watches its parent pid (:func:`server.cloud_io.die_with_parent`).  The
+watches its parent pid (:func:`server.lifetime.die_with_parent`).  The
 kernel sends that signal when the *thread* that forked the child exits, so
 pools (and the manager) are created and their workers started eagerly on
 one long-lived spawner thread, never on a short-lived request thread.
@@ -37,9 +37,9 @@ from typing import Any
 import numpy as np
 
 from planners.errors import CancelledError, InvalidInputError
-from server.cloud_io import die_with_parent
 from server.events import EventBus
 from server.lifecycle import IllegalTransitionError, PlanState
+from server.lifetime import die_with_parent
 from server.store import NotFoundError, Store
 
 log = logging.getLogger(__name__)

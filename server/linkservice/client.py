@@ -24,6 +24,7 @@ import socket
 import subprocess
 import sys
 import threading
+import time
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
@@ -101,15 +102,39 @@ class LinkServiceClient:
         self._closing = False
         self._ready = threading.Event()
         self._names: list[str] = []
+        self._want_spawn = threading.Event()
+        self._spawner: threading.Thread | None = None
         self.restarts = 0
 
     # -------------------------------------------------------------- lifecycle
     def start(self, timeout: float = 60.0) -> LinkServiceClient:
-        self._spawn()
+        # The kernel signals a child when the *thread* that forked it exits
+        # (PR_SET_PDEATHSIG), so every spawn happens on this long-lived thread.
+        self._spawner = threading.Thread(
+            target=self._spawn_loop, name="link-service spawner", daemon=True
+        )
+        self._spawner.start()
+        self._want_spawn.set()
         if not self._ready.wait(timeout):
             raise RuntimeError(f"the robot-link service did not start within {timeout:.0f} s")
         self._names = list(self._call("robot_names", {}))
         return self
+
+    def _spawn_loop(self) -> None:
+        while True:
+            self._want_spawn.wait()
+            self._want_spawn.clear()
+            if self._closing:
+                return
+            if self._proc is not None:
+                with contextlib.suppress(Exception):
+                    self._proc.wait(timeout=5)
+            try:
+                self._spawn()
+            except Exception:
+                log.exception("could not start the robot-link service; retrying in 1 s")
+                time.sleep(1.0)
+                self._want_spawn.set()
 
     def _spawn(self) -> None:
         rpc_parent, rpc_child = socket.socketpair()
@@ -153,6 +178,7 @@ class LinkServiceClient:
 
     def shutdown(self) -> None:
         self._closing = True
+        self._want_spawn.set()  # lets the spawner thread end
         proc = self._proc
         for ch in (self._rpc, self._estop):
             if ch is not None:
@@ -192,14 +218,7 @@ class LinkServiceClient:
         if not self._closing and channel is self._rpc:
             log.error("the robot-link service exited unexpectedly; restarting it")
             self.restarts += 1
-            threading.Thread(target=self._restart, name="link-service restart", daemon=True).start()
-
-    def _restart(self) -> None:
-        if self._proc is not None:
-            with contextlib.suppress(Exception):
-                self._proc.wait(timeout=5)
-        if not self._closing:
-            self._spawn()
+            self._want_spawn.set()
 
     def _fail_pending(self, why: str) -> None:
         with self._plock:

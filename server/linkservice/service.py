@@ -26,7 +26,6 @@ from __future__ import annotations
 import argparse
 import concurrent.futures
 import contextlib
-import ctypes
 import json
 import logging
 import os
@@ -41,6 +40,7 @@ from typing import Any
 
 from server.dispatch.engine import DispatchEngine, DispatchError
 from server.lifecycle import IllegalTransitionError
+from server.lifetime import die_with_parent
 from server.linkservice.channel import Channel, ChannelClosed
 from server.settings import Settings
 from server.store import NotFoundError, Store
@@ -49,13 +49,6 @@ log = logging.getLogger("steelpath.linkservice")
 
 #: Pushed events waiting for the web server; beyond this the oldest are dropped.
 EVENT_QUEUE = 2000
-
-
-def die_with_parent(sig: int = signal.SIGTERM) -> None:
-    """Ask Linux to send ``sig`` to this process when its parent dies."""
-    with contextlib.suppress(Exception):
-        libc = ctypes.CDLL("libc.so.6", use_errno=True)
-        libc.prctl(1, sig, 0, 0, 0)  # PR_SET_PDEATHSIG
 
 
 class _Outbox:
@@ -270,11 +263,14 @@ class LinkService:
         threading.Thread(target=self.estop_loop, name="estop", daemon=True).start()
         threading.Thread(target=self.rpc_loop, name="link-rpc reader", daemon=True).start()
         self.outbox.publish("linkservice", {"state": "ready", "pid": os.getpid()})
-        while not self.stopping.wait(0.2):
-            if os.getppid() != parent_pid:
-                log.error("web server (pid %d) is gone: stopping every link", parent_pid)
-                break
+        die_with_parent(parent_pid, sig=signal.SIGTERM, on_orphaned=self._orphaned, poll_s=0.1)
+        while not self.stopping.wait(0.5):
+            pass
         self.shutdown()
+
+    def _orphaned(self) -> None:
+        log.error("the web server is gone: stopping every link")
+        self.stopping.set()
 
     def shutdown(self) -> None:
         self.stopping.set()
@@ -314,7 +310,6 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--parent-pid", type=int, required=True)
     p.add_argument("--config", required=True, help="JSON: settings and emulator URLs")
     ns = p.parse_args(argv)
-    die_with_parent()
     if os.getppid() != ns.parent_pid:
         return 1  # the parent died before we got here
     cfg = json.loads(ns.config)

@@ -103,6 +103,10 @@ def test_a_crashed_link_service_restarts_and_the_run_resumes_exactly_once(lapi) 
     old_pid = eng.pid
     os.kill(old_pid, signal.SIGKILL)
     _wait(lambda: eng.pid != old_pid and eng.restarts >= 1, 30, "a new link service")
+    new_pid = eng.pid
+    assert eng.stats()["pid"] == new_pid
+    time.sleep(1.5)  # the new service stays up (it is not tied to a short-lived thread)
+    assert (eng.pid, eng.restarts) == (new_pid, 1)
     ex = _wait(
         lambda: (e := store.get_execution(eid)).state == "interrupted" and e, 30, "interrupted"
     )
