@@ -46,4 +46,6 @@ def alpha_shape(points2d: np.ndarray, alpha_m: float) -> BaseGeometry:
         return shapely.Polygon()
     rings = np.concatenate([corners[keep], corners[keep][:, :1]], axis=1)  # closed
     polys = shapely.polygons(rings)
-    return shapely.union_all(polys)
+    # Delaunay triangles never overlap and share whole edges: a polygonal
+    # coverage, which coverage_union_all dissolves ~30x faster than union_all.
+    return shapely.coverage_union_all(polys)

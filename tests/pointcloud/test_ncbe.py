@@ -115,3 +115,29 @@ def test_ncbe_errors():
         ncbe_boundary(np.zeros((5, 2)), sliding_factor=-1)
     with pytest.raises(InvalidInputError):
         ncbe_boundary(np.zeros((5, 4)))
+
+
+@settings(max_examples=25, deadline=None)
+@given(
+    seed=st.integers(0, 2**31 - 1),
+    n=st.integers(10, 400),
+    alpha=st.floats(0.02, 0.5),
+)
+def test_alpha_shape_equals_the_plain_union_of_its_triangles(seed: int, n: int, alpha: float):
+    """The fast coverage union is the same region as shapely's general union."""
+    from scipy.spatial import Delaunay
+
+    pts = np.random.default_rng(seed).uniform(0, 1, (n, 2))
+    hull = alpha_shape(pts, alpha)
+    tri = Delaunay(pts)
+    c = pts[tri.simplices]
+    a = np.linalg.norm(c[:, 1] - c[:, 2], axis=1)
+    b = np.linalg.norm(c[:, 0] - c[:, 2], axis=1)
+    cc = np.linalg.norm(c[:, 0] - c[:, 1], axis=1)
+    e1, e2 = c[:, 1] - c[:, 0], c[:, 2] - c[:, 0]
+    area2 = np.abs(e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0])
+    with np.errstate(divide="ignore", invalid="ignore"):
+        keep = np.isfinite(r := a * b * cc / (2 * area2)) & (r < alpha)
+    ref = shapely.union_all(shapely.polygons(np.concatenate([c[keep], c[keep][:, :1]], axis=1)))
+    assert abs(hull.area - ref.area) <= 1e-12 + 1e-9 * ref.area
+    assert hull.symmetric_difference(ref).area <= 1e-9 * max(ref.area, 1e-12)
