@@ -79,7 +79,7 @@ from tests.benchmarks._load import (  # noqa: E402
 ESTOP_P95_MS = 100.0
 ESTOP_P99_MS = 200.0
 READ_P95_MS = 250.0
-MODE_MOVING, MODE_ESTOP = 1, 4  # robots.protocol.messages.Mode
+MODE_IDLE, MODE_MOVING, MODE_ESTOP = 0, 1, 4  # robots.protocol.messages.Mode
 TERMINAL_EXEC_STATES = frozenset({"completed", "aborted", "faulted", "interrupted"})
 HEAVY_KINDS = ("cmbot.climb", "blast", "sbg.inspect", "ara.navigate")
 ESTOP_ROBOT = "ara"
@@ -354,11 +354,17 @@ def wait_ready(api: Api, robot: str, timeout: float = 60.0) -> None:
 
     def ready() -> bool:
         last.update(robot_state(api, robot))
-        # The robot's own report must have left ESTOP too: right after clear-estop
-        # the host is clear while the robot may still report its latch, and a run
-        # dispatched in that instant faults at once ("E-stop is latched").
-        mode = (last.get("report") or {}).get("mode")
-        return bool(last.get("connected")) and not last.get("estop_latched") and mode != MODE_ESTOP
+        # The robot's own report must say idle too: right after clear-estop the host
+        # is clear while the robot may still report its latch or its last run, and a
+        # run dispatched in that instant faults at once ("E-stop is latched",
+        # "robot_busy: robot is executing run ...").
+        rep = last.get("report") or {}
+        return (
+            bool(last.get("connected"))
+            and not last.get("estop_latched")
+            and rep.get("mode") == MODE_IDLE
+            and rep.get("executing", -1) < 0
+        )
 
     try:
         wait_for(f"robot {robot} connected with no E-stop latched", ready, timeout, 0.05)
@@ -657,9 +663,16 @@ def estop_trials(
             latency = (wait_for("mode ESTOP in the state report", host_sees, 30, 0.0) - t0) * 1e3
             moving = True
         run.trials.append(Trial(latency, http_ms, moving, upload, planning, ex["id"]))
-        # Clear only once the execution is aborted: the link service finishes an
-        # E-stop's bookkeeping after it has answered, and that bookkeeping latches
-        # the link again (Streamer.estop), undoing a clear that overtook it.
+        # Clear only once the robot reported its E-stop and the execution is aborted:
+        # the link service finishes an E-stop's bookkeeping after it has answered, and
+        # that bookkeeping latches the link again (Streamer.estop), undoing a clear
+        # that overtook it.
+        wait_for(
+            "the ARA to report ESTOP",
+            lambda: (robot_state(api, ESTOP_ROBOT).get("report") or {}).get("mode") == MODE_ESTOP,
+            60,
+            0.02,
+        )
         wait_for(
             f"E-stopped execution {ex['id']} to end",
             lambda ex_id=ex["id"]: api.get(f"/executions/{ex_id}")["state"]
@@ -832,6 +845,7 @@ def main() -> int:
     )
     ap.add_argument("--dispatch-timeout", type=float, default=300.0, help="s per dispatch")
     ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--json", default=None, help="also write every figure to this JSON file")
     ap.add_argument("--keep", action="store_true", help="keep the temporary directory")
     args = ap.parse_args()
     for name in ("clients", "trials", "dispatches", "planning"):
@@ -881,7 +895,8 @@ def run(args: argparse.Namespace, quiet_trials: int, tmp: Path, servers: list[Se
         api = Api(srv.url, operator["token"])
         for r in [r["name"] for r in api.get("/robots")]:
             wait_ready(api, r, 120)
-        n_estop = quiet_trials + args.trials + 1  # +1: the probe may be dropped
+        # Spares: the probe trial may be dropped, and a few routes may end unseen.
+        n_estop = quiet_trials + args.trials + 1 + MAX_SKIPS
         prep = prepare(
             api, args.dispatches, n_estop, args.extra_plan_max_s, args.estop_route_m
         )
@@ -1117,6 +1132,29 @@ def report(
         ),
     ]
     load_ok = bool(up_ok) and not up_bad and n_up > 0
+    if args.json:
+        Path(args.json).write_text(
+            json.dumps(
+                {
+                    "estop_ms": {"quiet": q, "loaded": lo, "method": loaded_run.method},
+                    "estop_http_ms": {"quiet": qh, "loaded": lh},
+                    "reads_ms": {"quiet": quiet_reads, "loaded": loaded_reads},
+                    "dispatches": dispatches,
+                    "uploads": uploads,
+                    "planning_finished": planning.get("finished", []),
+                    "memory_mb": {
+                        "main_vmhwm": hwm_mb,
+                        "largest_while_uploading": sampler.peak_single_upload[0],
+                        "tree_peak": sampler.peak_tree_mb,
+                    },
+                    "targets": {name: ok for name, ok in targets},
+                    "load_applied": load_ok,
+                },
+                indent=1,
+                default=str,
+            ),
+            encoding="utf-8",
+        )
     print()
     for name, ok in targets:
         print(f"  {'met   ' if ok else 'MISSED'}  {name}")
