@@ -326,13 +326,18 @@ def write_port_file(
     write_json_atomic(path, data)
 
 
-def _pid_alive(pid: int) -> bool:
+def pid_alive(pid: int) -> bool:
+    """Whether process ``pid`` runs (a zombie — exited, not yet reaped — does not)."""
     try:
         os.kill(pid, 0)
     except ProcessLookupError:
         return False
     except PermissionError:
         return True  # exists, owned by someone else
+    with contextlib.suppress(OSError, IndexError):
+        stat = Path(f"/proc/{pid}/stat").read_text()
+        if stat.rsplit(")", 1)[1].split()[0] == "Z":
+            return False
     return True
 
 
@@ -352,7 +357,7 @@ def read_port_file(path: str | os.PathLike[str], *, check_alive: bool = True) ->
         )
     except (KeyError, TypeError, ValueError) as exc:
         raise StateFileError(f"port file {p}: missing or bad field ({exc!r})") from exc
-    if check_alive and not _pid_alive(info.pid):
+    if check_alive and not pid_alive(info.pid):
         return None
     return info
 

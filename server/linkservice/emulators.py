@@ -33,6 +33,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from robots.emulator.persist import pid_alive
 from server.linkservice.service import robot_key_path
 
 log = logging.getLogger(__name__)
@@ -52,7 +53,7 @@ class EmulatorProcess:
     started_here: bool
 
     def alive(self) -> bool:
-        return _pid_alive(self.pid)
+        return pid_alive(self.pid)
 
     def execution_log(self) -> list[Any]:
         """The emulator's own execution log (``robots.emulator.robot.ExecutionRecord``s)."""
@@ -90,21 +91,6 @@ class EmulatorProcess:
             return dict(json.loads(self.state_path.read_text(encoding="utf-8")))
         except (OSError, ValueError):
             return None
-
-
-def _pid_alive(pid: int) -> bool:
-    try:
-        os.kill(pid, 0)
-    except ProcessLookupError:
-        return False
-    except PermissionError:
-        return True
-    # A zombie (our own exited child not yet reaped) is not alive.
-    with contextlib.suppress(OSError):
-        stat = Path(f"/proc/{pid}/stat").read_text()
-        if stat.rsplit(")", 1)[1].split()[0] == "Z":
-            return False
-    return True
 
 
 def _answers(url: str) -> bool:
@@ -163,7 +149,7 @@ class EmulatorSupervisor:
         except (OSError, ValueError):
             return None
         pid, url = int(info.get("pid", 0)), str(info.get("url", ""))
-        if pid <= 0 or not _pid_alive(pid) or not _answers(url):
+        if pid <= 0 or not pid_alive(pid) or not _answers(url):
             with contextlib.suppress(OSError):
                 paths["port"].unlink()
             return None
@@ -241,11 +227,11 @@ class EmulatorSupervisor:
         deadline = time.monotonic() + timeout
         for name, p in self.procs.items():
             popen = self._popen.get(name)
-            while _pid_alive(p.pid) and time.monotonic() < deadline:
+            while pid_alive(p.pid) and time.monotonic() < deadline:
                 if popen is not None and popen.poll() is not None:
                     break
                 time.sleep(0.05)
-            if _pid_alive(p.pid):
+            if pid_alive(p.pid):
                 with contextlib.suppress(ProcessLookupError):
                     os.kill(p.pid, signal.SIGKILL)
             if popen is not None:

@@ -2,22 +2,10 @@
 
 from __future__ import annotations
 
-import time
-
 import pytest
 
 from robots.emulator.robot import check_exactly_once
-
-
-def _wait(predicate, timeout: float = 30.0, what: str = "condition"):
-    deadline = time.monotonic() + timeout
-    while True:
-        value = predicate()
-        if value:
-            return value
-        if time.monotonic() > deadline:
-            raise AssertionError(f"timed out waiting for {what}")
-        time.sleep(0.05)
+from tests.support.waiting import wait_for as _wait
 
 
 @pytest.fixture

@@ -30,6 +30,7 @@ import pytest
 from robots.emulator.robot import check_exactly_once
 from server.linkservice.emulators import EmulatorProcess
 from tests.support.live import free_port
+from tests.support.waiting import wait_for as _wait
 
 pytestmark = pytest.mark.slow
 
@@ -116,16 +117,6 @@ class Server:
         self.http.close()
         self.log.close()
 
-
-def _wait(predicate, timeout: float, what: str):
-    deadline = time.monotonic() + timeout
-    while True:
-        value = predicate()
-        if value:
-            return value
-        if time.monotonic() > deadline:
-            raise AssertionError(f"timed out waiting for {what}")
-        time.sleep(0.02)
 
 
 def _emulators_stopped(data: Path) -> None:

@@ -11,19 +11,10 @@ import time
 import pytest
 
 from robots.emulator.robot import check_exactly_once
+from tests.support.waiting import wait_for as _wait
 
 ESTOP_MODE = 4  # STATE.mode ESTOP (docs/protocol.md §6)
 
-
-def _wait(predicate, timeout: float = 30.0, what: str = "condition"):
-    deadline = time.monotonic() + timeout
-    while True:
-        value = predicate()
-        if value:
-            return value
-        if time.monotonic() > deadline:
-            raise AssertionError(f"timed out waiting for {what}")
-        time.sleep(0.05)
 
 
 @pytest.fixture
