@@ -6,7 +6,8 @@ and ``jacobian(q)`` its 6×7 geometric Jacobian ``[v; ω]`` (seed Eq. 13).
 ``model.climber`` is the 5-DoF climbing chain J1…J5 from the stance (rear)
 foot sole B to the swing (front) foot sole P (seed Eq. 1) with the closed-form
 φy = 0 inverse kinematics of Eq. 8.  Both chains are read from ``cmbot.urdf``
-(generated from ``params.toml`` by :mod:`robots.cmbot.urdf`).
+(generated from ``params.toml`` by :mod:`robots.cmbot.urdf`); the closed forms
+live in :mod:`robots.cmbot.kinematics`.
 """
 
 from __future__ import annotations
@@ -18,6 +19,7 @@ from typing import Any
 
 import numpy as np
 
+from robots.cmbot.kinematics import climber_ik_batch
 from robots.kinematics import pose_error, solve_ik_dls
 from robots.model import RobotModel, read_params
 
@@ -193,8 +195,6 @@ class ClimberModel(CmbotChain):
     def ik(self, T: np.ndarray, q0: np.ndarray | None = None) -> np.ndarray | None:
         """Seed Eq. 8 (corrected): the knee-up solution for a sole pose with φy = 0
         (sole parallel to B's sole), else ``None``."""
-        from planners.cmbot.climbing_kinematics import climber_ik_batch
-
         T = np.asarray(T, dtype=float)
         if abs(T[2, 2] - 1.0) > 1e-9:  # only yaw is reachable with φy = 0
             return None
@@ -222,8 +222,6 @@ class CmbotModel(CmbotChain):
 
     def stance_climber_q(self) -> np.ndarray:
         """J1…J5 with both soles down at the work distance (the manipulation stance)."""
-        from planners.cmbot.climbing_kinematics import climber_ik_batch
-
         assert self.climber is not None
         c = self.params["climber"]
         q, ok = climber_ik_batch(

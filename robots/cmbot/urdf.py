@@ -19,14 +19,15 @@ from typing import Any
 
 import numpy as np
 
+from robots.cmbot.kinematics import climber_mdh
+
 HERE = Path(__file__).resolve().parent
 
 
 def climber_table(p: dict[str, Any]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Corrected Table 1 (see planners/cmbot/climbing_kinematics.py): α, a, d."""
-    l1, l2 = p["climber"]["l1"], p["climber"]["l2"]
-    alpha = np.array([0.0, math.pi / 2, 0.0, 0.0, -math.pi / 2])
-    return alpha, np.array([0.0, 0.0, l2, l2, 0.0]), np.array([l1, 0.0, 0.0, 0.0, -l1])
+    """Corrected Table 1 (see :mod:`robots.cmbot.kinematics`): α, a, d."""
+    # One table: the URDF is generated from the same rows the closed forms use.
+    return climber_mdh(p["climber"]["l1"], p["climber"]["l2"])
 
 
 def arm_table(p: dict[str, Any]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
