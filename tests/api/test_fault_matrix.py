@@ -4,6 +4,7 @@ executed twice (asserted from the emulator's own execution log)."""
 
 from __future__ import annotations
 
+import dataclasses
 import os
 import signal
 import time
@@ -18,7 +19,7 @@ from robots.emulator.server import Emulator
 from robots.protocol.auth import load_or_create_secret
 from server.app import create_app
 from server.auth import create_token
-from server.kinds import registry
+from server.kinds import import_errors, registry
 from server.linkservice import robot_key_path
 from tests.conftest import Api, make_settings
 
@@ -31,6 +32,7 @@ FAULTS: dict[str, FaultConfig] = {
     "drop": FaultConfig(),
     "silence": FaultConfig(),
     "corrupt": FaultConfig(corrupt_rate=0.003, seed=7),
+    # delay_s is replaced per program by _delay_for (scaled to its commands).
     "delay": FaultConfig(delay_s=0.15),
     "nak": FaultConfig(nak_index=2, nak_times=2),
     "reject": FaultConfig(nak_index=3, nak_permanent=True),
@@ -47,7 +49,41 @@ PARAMS: dict[str, dict] = {
     "sbg.inspect": {},
 }
 
-KINDS = sorted(k for k, v in registry().items() if v.compile is not None and v.robot is not None)
+#: Every DESIGN kind that compiles to a robot program (fixed here, not read
+#: back from the registry: a kind that silently failed to load would otherwise
+#: just drop out of the matrix).
+KINDS = sorted(
+    [
+        "ara.navigate",
+        "ara.switch",
+        "blast",
+        "cmbot.climb",
+        "cmbot.manipulate",
+        "demo.route",
+        "sbg.inspect",
+    ]
+)
+
+#: Wall seconds each program is scaled to (``time_scale``), so faults land mid-run.
+RUN_WALL_S = 3.0
+
+
+def _delay_for(n_commands: int) -> float:
+    """Frame delay for a program of ``n_commands``, scaled to it.
+
+    Each command then lasts ``RUN_WALL_S / n`` wall seconds; holding every frame
+    for half of that (clamped to 20–150 ms) keeps the delay comparable to a
+    command's own duration — acknowledgements arrive after the motion they
+    acknowledge has begun — without a long program paying 150 ms per frame.
+    """
+    return min(0.15, max(0.02, 0.5 * RUN_WALL_S / max(n_commands, 1)))
+
+
+def test_every_design_kind_is_registered_and_none_failed_to_import() -> None:
+    assert import_errors() == {}
+    assert set(KINDS) <= set(registry())
+    for kind in KINDS:
+        assert registry()[kind].compile is not None and registry()[kind].robot is not None, kind
 
 
 @pytest.fixture(scope="module")
@@ -93,14 +129,29 @@ def _fresh_approved(mapi: Api, base: dict) -> dict:
 @pytest.mark.parametrize("kind", KINDS)
 def test_fault_matrix(mapi, base_plans, kind: str, fault: str) -> None:
     robot = registry()[kind].robot
-    # Run each program in about 3 s of wall time, whatever its length, so the
-    # faults land mid-run.
-    duration = sum(c.get("duration_s", 0.0) for c in base_plans[kind]["program"])
-    scale = max(duration / 3.0, 1.0)
+    # Run each program in about RUN_WALL_S of wall time, whatever its length,
+    # so the faults land mid-run.
+    program = base_plans[kind]["program"]
+    duration = sum(c.get("duration_s", 0.0) for c in program)
+    scale = max(duration / RUN_WALL_S, 1.0)
+    faults = FAULTS[fault]
+    if fault == "delay":
+        faults = dataclasses.replace(faults, delay_s=_delay_for(len(program)))
     plan = _fresh_approved(mapi, base_plans[kind])
     # The robot holds the secret this server's link service uses for it.
     secret = load_or_create_secret(robot_key_path(mapi.services.settings.data, robot))
-    emulator = Emulator(robot, faults=FAULTS[fault], time_scale=scale, secret=secret).start()
+    emulator = Emulator(robot, faults=faults, time_scale=scale, secret=secret)
+    # Count the frames the emulator really holds back (its stats have no
+    # counter for delays): wrap, not replace, its scheduler.
+    held = [0]
+    schedule = emulator._later
+
+    def counting_later(when: float, action, _schedule=schedule) -> None:
+        held[0] += 1
+        _schedule(when, action)
+
+    emulator._later = counting_later  # type: ignore[method-assign]
+    emulator.start()
     try:
         r = mapi.put(f"/api/v1/robots/{robot}/connection", "admin", json={"url": emulator.url})
         assert r.status_code == 200, r.text
@@ -146,6 +197,9 @@ def test_fault_matrix(mapi, base_plans, kind: str, fault: str) -> None:
             assert stats["bytes_corrupted"] > 0
         elif fault in ("reject", "robot_fault"):
             assert resumes >= 1
+        elif fault == "delay":
+            # every command and its acknowledgement crossed a delayed link
+            assert held[0] >= 2 * ex["total"], (held[0], ex["total"])
         elif fault == "nak":
             link_stats = mapi.services.dispatch.robot_status(robot)["stats"]
             assert link_stats.get("naks", 0) >= 1, link_stats
