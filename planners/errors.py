@@ -62,3 +62,7 @@ class MotionPlanningError(InfeasibleError):
 
 class StreamLengthError(InvalidInputError):
     """A blasting stream length outside the nozzle's safe window (seed §3.2.1)."""
+
+
+class InternalError(PlannerError, RuntimeError):
+    """A planner's own consistency check failed: a bug to report, not a fault of the input."""

@@ -31,6 +31,7 @@ import numpy as np
 from scipy.optimize import least_squares, minimize
 
 from planners.blasting.collision import Obstacles, Spheroids, clearance
+from planners.errors import UnreachableError
 
 ALPHA_P = 1.0  # Eq. 3.11 weight per metre of position error (chosen)
 ALPHA_O = 0.05  # Eq. 3.11 weight per unit of |a − n| (chosen: 1° ≈ 0.9 mm)
@@ -86,7 +87,7 @@ def choose_branches(Q: np.ndarray, ok: np.ndarray, q_start: np.ndarray) -> np.nd
     if N == 0:
         return np.zeros(0, dtype=int)
     if not ok.any(axis=1).all():
-        raise ValueError("every spot needs at least one valid IK branch")
+        raise UnreachableError("every spot needs at least one valid IK branch")
     cost = np.where(ok[0], _change(Q[0], q_start), np.inf)
     back = np.zeros((N, K), dtype=int)
     for i in range(1, N):

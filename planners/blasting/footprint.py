@@ -29,6 +29,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from planners.blasting.nozzle import Nozzle
+from planners.errors import InvalidInputError
 
 
 @dataclass(frozen=True)
@@ -81,7 +82,7 @@ def exact_ellipse(
     sb, cb = np.sin(beta), np.cos(beta)
     A = ca * ca - sb * sb
     if np.any(A <= 0):
-        raise ValueError("the tilt must stay below 90° − the cone half-angle")
+        raise InvalidInputError("the tilt must stay below 90° − the cone half-angle")
     h = L * cb
     b = h * sa / np.sqrt(A)
     a = h * sa * ca / A

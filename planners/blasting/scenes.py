@@ -33,6 +33,7 @@ import numpy as np
 
 from planners.blasting.collision import Box
 from planners.blasting.surface import Surface
+from planners.errors import InvalidInputError
 
 MM = 1e-3
 ROBOT_BASE_MM = (500.0, 375.0, 370.0)  # seed §4.2.4
@@ -71,7 +72,9 @@ def seed_shape(name: str, size_m: float = 0.5, *, n_circle: int = 96) -> np.ndar
             ]
         )  # fmt: skip
     else:
-        raise ValueError(f"unknown seed shape {name!r}; choose trapezoid, circle or arbitrary")
+        raise InvalidInputError(
+            f"unknown seed shape {name!r}; choose trapezoid, circle or arbitrary"
+        )
     P = P - (P.min(axis=0) + P.max(axis=0)) / 2.0
     return P * (size_m / np.ptp(P, axis=0).max())
 
@@ -153,7 +156,7 @@ def bridge_surface(k: int) -> Surface:
     """Surface 1 (roof, normal −z), 2 or 3 (girder web, normal +x) with the
     seed's centres; outlines chosen (the boundary is relative to the centre)."""
     if k not in SURFACE_CENTRES_MM:
-        raise ValueError(f"unknown bridge surface {k!r}; choose 1, 2 or 3")
+        raise InvalidInputError(f"unknown bridge surface {k!r}; choose 1, 2 or 3")
     c = np.asarray(SURFACE_CENTRES_MM[k]) * MM
     if k == 1:
         return Surface(c, np.array([0.0, 0.0, -1.0]), _S1)

@@ -28,6 +28,8 @@ from scipy.sparse.csgraph import minimum_spanning_tree
 from scipy.spatial import cKDTree
 from scipy.spatial.distance import pdist, squareform
 
+from planners.errors import InvalidInputError
+
 TURN_THRESHOLD_DEG = 10.0  # a heading change above this counts as a turn (Table 4.2 style)
 
 
@@ -126,7 +128,7 @@ def brute_force(
     """Exact optimum by enumerating all orders (for ≤ 9 spots; tests)."""
     n = len(points)
     if n > 9:
-        raise ValueError(f"brute force is for at most 9 spots, got {n}")
+        raise InvalidInputError(f"brute force is for at most 9 spots, got {n}")
     perms = np.array(list(itertools.permutations(range(n))))
     costs = path_cost(points, perms, penalty, c, turn_weight)
     k = int(np.argmin(costs))

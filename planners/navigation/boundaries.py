@@ -32,6 +32,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial import ConvexHull, QhullError
 
+from planners.errors import InvalidInputError
 from planners.navigation.segmentation import Border
 from planners.pointcloud import ncbe_boundary
 
@@ -95,7 +96,7 @@ def cluster_geometry(
     of own + border points ordered by angle about the centre.
     """
     if polygons not in POLYGON_METHODS:
-        raise ValueError(f"polygons must be one of {POLYGON_METHODS}, got {polygons!r}")
+        raise InvalidInputError(f"polygons must be one of {POLYGON_METHODS}, got {polygons!r}")
     extra: dict[int, list[np.ndarray]] = {k: [] for k in range(len(kinds))}
     for br in borders:
         extra[br.a].append(br.points)

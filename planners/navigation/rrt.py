@@ -19,6 +19,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from planners.errors import InvalidInputError
+
 ValidFn = Callable[[np.ndarray], np.ndarray]
 
 
@@ -357,7 +359,7 @@ def primitive_poses(
             [np.full(n, a[0]), np.full(n, a[1]), wrap(a[2] + t * dyaw)]
         )
     if abs(dyaw) > 1e-9 or abs(d[0] * np.sin(a[2]) - d[1] * np.cos(a[2])) > 1e-7:
-        raise ValueError(
+        raise InvalidInputError(
             f"pose ({a[0]:.4f}, {a[1]:.4f}, {np.degrees(a[2]):.1f}°) → "
             f"({b[0]:.4f}, {b[1]:.4f}, {np.degrees(b[2]):.1f}°) is neither a turn in place "
             "nor a straight drive along the heading"

@@ -22,7 +22,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.spatial import ConvexHull, QhullError, cKDTree
 
-from planners.errors import InvalidInputError
+from planners.errors import InternalError, InvalidInputError
 from planners.pointcloud._validate import as_points, positive
 
 
@@ -132,7 +132,7 @@ def order_boundary(points2d: np.ndarray) -> np.ndarray:
                 cur = int(free[0])
                 break
             if kq >= k:
-                raise AssertionError("unreachable: unvisited point missing")  # pragma: no cover
+                raise InternalError("unreachable: unvisited point missing")  # pragma: no cover
             kq *= 4
         visited[cur] = True
         ring.append(cur)

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from planners.errors import InternalError
+
 
 def euler_trail(n: int, eu: np.ndarray, ev: np.ndarray, start: int) -> tuple[list[int], list[bool]]:
     """Traverse every edge ``j`` (``eu[j]``–``ev[j]``, self-loops and repeats allowed) once.
@@ -49,7 +51,7 @@ def euler_trail(n: int, eu: np.ndarray, ev: np.ndarray, start: int) -> tuple[lis
         estack.append((j, first_end[j] == x))
         vstack.append(y)
     if len(out_e) != m:
-        raise RuntimeError(
+        raise InternalError(
             f"Euler trail covered {len(out_e)} of {m} edges: the multigraph is not connected "
             "or has the wrong odd vertices (internal error)"
         )

@@ -18,6 +18,8 @@ from typing import Any
 import numpy as np
 from scipy.spatial import cKDTree
 
+from planners.errors import InvalidInputError
+
 
 @dataclass
 class SphereCover:
@@ -76,7 +78,7 @@ def sphere_cover(
         elif s.kind == "sphere":
             extent = None
         else:  # pragma: no cover - URDF loader rejects others
-            raise ValueError(f"unsupported collision shape {s.kind}")
+            raise InvalidInputError(f"unsupported collision shape {s.kind}")
         if extent is None:
             local, rad = np.zeros((1, 3)), float(s.size[0])
         else:
