@@ -8,15 +8,18 @@ axial noise model σ(z) = s0 + s2·(z − 0.4)² (Nguyen et al. 2012, Kinect
 class), with random pixel dropout.  Points come back in the camera (optical)
 frame, as a real scan would.  Everything is deterministic given ``seed``.
 
-| scene              | seed experiment                       | expected mode |
-| ------------------ | ------------------------------------- | ------------- |
-| same_height        | Fig. 5.3(a): surface at base height   | mobile        |
-| step_down_7cm      | Fig. 5.3(b): surface 7 cm lower       | inchworm      |
-| perpendicular      | Fig. 5.4: two perpendicular slabs     | inchworm      |
-| narrow_surface     | Fig. 5.2(b)-(d): 1 of 5 rectangles fit | inchworm      |
-| too_small          | Fig. 5.2 (insufficient surface)       | none          |
-| corroded_slab      | §5.1 corroded slabs, holes (Alg. 1)   | mobile        |
-| no_surface         | Eq. 3.2 with P_cl = ∅                 | none          |
+| scene              | seed experiment                        |
+| ------------------ | -------------------------------------- |
+| same_height        | Fig. 5.3(a): surface at base height    |
+| step_down_7cm      | Fig. 5.3(b): surface 7 cm lower        |
+| perpendicular      | Fig. 5.4: two perpendicular slabs      |
+| narrow_surface     | Fig. 5.2(b)-(d): 1 of 5 rectangles fit |
+| too_small          | Fig. 5.2 (insufficient surface)        |
+| corroded_slab      | §5.1 corroded slabs, holes (Alg. 1)    |
+| no_surface         | Eq. 3.2 with P_cl = ∅                  |
+
+The mode each scene must give is the seed's, asserted in the tests
+(``tests/switching/test_scenes.py``), not stated here.
 """
 
 from __future__ import annotations
@@ -69,14 +72,14 @@ class SceneSurface:
 
 @dataclass
 class Scene:
-    """A synthetic scan with what the seed's experiment says it should give."""
+    """A synthetic scan of one of the seed's experiments (the verdict it must
+    give is asserted in ``tests/switching/test_scenes.py``, from the seed)."""
 
     name: str
     points: np.ndarray  # (N, 3) camera frame
     camera_to_base: np.ndarray
     base_height: float
     surfaces: list[SceneSurface]
-    expected_mode: str
     description: str
     spheres: list[tuple[np.ndarray, float]] = field(default_factory=list)
 
@@ -148,27 +151,27 @@ def _standing(x_end: float) -> SceneSurface:
     return _horizontal("standing", 0.0, shapely.box(-0.9, -0.5, x_end, 0.5))
 
 
-def _same_height(rng: np.random.Generator) -> tuple[list[SceneSurface], list, str, str]:
-    return [_standing(1.8)], [], "mobile", "Fig. 5.3(a): the slab continues ahead at base height"
+def _same_height(rng: np.random.Generator) -> tuple[list[SceneSurface], list, str]:
+    return [_standing(1.8)], [], "Fig. 5.3(a): the slab continues ahead at base height"
 
 
-def _step_down(rng: np.random.Generator) -> tuple[list[SceneSurface], list, str, str]:
+def _step_down(rng: np.random.Generator) -> tuple[list[SceneSurface], list, str]:
     surfaces = [
         _standing(0.14),
         _horizontal("lower", -0.07, shapely.box(0.14, -0.5, 1.8, 0.5)),
     ]
-    return surfaces, [], "inchworm", "Fig. 5.3(b): the next slab is 7 cm below the base"
+    return surfaces, [], "Fig. 5.3(b): the next slab is 7 cm below the base"
 
 
-def _perpendicular(rng: np.random.Generator) -> tuple[list[SceneSurface], list, str, str]:
+def _perpendicular(rng: np.random.Generator) -> tuple[list[SceneSurface], list, str]:
     surfaces = [
         _standing(0.45),
         _wall_facing_minus_x("wall", 0.45, shapely.box(-0.5, 0.0, 0.5, 0.8)),
     ]
-    return surfaces, [], "inchworm", "Fig. 5.4: a second slab perpendicular to the first, ahead"
+    return surfaces, [], "Fig. 5.4: a second slab perpendicular to the first, ahead"
 
 
-def _narrow(rng: np.random.Generator) -> tuple[list[SceneSurface], list, str, str]:
+def _narrow(rng: np.random.Generator) -> tuple[list[SceneSurface], list, str]:
     # An irregular pentagonal plate 5 cm below the base, barely larger than a
     # foot: of Alg. 2's five rectangles exactly one passes (Fig. 5.2(b)-(c)).
     # The outline was picked by a seeded random search over pentagons for one
@@ -180,18 +183,17 @@ def _narrow(rng: np.random.Generator) -> tuple[list[SceneSurface], list, str, st
     return (
         surfaces,
         [],
-        "inchworm",
         "Fig. 5.2: an irregular plate where one of five rectangles fits",
     )
 
 
-def _too_small(rng: np.random.Generator) -> tuple[list[SceneSurface], list, str, str]:
+def _too_small(rng: np.random.Generator) -> tuple[list[SceneSurface], list, str]:
     plate = shapely.box(0.45, -0.06, 0.60, 0.05)  # 15 × 11 cm < foot 18 × 12 cm
     surfaces = [_standing(0.12), _horizontal("plate", -0.05, plate)]
-    return surfaces, [], "none", "Fig. 5.2 (insufficient area): a plate smaller than a foot"
+    return surfaces, [], "Fig. 5.2 (insufficient area): a plate smaller than a foot"
 
 
-def _corroded(rng: np.random.Generator) -> tuple[list[SceneSurface], list, str, str]:
+def _corroded(rng: np.random.Generator) -> tuple[list[SceneSurface], list, str]:
     slab = shapely.box(-0.9, -0.5, 1.8, 0.5)
     centres = rng.uniform((0.35, -0.35), (0.85, 0.35), (10, 2))
     radii = rng.uniform(0.012, 0.03, 10)
@@ -201,12 +203,11 @@ def _corroded(rng: np.random.Generator) -> tuple[list[SceneSurface], list, str, 
     return (
         [_horizontal("corroded", 0.0, slab.difference(holes))],
         [],
-        "mobile",
         "§5.1 corroded slab at base height with pits (NCBE ignores small holes)",
     )
 
 
-def _no_surface(rng: np.random.Generator) -> tuple[list[SceneSurface], list, str, str]:
+def _no_surface(rng: np.random.Generator) -> tuple[list[SceneSurface], list, str]:
     # The beam ends just ahead of foot 2; beyond it only clutter (cables,
     # bolts) far below: nothing planar to step on.
     spheres = [
@@ -214,10 +215,10 @@ def _no_surface(rng: np.random.Generator) -> tuple[list[SceneSurface], list, str
         (np.array([0.9, 0.2, -0.3]), 0.04),
         (np.array([1.2, -0.3, -0.45]), 0.08),
     ]
-    return [_standing(0.12)], spheres, "none", "Eq. 3.2: no planar surface in view (P_cl = ∅)"
+    return [_standing(0.12)], spheres, "Eq. 3.2: no planar surface in view (P_cl = ∅)"
 
 
-SCENES: dict[str, Callable[[np.random.Generator], tuple[list[SceneSurface], list, str, str]]] = {
+SCENES: dict[str, Callable[[np.random.Generator], tuple[list[SceneSurface], list, str]]] = {
     "same_height": _same_height,
     "step_down_7cm": _step_down,
     "perpendicular": _perpendicular,
@@ -234,7 +235,7 @@ def make_scene(name: str, seed: int = 0, *, camera: DepthCamera | None = None) -
         raise InvalidInputError(f"unknown scene {name!r}; known: {', '.join(SCENES)}")
     cam = camera or DepthCamera()
     rng = np.random.default_rng(seed)
-    surfaces, spheres, expected, text = SCENES[name](rng)
+    surfaces, spheres, text = SCENES[name](rng)
     pts = raycast(surfaces, cam, seed=seed, spheres=spheres)
     return Scene(
         name=name,
@@ -242,7 +243,6 @@ def make_scene(name: str, seed: int = 0, *, camera: DepthCamera | None = None) -
         camera_to_base=cam.camera_to_base(),
         base_height=0.0,
         surfaces=surfaces,
-        expected_mode=expected,
         description=text,
         spheres=spheres,
     )
