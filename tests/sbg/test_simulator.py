@@ -54,9 +54,17 @@ def test_seeded_runs_are_deterministic(path2) -> None:
     c = simulate(path2, seed=6)
     for k in ("t_s", "pos", "d_m", "v_left", "pitch_rad"):
         np.testing.assert_array_equal(a.arrays[k], b.arrays[k])
-    assert not np.array_equal(a.arrays["pos"], c.arrays["pos"]) or len(a.arrays["pos"]) != len(
-        c.arrays["pos"]
-    )
+    # Another seed draws other noise: the runs differ already on their common
+    # prefix (not merely in length) ...
+    n = min(len(a.arrays["pos"]), len(c.arrays["pos"]))
+    assert np.abs(a.arrays["pos"][:n] - c.arrays["pos"][:n]).max() > 1e-4
+    # ... and the seed acts only through the noise: without noise every seed
+    # gives the same run, sample for sample.
+    z5 = simulate(path2, noise=NoiseModel.none(), seed=5)
+    z6 = simulate(path2, noise=NoiseModel.none(), seed=6)
+    assert set(z5.arrays) == set(z6.arrays)
+    for k in z5.arrays:
+        np.testing.assert_array_equal(z5.arrays[k], z6.arrays[k], err_msg=k)
 
 
 def test_noisy_run_meets_the_seed_figures_and_keeps_the_welds_in_view(path2) -> None:
@@ -124,12 +132,37 @@ def test_rib_clearance_hand_case() -> None:
     assert float(c[0]) == pytest.approx(0.156429 - 0.1025, abs=1e-6)
 
 
+def _settle_time(t: np.ndarray, d: np.ndarray, tol_m: float = 1e-3) -> float:
+    """Time from the start until the true |d| stays below ``tol_m`` (computed here,
+    independently of ``experiments.settling``)."""
+    ok = np.isfinite(d)
+    t, d = t[ok], d[ok]
+    above = np.flatnonzero(np.abs(d) > tol_m)
+    if len(above) == 0:
+        return 0.0
+    return math.inf if above[-1] == len(d) - 1 else float(t[above[-1] + 1] - t[0])
+
+
 def test_lx_sweep_reports_a_best_value() -> None:
     sweep = ex.lx_sweep([0.01, 0.04], seeds=[0], d0_m=0.005)
     assert [r.preview_m for r in sweep.rows] == [0.01, 0.04]
-    assert sweep.best_preview_m in (0.01, 0.04)
-    best = next(r for r in sweep.rows if r.preview_m == sweep.best_preview_m)
-    assert all(best.settle_time_mean_s <= r.settle_time_mean_s for r in sweep.rows)
+    # The same Fig. 14 runs made one by one, graded here: the best Lx is the
+    # one that settles soonest among those meeting the seed's §4.2 figures.
+    settle, episodes = {}, {}
+    for lx in (0.01, 0.04):
+        run = ex.fig14_tracking(preview_m=lx, d0_m=0.005, seed=0)
+        assert run.finished
+        assert abs(run.final_d_m) <= 0.33e-3 and abs(run.final_delta_rad) <= 0.06 * DEG
+        settle[lx] = _settle_time(run.t_s, run.d_m)
+        episodes[lx] = run.episodes
+        row = next(r for r in sweep.rows if r.preview_m == lx)
+        assert row.settle_time_mean_s == pytest.approx(settle[lx])
+    assert math.isfinite(settle[0.01]) and settle[0.01] != settle[0.04]
+    assert sweep.best_preview_m == min(settle, key=settle.get)
+    # From 5 mm off the line the 10 mm preview overcorrects (more correction
+    # episodes: 47 vs 23 today) and settles later than 40 mm (4.25 s vs 2.9 s).
+    assert episodes[0.01] > episodes[0.04]
+    assert sweep.best_preview_m == 0.04
 
 
 def test_fig12_profiles() -> None:
