@@ -415,12 +415,6 @@ def compile_program(plan: Any) -> list[dict[str, Any]]:
     return as_dicts(cmds)
 
 
-def _draw(ctx: Any, plan: Any) -> None:
-    from server.scene.ara_navigate import draw
-
-    draw(ctx, plan)
-
-
 KIND = PlanKind(
     name="ara.navigate",
     title="ARA: inspection route over a steel-bar structure",
@@ -430,6 +424,5 @@ KIND = PlanKind(
     validate=validate,
     robot="ara",
     samples=dict(SAMPLES),
-    draw=_draw,
     compile=compile_program,
 )

@@ -340,12 +340,6 @@ def compile_program(plan: Any, sample_s: float = 0.1) -> list[dict[str, Any]] | 
     )
 
 
-def _draw(ctx: Any, plan: Any) -> None:
-    from server.scene.ara_switch import draw
-
-    draw(ctx, plan)
-
-
 KIND = PlanKind(
     name="ara.switch",
     title="ARA: mobile / inch-worm switching and inch-worm jump",
@@ -356,5 +350,4 @@ KIND = PlanKind(
     robot="ara",
     compile=compile_program,
     samples={f"{SAMPLE_PREFIX}{name}": _sample(name) for name in SCENES},
-    draw=_draw,
 )

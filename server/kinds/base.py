@@ -1,9 +1,11 @@
 """Types of the plan-kind registry.
 
 A plan kind couples a pydantic params model, a function that runs a pure
-planner, the checks it computes, sample clouds, a scene drawer and a compiler
-to robot commands.  Adding a kind touches one new module plus one line in
-:data:`server.kinds.KIND_MODULES` (DESIGN §5, §6).
+planner, the checks it computes, sample clouds and a compiler to robot
+commands.  Adding a kind touches one new module plus one line in
+:data:`server.kinds.KIND_MODULES` (DESIGN §5, §6); its scene drawer is found
+by kind name in :data:`server.scene.drawers.DRAWERS` (kinds never import the
+scene, the scene never imports the kinds).
 """
 
 from __future__ import annotations
@@ -11,13 +13,10 @@ from __future__ import annotations
 import copy
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any, Protocol
+from typing import Any, Protocol
 
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
-
-if TYPE_CHECKING:
-    from server.scene.context import DrawContext
 
 
 class StrictParams(BaseModel):
@@ -153,7 +152,6 @@ class PlanKind:
     description: str = ""
     robot: str | None = None
     samples: Mapping[str, SampleFn] = field(default_factory=dict)
-    draw: Callable[[DrawContext, PlanView], None] | None = None
     #: Result → command program dicts; returning None means "nothing for the
     #: robot to do" (no program, not dispatchable).
     compile: Callable[[PlanView], list[dict[str, Any]] | None] | None = None

@@ -386,12 +386,6 @@ def sample_under_deck(seed: int) -> np.ndarray:
     return pts + rng.normal(scale=0.002, size=pts.shape)
 
 
-def _draw(ctx: Any, plan: Any) -> None:
-    from server.scene.blast import draw
-
-    draw(ctx, plan)
-
-
 KIND = PlanKind(
     name="blast",
     title="Sand-blasting a rusted surface (DENSO VM-6083)",
@@ -400,7 +394,6 @@ KIND = PlanKind(
     run=run,
     validate=validate,
     samples={"blast_under_deck": sample_under_deck},
-    draw=_draw,
     robot=ROBOT,
     compile=compile_program,
 )

@@ -295,12 +295,6 @@ def compile_program(plan: Any, sample_s: float = 0.1) -> list[dict[str, Any]]:
     )
 
 
-def _draw(ctx: Any, plan: Any) -> None:
-    from server.scene.cmbot import draw_climb
-
-    draw_climb(ctx, plan)
-
-
 KIND = PlanKind(
     name="cmbot.climb",
     title="CMBOT: inchworm climb along a guardrail",
@@ -308,7 +302,6 @@ KIND = PlanKind(
     params_model=CmbotClimbParams,
     run=run,
     validate=validate,
-    draw=_draw,
     robot="cmbot",
     compile=compile_program,
 )

@@ -233,12 +233,6 @@ def compile_program(plan: Any) -> list[dict[str, Any]]:
     return [c.to_dict() for c in cmds]
 
 
-def _draw(ctx: Any, plan: Any) -> None:
-    from server.scene.cmbot import draw_manipulate
-
-    draw_manipulate(ctx, plan)
-
-
 KIND = PlanKind(
     name="cmbot.manipulate",
     title="CMBOT: arm maintenance motion with obstacle avoidance",
@@ -246,7 +240,6 @@ KIND = PlanKind(
     params_model=CmbotManipulateParams,
     run=run,
     validate=validate,
-    draw=_draw,
     robot=ROBOT,
     compile=compile_program,
 )

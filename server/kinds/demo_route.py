@@ -161,12 +161,6 @@ def sample_plane(seed: int) -> np.ndarray:
     return np.hstack([xy, z])
 
 
-def _draw(ctx: Any, plan: Any) -> None:
-    from server.scene.demo_route import draw
-
-    draw(ctx, plan)
-
-
 KIND = PlanKind(
     name="demo.route",
     title="Demo: shortest route on a small graph",
@@ -175,7 +169,6 @@ KIND = PlanKind(
     run=run,
     validate=validate,
     samples={"demo_plane": sample_plane},
-    draw=_draw,
     robot="ara",
     compile=compile_wheels,
 )

@@ -445,12 +445,6 @@ def run(p: SbgInspectParams, ctx: JobContext) -> KindOutput:
     return KindOutput(result=_clean(result), arrays=arrays, checks=checks, metrics=metrics)
 
 
-def _draw(ctx: Any, plan: Any) -> None:
-    from server.scene.sbg_inspect import draw
-
-    draw(ctx, plan)
-
-
 def compile_program(plan: Any) -> list[dict[str, Any]]:
     """Wheel-speed and lift-arm commands reproducing the simulated run.
 
@@ -481,7 +475,6 @@ KIND = PlanKind(
     params_model=SbgInspectParams,
     run=run,
     robot="sbg_climber",
-    draw=_draw,
     validate=validate,
     compile=compile_program,
 )

@@ -22,9 +22,9 @@ from typing import Any
 
 import numpy as np
 
-from server.kinds import registry
 from server.lifecycle import PlanState
 from server.scene.context import Animation, DrawContext, current_scene_client
+from server.scene.drawers import drawer_for, robot_for
 from server.scene.proposals import ProposalBook
 from server.scene.wsguard import TicketDesk, guarded_viser_start
 from server.store import PlanRecord, Store
@@ -125,12 +125,11 @@ class SceneService:
             self._follow = plan.id
         with self._lock:
             self._clear()
-            kind = registry().get(plan.kind)
             self.current = {
                 "plan_id": plan.id,
                 "kind": plan.kind,
                 "state": plan.state,
-                "robot": kind.robot if kind else None,
+                "robot": robot_for(plan.kind),
                 "base_pose": plan.result.get("robot_base_pose"),
             }
             if plan.result or plan.arrays:
@@ -138,8 +137,13 @@ class SceneService:
         return {"shown": plan.id, "state": plan.state, "following": self._follow == plan.id}
 
     def _draw(self, plan: PlanRecord) -> None:
-        kind = registry().get(plan.kind)
-        if kind is None or kind.draw is None:
+        # By kind name from the stored record: the scene never loads the kinds registry.
+        try:
+            draw = drawer_for(plan.kind)
+        except Exception:  # a broken drawer module must not take the scene down
+            log.exception("loading the drawer of kind %s failed", plan.kind)
+            draw = None
+        if draw is None:
             return
         ctx = DrawContext(
             scene=self._server.scene,
@@ -150,7 +154,7 @@ class SceneService:
             lock=self._lock,
         )
         try:
-            kind.draw(ctx, plan)
+            draw(ctx, plan)
         except Exception:
             log.exception("drawing plan %s failed", plan.id)
             self._server.scene.add_label(

@@ -1,0 +1,95 @@
+"""Scene drawers, looked up by plan-kind name.
+
+The scene draws a stored plan from what the plan record holds (its kind name,
+result and arrays), so it needs neither the kinds registry nor the kind
+modules, and a kind module never imports its drawer: the two layers meet
+only in the kind *name* (issue #13 §2, "one-way imports").  The built-in
+drawers are a static table of ``"module:function"`` targets, imported on the
+first draw so that importing the scene service stays as cheap as it was.
+Site-specific kinds (``STEELPATH_EXTRA_KINDS``) add theirs with
+:func:`register_drawer` from their own module.
+
+Each entry also names the robot whose URDF the scene shows live beside the
+planned ghost (``SceneService.update_live_robot``); a test checks it against
+the robot each registered kind drives.
+"""
+
+from __future__ import annotations
+
+import importlib
+import threading
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:
+    from server.scene.context import DrawContext
+
+#: ``draw(ctx, plan)``: ``plan`` is the stored record (``PlanRecord``-shaped:
+#: ``id``, ``kind``, ``params``, ``result``, ``checks``, ``array(name)``).
+Drawer = Callable[["DrawContext", Any], None]
+
+
+@dataclass(frozen=True)
+class DrawerSpec:
+    """Where a kind's drawer lives and which robot its plans move."""
+
+    target: str  #: ``"package.module:function"``
+    robot: str | None = None
+
+
+#: Kind name → drawer of every built-in kind (DESIGN §6 kinds plus the demo).
+DRAWERS: dict[str, DrawerSpec] = {
+    "demo.route": DrawerSpec("server.scene.demo_route:draw", "ara"),
+    "sbg.inspect": DrawerSpec("server.scene.sbg_inspect:draw", "sbg_climber"),
+    "ara.navigate": DrawerSpec("server.scene.ara_navigate:draw", "ara"),
+    "blast": DrawerSpec("server.scene.blast:draw", "denso_vm6083"),
+    "ara.switch": DrawerSpec("server.scene.ara_switch:draw", "ara"),
+    "cmbot.climb": DrawerSpec("server.scene.cmbot:draw_climb", "cmbot"),
+    "cmbot.manipulate": DrawerSpec("server.scene.cmbot:draw_manipulate", "cmbot"),
+}
+
+_registered: dict[str, tuple[Drawer, str | None]] = {}
+_lock = threading.Lock()  # registration may race the scene thread's first lookup
+
+
+def register_drawer(kind: str, draw: Drawer, robot: str | None = None) -> None:
+    """Draw plans of ``kind`` with ``draw`` (a site-specific kind's drawer).
+
+    A built-in kind keeps its own drawer: registering one for it raises
+    ``ValueError`` rather than silently replacing what operators see.
+    """
+    if kind in DRAWERS:
+        raise ValueError(f"plan kind {kind!r} already has a built-in drawer")
+    with _lock:
+        _registered[kind] = (draw, robot)
+
+
+def _load(target: str) -> Drawer:
+    module, _, name = target.partition(":")
+    fn: Drawer = getattr(importlib.import_module(module), name)
+    return fn
+
+
+def drawer_for(kind: str) -> Drawer | None:
+    """The drawer of ``kind``, or None for a kind the scene cannot draw."""
+    with _lock:
+        if kind in _registered:
+            return _registered[kind][0]
+    spec = DRAWERS.get(kind)
+    return None if spec is None else _load(spec.target)
+
+
+def robot_for(kind: str) -> str | None:
+    """The robot whose plans ``kind`` holds (shown live in the scene), if any."""
+    with _lock:
+        if kind in _registered:
+            return _registered[kind][1]
+    spec = DRAWERS.get(kind)
+    return None if spec is None else spec.robot
+
+
+def drawable_kinds() -> list[str]:
+    """Every kind name the scene has a drawer for."""
+    with _lock:
+        return sorted(set(DRAWERS) | set(_registered))
