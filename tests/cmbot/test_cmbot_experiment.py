@@ -87,10 +87,36 @@ def test_invalid_stance_is_refused():
         plan_manipulation(MODEL, rear_foot_x=7.30)
 
 
+def _valid_work_stances(rear_x: np.ndarray) -> np.ndarray:
+    """Whether the work stance (rear sole at x, front d0 ahead) has both soles
+    wholly on one bar segment and clear of every post's keep-out — computed
+    here from the seed guardrail's dimensions, not with ``Guardrail.valid_foothold``."""
+    from planners.cmbot import seed_guardrail
+
+    g = seed_guardrail()
+    c = MODEL.params["climber"]
+    half_sole, d0 = c["foot_length_m"] / 2, c["work_foot_distance_m"]
+    keep = g.params.post_width_m / 2 + g.params.post_keepout_m
+    ok = np.ones(len(rear_x), dtype=bool)
+    for x in (rear_x, rear_x + d0):
+        lo, hi = x - half_sole, x + half_sole
+        on_bar = np.zeros(len(x), dtype=bool)
+        for s0, s1 in g.segments:
+            on_bar |= (lo >= s0) & (hi <= s1)
+        clear = np.ones(len(x), dtype=bool)
+        for post in g.posts:
+            clear &= (hi <= post - keep) | (lo >= post + keep)
+        ok &= on_bar & clear
+    return ok
+
+
 def test_relocation_search_nearest_valid_stance_first(monkeypatch):
-    """The base search tries valid stances nearest first and returns the first
-    whose simulated motion passes (the planning runs are stubbed here; the
-    real gate is exercised by the experiment tests above)."""
+    """The base search tries valid stances nearest first (ties: behind first),
+    skips the invalid ones without simulating them, and returns the first
+    whose simulated motion passes.  The per-stance planning run is stubbed
+    (its real gate is exercised by the slow test below) so the stub can put
+    the passing stances just where the skipping is tested: beyond 8.35 m —
+    which the front foot cannot use (the post at 8.60 m) — and at 7.5 m."""
     import planners.cmbot.manipulation as man
     from planners.cmbot.arm import ArmKinematics
     from planners.cmbot.simulate import GateCheck, GateReport
@@ -99,16 +125,15 @@ def test_relocation_search_nearest_valid_stance_first(monkeypatch):
 
     def fake_plan_at(model, arm, guardrail, x, params, shift, avoidance, dt, progress=None):
         calls.append(round(x, 3))
-        ok = x >= 8.25
+        ok = x >= 8.35 - 1e-9 or x <= 7.5 + 1e-9
         rep = GateReport([GateCheck("clearance", ok, 0.1 if ok else 0.0, 0.05, "stub")])
         return None, params, None, None, rep
 
     monkeypatch.setattr(man, "_plan_at", fake_plan_at)
-    g = man.seed_guardrail()
     prop = man.propose_base(
         MODEL,
         ArmKinematics.from_model(MODEL),
-        g,
+        man.seed_guardrail(),
         8.0,
         ExperimentParams(),
         True,
@@ -116,10 +141,17 @@ def test_relocation_search_nearest_valid_stance_first(monkeypatch):
         0.05,
         lambda f, s: None,
     )
-    # 8.4–8.5 put the front foot on the post at 8.60 → skipped; 7.5 is the first valid one behind
-    assert prop.rear_foot_x == pytest.approx(8.25)
-    assert calls == [7.95, 8.05, 7.9, 8.1, 7.85, 8.15, 7.8, 8.2, 7.75, 8.25]
-    assert prop.shift_m == pytest.approx(0.25)
+    # Expected order, derived here: shifts ±0.05 … ±0.5 by distance, behind first.
+    shifts = [s * k * 0.05 for k in range(1, 11) for s in (-1, 1)]
+    xs = np.round(8.0 + np.array(shifts), 3)
+    valid = _valid_work_stances(xs)
+    assert list(xs[~valid]) == [8.35, 8.4, 8.45, 8.5]  # front sole over the 8.60 m post
+    expected = list(xs[valid])
+    expected = expected[: expected.index(7.5) + 1]  # 8.35+ pass but are never tried
+    assert calls == expected
+    assert [round(x, 3) for x, _ in prop.tried] == expected
+    assert prop.rear_foot_x == pytest.approx(7.5)
+    assert prop.shift_m == pytest.approx(-0.5)
 
 
 @pytest.mark.slow
