@@ -42,7 +42,7 @@ import shapely
 from planners.errors import InvalidInputError, MotionPlanningError, UnreachableError
 from planners.switching.collision import PointObstacles, SphereCover, self_pairs, sphere_cover
 from planners.switching.decide import check_rigid
-from planners.switching.rrt import rrt_connect, shortcut
+from planners.switching.rrt import plan_path
 
 Progress = Callable[[float, str], None]
 _DEBUG = False
@@ -83,6 +83,9 @@ class JumpParams:
     # rectangle anchored on an edge where the plane meets another surface
     # (a wall on a floor) puts the foot against that surface.
     inward_shifts_m: tuple[float, ...] = (0.0, 0.03, 0.06)
+    # "legacy": the hand-written RRT-Connect (planners/switching/rrt.py);
+    # "ompl": OMPL's RRT-Connect + simplifier (planners/motion), same checks.
+    motion_backend: str = "legacy"
     seed: int = 0
 
 
@@ -455,29 +458,22 @@ def _plan_free(
     """RRT-Connect with restarts, then shortcutting. Returns (path, attempts)."""
     lo, hi = checker.robot.joint_limits[:, 0], checker.robot.joint_limits[:, 1]
     for attempt in range(1, int(params.attempts) + 1):
-        path = rrt_connect(
+        path = plan_path(
             start,
             goals,
             checker.valid,
             lower=lo,
             upper=hi,
             rng=rng,
+            backend=params.motion_backend,
             step=params.step_rad,
             resolution=params.resolution_rad,
             goal_bias=params.goal_bias,
             max_iterations=params.max_iterations,
+            shortcut_iterations=params.shortcut_iterations,
         )
         if path is not None:
-            return (
-                shortcut(
-                    path,
-                    checker.valid,
-                    rng=rng,
-                    iterations=params.shortcut_iterations,
-                    resolution=params.resolution_rad,
-                ),
-                attempt,
-            )
+            return path, attempt
     return None, int(params.attempts)
 
 

@@ -7,6 +7,12 @@ alternately: one extends a step towards a random sample (a goal with
 probability ``goal_bias``), the other then connects greedily towards the new
 node.  Edge validity is checked by batching all interpolated configurations
 at ``resolution`` rad into one call of ``valid``.
+
+:func:`plan_path` is the entry point the jump uses: ``backend="legacy"``
+runs this hand-written RRT-Connect + :func:`shortcut` (kept for the
+before/after benchmark), ``backend="ompl"`` the same problem through
+:func:`planners.motion.plan_motion` (OMPL's RRT-Connect and simplifier,
+same validity function, same segment check).
 """
 
 from __future__ import annotations
@@ -14,6 +20,11 @@ from __future__ import annotations
 from collections.abc import Callable
 
 import numpy as np
+
+from planners.errors import InvalidInputError
+from planners.motion import plan_motion
+
+BACKENDS = ("legacy", "ompl")
 
 Valid = Callable[[np.ndarray], np.ndarray]  # (K, d) configs → (K,) bool
 
@@ -152,3 +163,44 @@ def shortcut(
         if segment_free(pts[i], pts[j], valid, resolution):
             pts = pts[: i + 1] + pts[j:]
     return np.array(pts)
+
+
+def plan_path(
+    start: np.ndarray,
+    goals: np.ndarray,
+    valid: Valid,
+    *,
+    lower: np.ndarray,
+    upper: np.ndarray,
+    rng: np.random.Generator,
+    backend: str = "legacy",
+    step: float = 0.25,
+    resolution: float = 0.03,
+    goal_bias: float = 0.1,
+    max_iterations: int = 1500,
+    shortcut_iterations: int = 80,
+) -> np.ndarray | None:
+    """One RRT-Connect attempt from ``start`` to one of ``goals`` (G, d), then
+    shortcutting; ``None`` when the iteration budget runs out.  The OMPL
+    backend has no goal bias (its goal tree is rooted at the goals, which it
+    adds lazily) and draws its seed from ``rng``, so runs stay reproducible."""
+    if backend == "legacy":
+        path = rrt_connect(
+            start, goals, valid, lower=lower, upper=upper, rng=rng, step=step,
+            resolution=resolution, goal_bias=goal_bias, max_iterations=max_iterations,
+        )  # fmt: skip
+        if path is None:
+            return None
+        return shortcut(
+            path, valid, rng=rng, iterations=shortcut_iterations, resolution=resolution
+        )
+    if backend == "ompl":
+        res = plan_motion(
+            start, goals, valid, lower=lower, upper=upper,
+            seed=int(rng.integers(2**31 - 1)), resolution=resolution, range_=step,
+            # the iteration budget governs, as for the legacy planner
+            max_time_s=600.0, max_iterations=max_iterations,
+            simplify_steps=shortcut_iterations,
+        )  # fmt: skip
+        return res.path
+    raise InvalidInputError(f"backend must be one of {', '.join(BACKENDS)}, got {backend!r}")

@@ -1,0 +1,175 @@
+"""Inch-worm jump: hand-written RRT-Connect vs OMPL's, same run (issue #13 §1).
+
+    .venv/bin/python tests/benchmarks/bench_motion.py [N] [scene,scene,...]
+    .venv/bin/python tests/benchmarks/bench_motion.py --replay [R] [scene,...] [jump seeds]
+
+For every scene of :mod:`planners.switching.scenes` whose switching decision
+is an inch-worm jump (the others — mobile, no surface — plan no jump), and
+every noise seed 0..N-1, the full jump (:func:`plan_inchworm_jump`, default
+parameters, ``seed`` = the scene seed) is planned twice, with
+``motion_backend="legacy"`` (planners/switching/rrt.py) and ``"ompl"``
+(planners/motion: OMPL RRT-Connect + simplifier), on the same decision and
+the same ``_Checker.valid``.  Success = a plan comes back; time = wall time of
+the whole jump (IK, RRT, checks); checks = configurations passed to
+``_Checker.valid``.  Ratios are OMPL / legacy from this run.
+
+``--replay`` isolates the planner (IK, the swing search and the checks
+around it are the same for both and dominate the jump's time on easy
+scenes): one legacy jump per scene and jump seed records every
+joint-space problem the jump hands to ``_plan_free`` (checker, start, IK
+goals, parameters: attempts restarts of ``max_iterations``), then each
+backend solves each recorded problem with R planner seeds.  Success = a path
+within the restarts; time = that ``_plan_free`` call.
+"""
+
+from __future__ import annotations
+
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
+
+import robots
+from planners.errors import PlannerError
+from planners.switching import jump as _jump
+from planners.switching.decide import decide_mode
+from planners.switching.jump import JumpParams, plan_inchworm_jump
+from planners.switching.scenes import SCENES, make_scene
+
+ARA = robots.load_robot("ara")
+FOOT = (float(ARA.params["foot"]["length_m"]), float(ARA.params["foot"]["width_m"]))
+BACKENDS = ("legacy", "ompl")
+_COUNT = [0]
+_valid = _jump._Checker.valid
+
+
+def _counting_valid(self, Q):  # count configurations checked, same checker
+    _COUNT[0] += len(np.atleast_2d(Q))
+    return _valid(self, Q)
+
+
+_jump._Checker.valid = _counting_valid
+
+
+def run(d, seed: int, backend: str) -> tuple[bool, float, int, str]:
+    c = d.chosen
+    surface = (c.frame.origin, c.frame.x_axis, c.frame.y_axis, c.area.hull)
+    _COUNT[0] = 0
+    t0 = time.perf_counter()
+    try:
+        plan_inchworm_jump(
+            ARA, d.foothold_candidates, obstacles=d.points, surface=surface,
+            params=JumpParams(seed=seed, motion_backend=backend),
+        )  # fmt: skip
+        ok, why = True, ""
+    except PlannerError as exc:
+        ok, why = False, type(exc).__name__
+    return ok, time.perf_counter() - t0, _COUNT[0], why
+
+
+def replay(r: int, names: list[str], jump_seeds: list[int]) -> None:
+    problems: list[tuple[str, tuple]] = []
+    orig = _jump._plan_free
+
+    def record(checker, start, goals, params, rng):
+        problems.append((current[0], (checker, start.copy(), np.array(goals), params)))
+        return orig(checker, start, goals, params, rng)
+
+    current = [""]
+    _jump._plan_free = record
+    for name in names:
+        for seed in jump_seeds:
+            sc = make_scene(name, seed)
+            d = decide_mode(sc.points, camera_to_base=sc.camera_to_base, base_height=0.0, foot=FOOT)
+            if d.mode != "inchworm":
+                print(f"{name:15s} seed {seed}: no inch-worm decision", flush=True)
+                continue
+            current[0] = name
+            ok, t, _, why = run(d, seed, "legacy")
+            print(f"{name:15s} seed {seed}: recorded (jump {'ok' if ok else why}, {t:.1f} s)",
+                  flush=True)  # fmt: skip
+    _jump._plan_free = orig
+    print()
+    per_scene: dict[str, dict[str, list]] = {}
+    for k, (name, (checker, start, goals, params)) in enumerate(problems):
+        if np.abs(goals - start).max() < 1e-12:
+            continue
+        res = per_scene.setdefault(name, {b: [] for b in BACKENDS})
+        for s in range(r):
+            for b in BACKENDS:
+                p = JumpParams(**{**params.__dict__, "motion_backend": b})
+                _COUNT[0] = 0
+                t0 = time.perf_counter()
+                path, _ = orig(checker, start, goals, p, np.random.default_rng(s))
+                res[b].append((path is not None, time.perf_counter() - t0, _COUNT[0]))
+        line = "  ".join(
+            f"{b}: {sum(x[0] for x in v[-r:])}/{r} ok, median "
+            f"{np.median([x[1] for x in v[-r:]]):.2f} s" for b, v in res.items()
+        )  # fmt: skip
+        print(f"{name:15s} problem {k:2d} ({len(goals)} goals)  {line}", flush=True)
+    print()
+    print(f"{'scene':15s} {'legacy ok':>10s} {'ompl ok':>9s} {'legacy med s':>13s} "
+          f"{'ompl med s':>11s} {'time ratio':>11s} {'checks ratio':>13s}")  # fmt: skip
+    for name, res in per_scene.items():
+        (lo, oo) = (np.array([x[0] for x in res[b]]) for b in BACKENDS)
+        lt, ot = (np.median([x[1] for x in res[b]]) for b in BACKENDS)
+        lc, oc = (np.median([x[2] for x in res[b]]) for b in BACKENDS)
+        print(
+            f"{name:15s} {lo.sum():4d}/{len(lo):<5d} {oo.sum():4d}/{len(oo):<4d} {lt:13.3f} "
+            f"{ot:11.3f} {ot / lt:11.2f} {oc / lc:13.2f}"
+        )
+
+
+def main() -> None:
+    if len(sys.argv) > 1 and sys.argv[1] == "--replay":
+        r = int(sys.argv[2]) if len(sys.argv) > 2 else 20
+        names = sys.argv[3].split(",") if len(sys.argv) > 3 else list(SCENES)
+        seeds = [int(x) for x in sys.argv[4].split(",")] if len(sys.argv) > 4 else [0]
+        replay(r, names, seeds)
+        return
+    n = int(sys.argv[1]) if len(sys.argv) > 1 else 20
+    names = sys.argv[2].split(",") if len(sys.argv) > 2 else list(SCENES)
+    summary = []
+    for name in names:
+        rows: dict[str, list] = {b: [] for b in BACKENDS}
+        for seed in range(n):
+            sc = make_scene(name, seed)
+            d = decide_mode(sc.points, camera_to_base=sc.camera_to_base, base_height=0.0, foot=FOOT)
+            if d.mode != "inchworm":
+                continue
+            for b in BACKENDS:
+                rows[b].append(run(d, seed, b))
+            print(
+                f"{name:15s} seed {seed:2d}  "
+                + "  ".join(
+                    f"{b}: {'ok ' if r[-1][0] else 'FAIL'} {r[-1][1]:6.2f}s {r[-1][2]:7d} chk {r[-1][3]}"
+                    for b, r in rows.items()
+                ),
+                flush=True,
+            )
+        if not rows["legacy"]:
+            print(f"{name:15s} no inch-worm decision on any seed: no jump to plan")
+            continue
+        stats = {}
+        for b, r in rows.items():
+            ok = np.array([x[0] for x in r])
+            t = np.array([x[1] for x in r])
+            chk = np.array([x[2] for x in r])
+            stats[b] = (ok.sum(), len(ok), np.median(t[ok]) if ok.any() else np.nan, np.median(chk))
+        summary.append((name, stats))
+    print()
+    print(f"{'scene':15s} {'legacy ok':>10s} {'ompl ok':>8s} {'legacy med s':>13s} "
+          f"{'ompl med s':>11s} {'time ratio':>11s} {'checks ratio':>13s}")  # fmt: skip
+    for name, s in summary:
+        (lk, ln, lt, lc), (ok_, on, ot, oc) = s["legacy"], s["ompl"]
+        print(
+            f"{name:15s} {lk:4d}/{ln:<5d} {ok_:3d}/{on:<4d} {lt:13.2f} {ot:11.2f} "
+            f"{ot / lt:11.2f} {oc / lc:13.2f}"
+        )
+
+
+if __name__ == "__main__":
+    main()
