@@ -97,7 +97,49 @@ def test_long_random_guardrail_walk_is_planned():
         if g.valid_foothold(np.array([x, x + lim.d_work]), L).all()
     )
     moves = plan_footholds(g, start, goal, lim, 0.005)
-    assert len(moves) >= 2 * (goal - start) / lim.max_step - 2
+    # Replayed here, move by move: a forward walk that ends on the goal stance
+    # and never stands anywhere the chain or the guardrail forbids.
+    rear, front = _replay(g, lim, start, moves)
+    assert rear == pytest.approx(goal) and front == pytest.approx(goal + lim.d_work)
+    # Each foot steps over each gap on the way exactly once (forward only).
+    for g0, g1 in g.gaps[(g.gaps[:, 0] > start) & (g.gaps[:, 1] < goal)]:
+        for kind in ("extension", "contraction"):
+            over = [m for m in moves if m[0] == kind and m[1] < g0 and m[2] > g1]
+            assert len(over) == 1, (kind, g0, g1, over)
+    # Each foot travels goal − start in steps of at most S: at least
+    # 2·⌈(goal − start)/S⌉ phases; the gaps and posts may cost a few more.
+    assert len(moves) >= 2 * int(np.ceil((goal - start) / lim.max_step - 1e-9))
+
+
+def _replay(g: Guardrail, lim, start: float, moves) -> tuple[float, float]:
+    """Walk ``moves`` from the contracted stance at ``start`` (forward walk):
+    an extension moves the front sole, a contraction the rear one, each from
+    where that sole stands, forward by at most the step cap, onto a valid
+    foothold, keeping the soles d_min…d_max apart.  Returns the final stance."""
+    rear, front = start, start + lim.d_work
+    for kind, a, b in moves:
+        assert kind in ("extension", "contraction"), kind
+        foot = front if kind == "extension" else rear
+        assert a == pytest.approx(foot, abs=1e-9), (kind, a, foot)
+        assert 0 < b - a <= lim.max_step + 1e-9, (kind, a, b)
+        assert g.valid_foothold(np.array([b]), L).all(), (kind, b)
+        front, rear = (b, rear) if kind == "extension" else (front, b)
+        assert lim.d_min - 1e-9 <= front - rear <= lim.d_max + 1e-9, (rear, front)
+    return rear, front
+
+
+def test_clear_guardrail_walk_is_the_plain_inchworm():
+    """Without gaps or posts the fewest phases are known in closed form: each
+    sole must travel D in steps of at most S, ⌈D/S⌉ steps each, alternating."""
+    clear = Guardrail(np.array([[0.0, 20.0]]), np.array([]))
+    lim = chain_limits(MODEL, GaitParams())
+    for start, goal in ((1.0, 1.3), (1.0, 5.03), (1.0, 15.0)):
+        moves = plan_footholds(clear, start, goal, lim, 0.005)
+        steps = int(np.ceil((goal - start) / lim.max_step - 1e-9))
+        assert len(moves) == 2 * steps, (start, goal, len(moves))
+        assert [m[0] for m in moves] == ["extension", "contraction"] * steps
+        rear, front = _replay(clear, lim, start, moves)
+        assert rear == pytest.approx(goal) and front == pytest.approx(goal + lim.d_work)
 
 
 def test_gate_reports_where_and_when():
