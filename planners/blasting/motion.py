@@ -20,6 +20,11 @@ straight joint interpolation passes through an obstacle.  Here:
   certified by :func:`edge_free`; then :func:`shortcut` (random pairs,
   deterministic) and :func:`densify` (≤ ``max_step`` per joint) so the
   trajectory's time stamps can hold the 30°/s limit (Eq. 3.12–3.13).
+  ``backend="ompl"`` (or module-wide :data:`BACKEND`) solves the same
+  problem with OMPL's RRT-Connect (:func:`planners.motion.plan_motion`):
+  the same clearance as state validity, :func:`edge_free` injected as the
+  motion validator, OMPL's metric scaled by ``w`` (‖w ⊙ Δq‖₂ instead of the
+  weighted L1 above), no goal bias (OMPL roots its goal tree at ``qb``).
 """
 
 from __future__ import annotations
@@ -29,6 +34,12 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
+
+from planners.errors import InvalidInputError
+from planners.motion import plan_motion
+
+# The joint planner behind joint_planner="rrt": "legacy" (below) or "ompl".
+BACKEND = "legacy"
 
 ClearFn = Callable[[np.ndarray], np.ndarray]  # (T,6) → (T,) clearance minus margin (m)
 
@@ -145,11 +156,16 @@ def rrt_connect(
     max_iter: int = 1500,
     active: np.ndarray | None = None,
     goal_bias: float = 0.1,
+    backend: str | None = None,
 ) -> RRTResult:
     """RRT-Connect between joint vectors ``qa`` and ``qb``; joints not in
     ``active`` (default J1–J5) keep qa's value.  Extensions are at most
     ``step_m`` in the weighted metric (≈ the largest motion of any
-    ellipsoid point); every edge is certified by :func:`edge_free`."""
+    ellipsoid point); every edge is certified by :func:`edge_free`.
+    ``backend`` (default :data:`BACKEND`): ``"legacy"`` or ``"ompl"``."""
+    backend = BACKEND if backend is None else backend
+    if backend not in ("legacy", "ompl"):
+        raise InvalidInputError(f"backend must be 'legacy' or 'ompl', got {backend!r}")
     qa = np.asarray(qa, dtype=float)
     qb = np.asarray(qb, dtype=float)
     act = np.arange(5) if active is None else np.asarray(active)
@@ -168,6 +184,19 @@ def rrt_connect(
     ca0, cb0 = cfn(xa)[0], cfn(xb)[0]
     if ca0 <= 0 or cb0 <= 0:
         return RRTResult(None, 0, 0)
+    if backend == "ompl":
+        res = plan_motion(
+            xa, xb[None], lambda x: cfn(x) > 0,
+            lower=np.minimum(lo, np.minimum(xa, xb)), upper=np.maximum(hi, np.maximum(xa, xb)),
+            seed=int(rng.integers(2**31 - 1)),
+            motion_valid=lambda x0, x1: bool(
+                edge_free(full(x0[None]), full(x1[None]), clear_fn, w)[0]
+            ),
+            range_=step_m, max_time_s=600.0, max_iterations=max_iter,
+            weights=np.maximum(wa, 1e-9),
+        )  # fmt: skip
+        path = None if res.path is None else full(res.path)
+        return RRTResult(path, max(res.vertices, 2 if path is not None else 0), res.iterations)
     if edge_free(full(xa[None]), full(xb[None]), clear_fn, w, ca=[ca0], cb=[cb0])[0]:
         return RRTResult(np.stack([qa, qb]), 2, 0)
     trees = [

@@ -69,6 +69,7 @@ class MotionResult:
     planning_time_s: float
     iterations: int
     goal_index: int = -1
+    vertices: int = 0  # states in the planner's trees (0 when no planner ran)
 
     @property
     def success(self) -> bool:
@@ -172,8 +173,10 @@ def plan_motion(
 
     seg = motion_valid or segment_validator(counted, resolution)
 
-    def done(path: np.ndarray | None, status: str, its: int, gi: int = -1) -> MotionResult:
-        return MotionResult(path, status, checks, time.perf_counter() - t0, its, gi)
+    def done(
+        path: np.ndarray | None, status: str, its: int, gi: int = -1, nv: int = 0
+    ) -> MotionResult:
+        return MotionResult(path, status, checks, time.perf_counter() - t0, its, gi, nv)
 
     if not counted(q0[None])[0]:
         return done(None, "invalid_start", 0)
@@ -246,9 +249,13 @@ def plan_motion(
 
     st = pl.solve(ob.PlannerTerminationCondition(stop))
     its = min(its, cap) if cap is not None else its
+    data = ob.PlannerData(si)
+    pl.getPlannerData(data)
+    nv = int(data.numVertices())
     if not pdef.hasExactSolution():
         name = str(st.getStatus()).split(".")[-1].lower()
-        return done(None, "timeout" if name in ("timeout", "approximate_solution") else name, its)
+        status = "timeout" if name in ("timeout", "approximate_solution") else name
+        return done(None, status, its, nv=nv)
     path = pdef.getSolutionPath()
     if simplify:
         ps = og.PathSimplifier(si)
@@ -258,4 +265,4 @@ def plan_motion(
     # Exact ends: OMPL copies states, but undo the scaling round-off.
     gi = int(np.argmin(np.abs(G - P[-1]).max(axis=1)))
     P[0], P[-1] = q0, G[gi]
-    return done(P, "exact", its, int(goal_ids[gi]))
+    return done(P, "exact", its, int(goal_ids[gi]), nv)
