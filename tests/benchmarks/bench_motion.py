@@ -71,56 +71,58 @@ def run(d, seed: int, backend: str) -> tuple[bool, float, int, str]:
 
 
 def replay(r: int, names: list[str], jump_seeds: list[int]) -> None:
-    problems: list[tuple[str, tuple]] = []
     orig = _jump._plan_free
-
-    def record(checker, start, goals, params, rng):
-        problems.append((current[0], (checker, start.copy(), np.array(goals), params)))
-        return orig(checker, start, goals, params, rng)
-
-    current = [""]
-    _jump._plan_free = record
+    header = (f"{'scene':15s} {'legacy ok':>10s} {'ompl ok':>9s} {'legacy med s':>13s} "
+              f"{'ompl med s':>11s} {'time ratio':>11s} {'checks ratio':>13s}")  # fmt: skip
+    table = []
     for name in names:
+        problems: list[tuple] = []
+
+        def record(checker, start, goals, params, rng, _into=problems):
+            _into.append((checker, start.copy(), np.array(goals), params))
+            return orig(checker, start, goals, params, rng)
+
+        _jump._plan_free = record
         for seed in jump_seeds:
             sc = make_scene(name, seed)
             d = decide_mode(sc.points, camera_to_base=sc.camera_to_base, base_height=0.0, foot=FOOT)
             if d.mode != "inchworm":
                 print(f"{name:15s} seed {seed}: no inch-worm decision", flush=True)
                 continue
-            current[0] = name
             ok, t, _, why = run(d, seed, "legacy")
-            print(f"{name:15s} seed {seed}: recorded (jump {'ok' if ok else why}, {t:.1f} s)",
-                  flush=True)  # fmt: skip
-    _jump._plan_free = orig
-    print()
-    per_scene: dict[str, dict[str, list]] = {}
-    for k, (name, (checker, start, goals, params)) in enumerate(problems):
-        if np.abs(goals - start).max() < 1e-12:
+            print(f"{name:15s} seed {seed}: recorded {len(problems)} problems "
+                  f"(jump {'ok' if ok else why}, {t:.1f} s)", flush=True)  # fmt: skip
+        _jump._plan_free = orig
+        res: dict[str, list] = {b: [] for b in BACKENDS}
+        for k, (checker, start, goals, params) in enumerate(problems):
+            if np.abs(goals - start).max() < 1e-12:
+                continue
+            for s in range(r):
+                for b in BACKENDS:
+                    p = JumpParams(**{**params.__dict__, "motion_backend": b})
+                    _COUNT[0] = 0
+                    t0 = time.perf_counter()
+                    path, _ = orig(checker, start, goals, p, np.random.default_rng(s))
+                    res[b].append((path is not None, time.perf_counter() - t0, _COUNT[0]))
+            line = "  ".join(
+                f"{b}: {sum(x[0] for x in v[-r:])}/{r} ok, median "
+                f"{np.median([x[1] for x in v[-r:]]):.2f} s, "
+                f"{np.median([x[2] for x in v[-r:]]):.0f} chk" for b, v in res.items()
+            )  # fmt: skip
+            print(f"{name:15s} problem {k:2d} ({len(goals)} goals)  {line}", flush=True)
+        if not res["legacy"]:
             continue
-        res = per_scene.setdefault(name, {b: [] for b in BACKENDS})
-        for s in range(r):
-            for b in BACKENDS:
-                p = JumpParams(**{**params.__dict__, "motion_backend": b})
-                _COUNT[0] = 0
-                t0 = time.perf_counter()
-                path, _ = orig(checker, start, goals, p, np.random.default_rng(s))
-                res[b].append((path is not None, time.perf_counter() - t0, _COUNT[0]))
-        line = "  ".join(
-            f"{b}: {sum(x[0] for x in v[-r:])}/{r} ok, median "
-            f"{np.median([x[1] for x in v[-r:]]):.2f} s" for b, v in res.items()
-        )  # fmt: skip
-        print(f"{name:15s} problem {k:2d} ({len(goals)} goals)  {line}", flush=True)
-    print()
-    print(f"{'scene':15s} {'legacy ok':>10s} {'ompl ok':>9s} {'legacy med s':>13s} "
-          f"{'ompl med s':>11s} {'time ratio':>11s} {'checks ratio':>13s}")  # fmt: skip
-    for name, res in per_scene.items():
         (lo, oo) = (np.array([x[0] for x in res[b]]) for b in BACKENDS)
         lt, ot = (np.median([x[1] for x in res[b]]) for b in BACKENDS)
         lc, oc = (np.median([x[2] for x in res[b]]) for b in BACKENDS)
-        print(
+        table.append(
             f"{name:15s} {lo.sum():4d}/{len(lo):<5d} {oo.sum():4d}/{len(oo):<4d} {lt:13.3f} "
             f"{ot:11.3f} {ot / lt:11.2f} {oc / lc:13.2f}"
         )
+        print(header + "\n" + table[-1], flush=True)
+    print()
+    print(header)
+    print("\n".join(table))
 
 
 def main() -> None:
