@@ -4,7 +4,7 @@ PYTHON ?= python3
 VENV   ?= .venv
 BIN    := $(VENV)/bin
 
-.PHONY: serve test install install-test system-test-deps lint bench clean
+.PHONY: serve test test-fast install install-test system-test-deps lint bench clean
 
 $(BIN)/python:
 	$(PYTHON) -m venv $(VENV)
@@ -34,6 +34,12 @@ lint: install-test
 
 test: install-test system-test-deps lint
 	$(BIN)/pytest
+
+# The edit loop: unit tests (no slow or browser tests), then one fault-matrix
+# cell per fault (the cheap demo.route kind) and the registry check.
+test-fast: install-test
+	$(BIN)/pytest -q -m "not slow and not browser"
+	$(BIN)/pytest -q tests/api/test_fault_matrix.py -k "demo.route or registered"
 
 bench: install-test
 	for b in tests/benchmarks/bench_*.py; do $(BIN)/python $$b || exit 1; done

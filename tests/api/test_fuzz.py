@@ -47,6 +47,8 @@ from tests.conftest import make_settings
 
 load_all_checks()
 ALL_CHECKS = CHECKS.get_all()
+pytestmark = pytest.mark.slow  # heavy: left out of `make test-fast`
+
 MAX_EXAMPLES = 15
 
 
