@@ -419,16 +419,44 @@ def why_not_dispatchable(plan: dict[str, Any], robot: str, robots: list[str]) ->
     return None
 
 
+def spread_extras(secs: dict[str, float], n: int, budget_s: float) -> list[str]:
+    """``n`` kinds for the extra dispatches: round robin, cheapest first, within a budget.
+
+    Each round takes every kind in order of its planning time while the summed
+    planning time stays within ``budget_s``; once no kind fits, the rest go to the
+    cheapest kind, so the set-up is bounded and still spread over every kind it can.
+    """
+    order = sorted(secs, key=secs.__getitem__)
+    out: list[str] = []
+    spent = 0.0
+    while order and len(out) < n:
+        took = False
+        for k in order:
+            if len(out) < n and spent + secs[k] <= budget_s:
+                out.append(k)
+                spent += secs[k]
+                took = True
+        if not took:
+            out += [order[0]] * (n - len(out))
+    return out
+
+
 def prepare(
-    api: Api, n_dispatches: int, n_estop: int, extra_max_s: float, route_m: float
+    api: Api,
+    n_dispatches: int,
+    n_estop: int,
+    extra_max_s: float,
+    extra_budget_s: float,
+    route_m: float,
 ) -> Prepared:
     """Plan and approve every plan the run dispatches, before anything is measured.
 
     Each dispatchable kind's default plan is its first dispatch; the other
-    ``n_dispatches - kinds`` dispatches are fresh revisions spread round robin
-    over the kinds whose default plan planned within ``extra_max_s`` (cheapest
-    first), submitted as soon as that set is known (every default plan done or
-    planning longer than that), so set-up stays within minutes on two cores.
+    ``n_dispatches - kinds`` dispatches are fresh revisions spread over the
+    kinds whose default plan planned within ``extra_max_s`` by
+    :func:`spread_extras` (summed planning time within ``extra_budget_s``),
+    submitted as soon as that set is known (every default plan done or planning
+    longer than ``extra_max_s``), so set-up stays within minutes on two cores.
     The E-stop plans are straight ``route_m`` demo routes.
     """
     robots = [r["name"] for r in api.get("/robots")]
@@ -461,8 +489,13 @@ def prepare(
         key=lambda k: watch.secs[submitted[k]],
     )
     n_extra = max(0, n_dispatches - len(compiling))
-    extra_kinds = [cheap[i % len(cheap)] for i in range(n_extra)] if cheap else []
-    log(f"{n_extra} more dispatch plans of {sorted(set(extra_kinds))} (planned within {extra_max_s} s)")
+    extra_kinds = spread_extras(
+        {k: watch.secs[submitted[k]] for k in cheap}, n_extra, extra_budget_s
+    )
+    log(
+        f"{len(extra_kinds)} more dispatch plans: "
+        + ", ".join(f"{k} ×{extra_kinds.count(k)}" for k in sorted(set(extra_kinds)))
+    )
     revised = [
         (k, api.post(f"/plans/{submitted[k]}/revise", {"params": {}}, expect=(202,))["id"])
         for k in extra_kinds
@@ -557,6 +590,7 @@ class EstopRun:
     method: str = "emulator log"
     probed: bool = False  # the first trial of a run tells whether stop records exist
     skipped: int = 0  # routes that finished before the host saw them execute
+    cut_short: int | None = None  # trials done when the time budget ran out
 
 
 MAX_SKIPS = 5
@@ -588,11 +622,21 @@ def estop_trials(
     upload_flag: Any,
     plans_flag: Any,
     label: str,
+    budget_s: float = math.inf,
 ) -> None:
-    """Append ``n`` E-stop trials to ``run`` (see the module docstring for one trial)."""
+    """Append ``n`` E-stop trials to ``run`` (see the module docstring for one trial).
+
+    Stops early once ``budget_s`` is spent (noted in ``run.cut_short``), so a
+    host too slow to answer its own control requests still ends the run.
+    """
     target = len(run.trials) + n
     i = 0
+    t_end = time.monotonic() + budget_s
     while len(run.trials) < target:
+        if time.monotonic() > t_end:
+            run.cut_short = n - (target - len(run.trials))
+            log(f"{label}: trial budget of {budget_s:.0f} s spent after {run.cut_short} trials")
+            break
         i += 1
         if not plans:
             raise BenchError("ran out of prepared E-stop plans")
@@ -602,9 +646,11 @@ def estop_trials(
 
         def executing(ex: dict[str, Any] = ex) -> bool:
             rep = robot_state(api, ESTOP_ROBOT).get("report") or {}
-            if rep.get("executing", -1) >= 0 and rep.get("run_id") in (None, 0, ex.get("run_id")):
+            ours = rep.get("run_id") == ex.get("run_id") or not ex.get("run_id")
+            if rep.get("executing", -1) >= 0 and ours:
                 return True
-            if rep.get("mode") != MODE_MOVING:
+            # Only a report of this run, idle, can mean it already finished: ask then.
+            if ours and rep.get("mode") != MODE_MOVING:
                 cur = api.get(f"/executions/{ex['id']}")
                 if cur["state"] == "completed":
                     raise RouteFinished(ex["id"])
@@ -620,7 +666,7 @@ def estop_trials(
         except RouteFinished:
             run.skipped += 1
             log(f"{label}: execution {ex['id']} finished before it was seen executing")
-            if run.skipped > MAX_SKIPS:
+            if run.skipped > max(MAX_SKIPS, n // 5):
                 raise BenchError(
                     f"{run.skipped} E-stop routes finished before the host saw them execute: "
                     "lengthen --estop-route-m or lower --time-scale"
@@ -841,7 +887,16 @@ def main() -> int:
         help="dispatches beyond one per kind go to kinds that plan within this many seconds",
     )
     ap.add_argument(
-        "--estop-route-m", type=float, default=6.0, help="length of the E-stop trials' route"
+        "--extra-plan-budget-s",
+        type=float,
+        default=150.0,
+        help="summed planning seconds the extra dispatch plans may take (cheapest kinds first)",
+    )
+    ap.add_argument(
+        "--estop-route-m", type=float, default=30.0, help="length of the E-stop trials' route"
+    )
+    ap.add_argument(
+        "--trial-budget-s", type=float, default=420.0, help="most seconds for the loaded trials"
     )
     ap.add_argument("--dispatch-timeout", type=float, default=300.0, help="s per dispatch")
     ap.add_argument("--seed", type=int, default=0)
@@ -898,7 +953,12 @@ def run(args: argparse.Namespace, quiet_trials: int, tmp: Path, servers: list[Se
         # Spares: the probe trial may be dropped, and a few routes may end unseen.
         n_estop = quiet_trials + args.trials + 1 + MAX_SKIPS
         prep = prepare(
-            api, args.dispatches, n_estop, args.extra_plan_max_s, args.estop_route_m
+            api,
+            args.dispatches,
+            n_estop,
+            args.extra_plan_max_s,
+            args.extra_plan_budget_s,
+            args.estop_route_m,
         )
         writer.join(600)
     finally:
@@ -969,6 +1029,7 @@ def run(args: argparse.Namespace, quiet_trials: int, tmp: Path, servers: list[Se
             upload_flag,
             plans_flag,
             "loaded",
+            args.trial_budget_s,
         )
         clear_all(api, prep.robots)
         log(f"loaded: {len(prep.dispatch_jobs)} dispatches")
@@ -1036,6 +1097,11 @@ def report(
         f"{cloud_bytes / 2**20:.0f} MiB XYZ upload loop; emulator time scale {args.time_scale}"
     )
     print(f"E-stop measured as: {loaded_run.method}")
+    if loaded_run.cut_short is not None:
+        print(
+            f"NOTE: only {loaded_run.cut_short} of {args.trials} loaded E-stop trials fit in "
+            f"--trial-budget-s {args.trial_budget_s:.0f}"
+        )
     print()
     print(f"{'ms':38} {'p50':>8} {'p95':>8} {'p99':>8} {'max':>8}")
     rows = [
