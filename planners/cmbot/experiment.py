@@ -30,7 +30,7 @@ from scipy.spatial.transform import Rotation, Slerp
 
 from planners.cmbot.arm import ArmKinematics, rotation_error, rpy_to_matrix
 from planners.cmbot.avoidance import AvoidanceParams, combine, escape_velocities
-from planners.cmbot.distance import Cuboid, boxes_arrays, sphere_box_exact, sphere_box_gjk
+from planners.cmbot.distance import Cuboid, boxes_arrays, sphere_box_exact
 from planners.errors import CancelledError, InvalidInputError, UnreachableError
 
 ANGULAR_UNITS = {"mrad": 1e-3, "deg": np.pi / 180.0, "rad": 1.0}
@@ -190,19 +190,20 @@ def pair_distances(
     mask: np.ndarray,
     cutoff: float,
 ) -> tuple[list[tuple[int, int, float, np.ndarray]], tuple[float, int, int]]:
-    """Pairs within ``cutoff`` with GJK distance and direction, and the overall minimum.
+    """Pairs within ``cutoff`` with distance and direction, and the overall minimum.
 
-    The closed-form sphere–box distance screens all pairs at once (it is
-    exact for spheres against cuboids); GJK then computes d_ij and u_ij of
-    the screened pairs that Eq. 15 acts on.
+    The closed-form sphere–box distance (exact for spheres against cuboids)
+    gives d_ij and u_ij of every pair at once; Eq. 15 acts on those within
+    ``cutoff``.  (It replaced a per-pair GJK, which agreed to 1e-9 and was
+    slower: issue #13 §1.)
     """
-    d, _u = sphere_box_exact(centers, radii, arrays, directions=False)
+    d, u = sphere_box_exact(centers, radii, arrays)
+    assert u is not None  # directions=True
     d = np.where(mask, d, np.inf)
-    near = []
-    for i, j in zip(*np.nonzero(d <= cutoff + 1e-9), strict=True):
-        dg, ug = sphere_box_gjk(centers[i], radii[i], boxes[j])
-        if dg <= cutoff:
-            near.append((int(i), int(j), dg, ug))
+    near = [
+        (int(i), int(j), float(d[i, j]), u[i, j])
+        for i, j in zip(*np.nonzero(d <= cutoff), strict=True)
+    ]
     flat = int(np.argmin(d))
     i, j = np.unravel_index(flat, d.shape)
     return near, (float(d[i, j]), int(i), int(j))

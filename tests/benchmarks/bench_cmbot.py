@@ -33,15 +33,11 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
 
 import robots
 from planners.cmbot import ExperimentParams, Section4Trajectory, plan_climb, plan_manipulation
-from planners.cmbot.distance import (
-    Cuboid,
-    sphere_box_bruteforce,
-    sphere_box_exact,
-    sphere_box_gjk,
-)
+from planners.cmbot.distance import Cuboid, sphere_box_bruteforce, sphere_box_exact
 from planners.cmbot.gait import GaitParams, build_trajectory, chain_limits, plan_footholds
 from planners.cmbot.guardrail import make_guardrail
 from planners.cmbot.simulate import simulate_climb
+from tests.cmbot._reference_gjk import sphere_box_gjk  # the former GJK (issue #13 §1)
 
 
 def section_experiment(model) -> None:

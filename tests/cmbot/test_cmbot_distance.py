@@ -1,4 +1,5 @@
-"""GJK sphere–cuboid distances (seed §3.2, Fig. 13) against brute force."""
+"""Sphere–cuboid distances (seed §3.2, Fig. 13): the closed form against the
+former GJK (now a test reference, ``_reference_gjk``) and brute force."""
 
 from __future__ import annotations
 
@@ -7,13 +8,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy.spatial.transform import Rotation
 
-from planners.cmbot.distance import (
-    Cuboid,
-    gjk_distance,
-    sphere_box_bruteforce,
-    sphere_box_exact,
-    sphere_box_gjk,
-)
+from planners.cmbot.distance import Cuboid, sphere_box_bruteforce, sphere_box_exact
+from tests.cmbot._reference_gjk import gjk_distance, sphere_box_gjk, support_tuple
 
 coord = st.floats(-2.0, 2.0, allow_nan=False)
 half = st.floats(0.02, 1.0, allow_nan=False)
@@ -54,7 +50,9 @@ def test_gjk_matches_closed_form_and_brute_force(box, x, y, z, r):
 @given(a=boxes(), b=boxes())
 def test_gjk_box_box_against_vertex_face_brute_force(a, b):
     """Generic GJK (two support functions) vs dense sampling of both surfaces."""
-    res = gjk_distance(a.support_tuple, b.support_tuple, a.center - b.center)
+    res = gjk_distance(
+        lambda d: support_tuple(a, d), lambda d: support_tuple(b, d), a.center - b.center
+    )
     g = np.linspace(-1, 1, 13)
     pts = []
     for box in (a, b):
