@@ -85,15 +85,21 @@ def test_small_robot_plan_passes_every_check_and_draws(make_api) -> None:
         "/plan/cloud/0",
     ):
         assert scene.get_handle_by_name(name) is not None, name
-    # Two vertex clicks propose a child plan with that start and end.
+    # Two vertex clicks propose a child plan with that start and end; only
+    # the operator's Accept (REST) makes it.
     handle = scene.get_handle_by_name("/plan/vertices")
     ids = [n["id"] for n in res["graph"]["nodes"]]
     leaves = [n["id"] for n in res["graph"]["nodes"] if n["degree"] == 1]
     for v in (leaves[1], leaves[0]):
         for entry in handle._impl.click_cb:
             entry.callback(types.SimpleNamespace(instance_index=ids.index(v)))
+    assert sapi.get(f"/api/v1/plans?parent_id={plan['id']}").json() == []
+    (proposal,) = sapi.get("/api/v1/scene", "viewer").json()["proposals"]
+    assert proposal["patch"] == {"start": leaves[1], "end": leaves[0]}
+    r = sapi.post(f"/api/v1/scene/proposals/{proposal['id']}/accept")
+    assert r.status_code == 202, r.text
     children = sapi.get(f"/api/v1/plans?parent_id={plan['id']}").json()
-    assert len(children) == 1
+    assert [c["id"] for c in children] == [r.json()["id"]]
     child = sapi.wait(children[0]["id"], timeout=240)
     assert child["params"]["start"] == leaves[1] and child["params"]["end"] == leaves[0]
     assert child["result"]["route"]["vertices"][0] == leaves[1]
