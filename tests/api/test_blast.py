@@ -76,6 +76,7 @@ def test_defaults_plan_the_seed_surface_1(api) -> None:
     assert r.status_code == 200
 
 
+@pytest.mark.slow  # four plans from a parsed cloud
 def test_plane_picked_from_a_cloud(api) -> None:
     r = api.post("/api/v1/clouds", json={"sample": "blast_under_deck"})
     assert r.status_code == 201, r.text

@@ -6,6 +6,7 @@ import socket
 import time
 
 import numpy as np
+import pytest
 
 SHORT_CLIMB = {"start_rear_x_m": 4.6, "goal_rear_x_m": 4.84}
 
@@ -16,6 +17,7 @@ def free_port() -> int:
         return s.getsockname()[1]
 
 
+@pytest.mark.slow  # the seed experiment through the API (tests/cmbot covers the planner)
 def test_climb_defaults_cross_the_gap_and_pass_the_gate(api) -> None:
     plan = api.wait(api.submit("cmbot.climb")["id"], timeout=300)
     assert plan["state"] == "planned", plan.get("error") or [
@@ -63,6 +65,7 @@ def test_weak_counterweightless_fast_climb_is_rejected_with_where_and_when(api) 
     assert failed and all("t =" in c["message"] for c in failed)
 
 
+@pytest.mark.slow  # the seed experiment through the API (tests/cmbot covers the planner)
 def test_manipulate_defaults_plan_the_seed_experiment(api) -> None:
     plan = api.wait(api.submit("cmbot.manipulate")["id"], timeout=300)
     assert plan["state"] == "planned", [c["message"] for c in plan["checks"] if not c["passed"]]

@@ -114,6 +114,7 @@ def _alive(pid: int) -> bool:
     return st is not None and st[0] != "Z"  # a zombie has exited (its reaper is just slow)
 
 
+@pytest.mark.slow  # starts a whole server process (~1 min on a loaded 2-core machine)
 @pytest.mark.skipif(not sys.platform.startswith("linux"), reason="reads /proc")
 def test_workers_are_niced_and_die_with_a_killed_server(tmp_path) -> None:
     with socket.socket() as s:
