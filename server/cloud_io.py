@@ -596,6 +596,19 @@ def parse_upload(raw: Path, content_type: str, out: Path) -> dict[str, Any]:
 
 
 # ------------------------------------------------------------------ child process
+def _own_peak_rss_kb() -> int:
+    """This process's peak resident set since its exec (``VmHWM``).
+
+    ``ru_maxrss`` is not that: a child forked from a large server keeps the
+    parent's resident size as its starting maximum, across the exec.
+    """
+    with contextlib.suppress(OSError, ValueError):
+        for line in Path("/proc/self/status").read_text().splitlines():
+            if line.startswith("VmHWM:"):
+                return int(line.split()[1])
+    return int(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss)
+
+
 def main(argv: list[str]) -> int:
     """``upload RAW CONTENT_TYPE OUT PARENT_PID``: one JSON line on stdout."""
     if len(argv) != 5 or argv[0] != "upload":
@@ -606,7 +619,7 @@ def main(argv: list[str]) -> int:
     with contextlib.suppress(OSError):
         os.nice(10)  # parsing yields the CPU to the API and the robot links
     outcome = parse_upload(Path(argv[1]), argv[2], Path(argv[3]))
-    outcome["peak_rss_kb"] = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+    outcome["peak_rss_kb"] = _own_peak_rss_kb()
     print(json.dumps(outcome), flush=True)
     return 0
 

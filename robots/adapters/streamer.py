@@ -196,6 +196,14 @@ class Streamer:
         self.link.estop()
         self._queue.put(("op", "estop"))
 
+    def estopped(self) -> None:
+        """The robot was E-stopped already (by the caller): end the execution, send nothing.
+
+        Unlike :meth:`estop` this never latches the link again, so an operator's
+        clear that overtakes this call is not undone.
+        """
+        self._queue.put(("op", "estop"))
+
     def close(self, timeout: float = 5.0) -> None:
         """Stop the streamer's thread without telling the robot anything."""
         self._queue.put(("stop", None))

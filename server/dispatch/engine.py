@@ -235,9 +235,17 @@ class DispatchEngine:
         self.events.publish("robot", {"name": name, "takeover": True})
         return self.robot_status(name)
 
-    def clear_estop(self, name: str, actor: str) -> dict[str, Any]:
+    def clear_estop(self, name: str, actor: str, wait_s: float = 2.0) -> dict[str, Any]:
+        """Clear the E-stop latch; waits (bounded) until the robot itself reports it cleared,
+        so the answer says what the robot says, not only what the host sent."""
         r = self._robot(name)
         r.link.clear_estop()
+        if r.link.state in CONNECTED_STATES:
+            r.link.wait_for(
+                lambda lk: lk.last_report is not None
+                and not int(lk.last_report.faults) & int(FaultFlag.ESTOP),
+                wait_s,
+            )
         self.store.audit(actor, "robot", name, "clear-estop")
         self.events.publish("robot", {"name": name, "estop_latched": False})
         return self.robot_status(name)
@@ -282,7 +290,7 @@ class DispatchEngine:
         status = r.link.status()
         if status.estop_latched:
             raise DispatchError(f"robot {robot} is E-stopped; clear the E-stop first")
-        why = not_ready_reason(status, allow_link_faults=True)
+        why = not_ready_reason(status, allow_link_faults=True, require_idle=True)
         if why:
             raise DispatchError(f"robot {robot} {why}; check its connection ({r.url})")
         run_id = secrets.randbelow(0xFFFFFFFE) + 1
@@ -413,7 +421,7 @@ class DispatchEngine:
         for eid, s in list(self._streamers.items()):
             ex = self.store.get_execution(eid)
             if robot is None or ex.robot == robot:
-                s.estop()
+                s.estopped()  # estop_links already latched the link: never latch it again
                 if ex.state in ACTIVE:
                     self._transition(eid, "abort", "estop", reason)
 
@@ -522,7 +530,11 @@ class DispatchEngine:
 
 
 def not_ready_reason(
-    status: Any, *, allow_link_faults: bool = True, allow_robot_faults: bool = False
+    status: Any,
+    *,
+    allow_link_faults: bool = True,
+    allow_robot_faults: bool = False,
+    require_idle: bool = False,
 ) -> str | None:
     """Why the robot cannot take a run now, or ``None``.
 
@@ -533,6 +545,12 @@ def not_ready_reason(
     if status.state not in CONNECTED_STATES:
         return f"is not connected ({status.state}: {status.reason})"
     faults = int(status.report.faults) if status.report is not None else 0
+    if faults & int(FaultFlag.ESTOP):
+        # The host's latch is clear but the robot's report is not (yet): a run
+        # sent now would be refused FAULTED at once.
+        return "still reports its E-stop latched (the clear has not reached it yet); try again"
+    if require_idle and status.report is not None and status.report.executing >= 0:
+        return f"is still executing command {status.report.executing} of run {status.report.run_id}"
     other = faults & ~int(LINK_FAULTS) & ~int(FaultFlag.ESTOP)
     if faults & int(LINK_FAULTS) and not allow_link_faults:
         return f"reports link faults ({FaultFlag(faults & int(LINK_FAULTS))!r})"

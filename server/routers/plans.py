@@ -126,6 +126,7 @@ def list_plans(
         parent_id=parent_id,
         limit=limit,
         offset=offset,
+        summary=True,
     )
     return [p.public(include_result=False) for p in plans]
 

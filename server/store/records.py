@@ -69,6 +69,8 @@ class PlanRecord:
     approved_by: str | None
     approved_at: str | None
     program: list[dict[str, Any]] | None = None
+    #: In a summary listing (no program loaded): how many commands it has.
+    program_length_hint: int | None = None
     _loader: Any = field(default=None, repr=False, compare=False)
 
     @classmethod
@@ -112,7 +114,9 @@ class PlanRecord:
             "approved_at": self.approved_at,
             "allowed_actions": allowed_actions(self.state),
             "arrays": {k: f"/api/v1/plans/{self.id}/arrays/{k}" for k in sorted(self.arrays)},
-            "program_length": None if self.program is None else len(self.program),
+            "program_length": (
+                self.program_length_hint if self.program is None else len(self.program)
+            ),
         }
         if include_result:
             out["result"] = self.result

@@ -210,8 +210,21 @@ class Store:
         parent_id: str | None = None,
         limit: int = 50,
         offset: int = 0,
+        summary: bool = False,
     ) -> list[PlanRecord]:
-        sql, args = "SELECT * FROM plans WHERE 1=1", []
+        """Plans, newest first.  ``summary`` leaves out ``result`` and ``program``
+        (``program_length`` is kept): a listing then costs no JSON decoding of
+        results, which can be megabytes per plan."""
+        cols = "*"
+        if summary:
+            cols = (
+                "id, kind, state, params, parent_id, progress, stage, NULL AS result, metrics, "
+                "checks, arrays, error, created_at, updated_at, created_by, approved_by, "
+                "approved_at, NULL AS program, "
+                "CASE WHEN program IS NULL THEN NULL ELSE json_array_length(program) END "
+                "AS program_length_hint"
+            )
+        sql, args = f"SELECT {cols} FROM plans WHERE 1=1", []
         for col, val in (("kind", kind), ("state", state), ("parent_id", parent_id)):
             if val is not None:
                 sql += f" AND {col} = ?"

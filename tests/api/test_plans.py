@@ -259,3 +259,12 @@ def test_legacy_rows_with_unknown_keys_still_load_run_and_revise(api) -> None:
     assert "old_knob" not in r.json()["params"] and r.json()["params"]["end"] == "c1"
     r = api.post(f"/api/v1/plans/{legacy.id}/revise", json={"params": {"ned": "c1"}})
     assert r.status_code == 422 and [e["loc"] for e in r.json()["detail"]] == [["ned"]]
+
+
+def test_listing_is_a_summary_with_the_program_length(api) -> None:
+    plan = api.wait(api.submit("demo.route")["id"])
+    full = api.get(f"/api/v1/plans/{plan['id']}").json()
+    (listed,) = [p for p in api.get("/api/v1/plans").json() if p["id"] == plan["id"]]
+    assert "result" not in listed and "program" not in listed
+    assert listed["program_length"] == len(full["program"]) > 0
+    assert listed["checks"] == full["checks"] and listed["metrics"] == full["metrics"]

@@ -111,3 +111,27 @@ def test_a_crashed_link_service_restarts_and_the_run_resumes_exactly_once(lapi) 
     assert check_exactly_once(log, done.run_id, done.total) == []
     assert store.list_acks(eid) == list(range(done.total))
     assert ex.acked <= done.total
+
+
+def test_a_clear_right_after_an_estop_sticks_and_the_next_dispatch_runs(lapi) -> None:
+    """The E-stop's bookkeeping (after the reply) must not latch the link again
+    over an operator's clear, and a dispatch right after the clear must not
+    meet a robot still reporting its E-stop."""
+    eng, store = lapi.services.dispatch, lapi.services.store
+    eid, _ = _dispatch_demo(lapi)
+    _wait(lambda: store.get_execution(eid).state == "running", 30, "running")
+    assert lapi.post("/api/v1/estop").status_code == 200
+    cleared = lapi.post("/api/v1/robots/ara/clear-estop")
+    assert cleared.status_code == 200 and not cleared.json()["estop_latched"]
+    _wait(lambda: store.get_execution(eid).state == "aborted", 10, "execution aborted")
+    time.sleep(0.5)  # the bookkeeping has run by now
+    status = eng.robot_status("ara")
+    assert not status["estop_latched"], status
+    assert not status["report"]["faults"] & 0x0004, status["report"]  # the robot agrees
+    eid2, _ = _dispatch_demo(lapi)
+    done = _wait(
+        lambda: (e := store.get_execution(eid2)).state in ("completed", "faulted", "aborted") and e,
+        60,
+        "second run finished",
+    )
+    assert done.state == "completed", done

@@ -167,7 +167,11 @@ def _parse_in_child(raw: Path, ctype: str, out: Path) -> tuple[dict, int]:
         if p.stdout:
             p.stdout.close()
     assert p.returncode == 0
-    return json.loads(stdout.decode().strip().splitlines()[-1]), usage.ru_maxrss * 1024
+    outcome = json.loads(stdout.decode().strip().splitlines()[-1])
+    # The child's own VmHWM: wait4's ru_maxrss starts from the forking parent's
+    # size (this test process can be a gigabyte late in a full run).
+    assert 0 < outcome["peak_rss_kb"] <= usage.ru_maxrss
+    return outcome, outcome["peak_rss_kb"] * 1024
 
 
 BOUND_EXTRA = 200 * 2**20
