@@ -55,6 +55,7 @@ def cmd_serve(args: argparse.Namespace) -> int:
         host=settings.host,
         port=settings.port,
         log_level=settings.log_level,
+        access_log=settings.access_log,
         ws="websockets-sansio",
         # Event streams and scene sockets never end on their own: bound the wait.
         timeout_graceful_shutdown=3,

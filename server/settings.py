@@ -46,6 +46,11 @@ class Settings(BaseSettings):
         description="embedded emulators run motions this much faster than real time",
     )
     log_level: str = Field("info", description="uvicorn log level")
+    access_log: bool = Field(
+        False,
+        description="log every HTTP request (off by default: a console polling robots writes "
+        "thousands of lines, and each is a write on the server's event loop)",
+    )
 
     @property
     def max_upload_bytes(self) -> int:

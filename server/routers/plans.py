@@ -136,7 +136,9 @@ def get_plan(plan_id: str, services: Svc, _: Viewer) -> dict[str, Any]:
     plan = services.store.get_plan(plan_id)
     out = plan.public()
     out["audit"] = [e.public() for e in services.store.list_audit("plan", plan_id)]
-    out["revisions"] = [p.id for p in services.store.list_plans(parent_id=plan_id, limit=500)]
+    out["revisions"] = [
+        p.id for p in services.store.list_plans(parent_id=plan_id, limit=500, summary=True)
+    ]
     return out
 
 
