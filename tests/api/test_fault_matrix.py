@@ -118,10 +118,27 @@ def base_plans(mapi) -> dict[str, dict]:
 
 
 def _fresh_approved(mapi: Api, base: dict) -> dict:
-    r = mapi.post(f"/api/v1/plans/{base['id']}/revise", json={"params": {}})
-    plan = mapi.wait(r.json()["id"], timeout=300)
-    assert plan["state"] == "planned", plan["error"]
-    assert mapi.post(f"/api/v1/plans/{plan['id']}/approve").status_code == 200
+    """An approved copy of the kind's planned base plan (an approved plan runs once).
+
+    The planners are deterministic, so a revision would plan the same program
+    again; the matrix is about dispatch under faults, so the copy stores the
+    base plan's result, checks and program directly instead of re-planning
+    (which made each cell cost a full planning run).
+    """
+    store = mapi.services.store
+    copy = store.create_plan(base["kind"], base["params"], "fault-matrix", parent_id=base["id"])
+    store.transition_plan(copy.id, "start", "fault-matrix")
+    store.store_plan_result(
+        copy.id,
+        result=base["result"],
+        arrays={},
+        checks=base["checks"],
+        metrics=base["metrics"],
+        program=base["program"],
+    )
+    assert mapi.post(f"/api/v1/plans/{copy.id}/approve").status_code == 200
+    plan = mapi.get(f"/api/v1/plans/{copy.id}").json()
+    assert plan["state"] == "approved" and plan["program"] == base["program"]
     return plan
 
 
