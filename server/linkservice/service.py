@@ -271,6 +271,8 @@ class LinkService:
     def _orphaned(self) -> None:
         log.error("the web server is gone: stopping every link")
         self.stopping.set()
+        # Whatever a worker thread is stuck in, this process ends soon.
+        threading.Timer(10.0, lambda: os._exit(1)).start()
 
     def shutdown(self) -> None:
         self.stopping.set()
@@ -329,4 +331,7 @@ def main(argv: list[str] | None = None) -> int:
     signal.signal(signal.SIGTERM, lambda *_: service.stopping.set())
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # the parent decides when we stop
     service.run(ns.parent_pid)
-    return 0
+    # Links are closed and the store is durable: do not wait at interpreter exit
+    # for an RPC thread still inside a long call (wait_connected, a busy SQLite).
+    logging.shutdown()
+    os._exit(0)

@@ -118,7 +118,6 @@ class Server:
         self.log.close()
 
 
-
 def _emulators_stopped(data: Path) -> None:
     """Stop emulator processes a test left (they run in sessions of their own)."""
     import json
@@ -271,3 +270,39 @@ def test_kill9_mid_command_restart_resume_ends_on_the_plan(servers, tmp_path, ca
         assert bool(report["magnets"] >> i & 1) == on, ("magnet", i, report["magnets"])
     for i, on in end["plates"].items():
         assert bool(report["plates"] >> i & 1) == on, ("plate", i, report["plates"])
+
+
+def _children(pid: int) -> dict[int, str]:
+    out = {}
+    for task in Path(f"/proc/{pid}/task").iterdir():
+        with contextlib.suppress(OSError):
+            for child in (task / "children").read_text().split():
+                with contextlib.suppress(OSError):
+                    cmd = Path(f"/proc/{child}/cmdline").read_bytes().replace(b"\0", b" ")
+                    out[int(child)] = cmd.decode(errors="replace")
+    return out
+
+
+def test_the_link_service_dies_with_a_killed_server_and_the_robots_do_not(
+    servers, tmp_path
+) -> None:
+    data = tmp_path / "var"
+    server = Server(data, 1.0)
+    servers.append(server)
+    kids = _children(server.proc.pid)
+    (link_pid,) = [p for p, cmd in kids.items() if "server.linkservice" in cmd]
+    robots = [p for p, cmd in kids.items() if "robots.emulator" in cmd]
+    assert len(robots) == 4
+    server.kill9()
+    _wait(
+        lambda: not Path(f"/proc/{link_pid}").exists() or _zombie(link_pid), 15, "link service gone"
+    )
+    # The robots (emulator processes) live on, as robots do.
+    assert all(Path(f"/proc/{p}").exists() and not _zombie(p) for p in robots)
+
+
+def _zombie(pid: int) -> bool:
+    try:
+        return Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0] == "Z"
+    except OSError:
+        return True
