@@ -258,21 +258,25 @@ class LinkService:
         raise ValueError(op)  # pragma: no cover - OPS guards it
 
     # -------------------------------------------------------------- lifecycle
-    def run(self, parent_pid: int) -> None:
+    def run(self) -> None:
         self.engine.start()
         threading.Thread(target=self.estop_loop, name="estop", daemon=True).start()
         threading.Thread(target=self.rpc_loop, name="link-rpc reader", daemon=True).start()
         self.outbox.publish("linkservice", {"state": "ready", "pid": os.getpid()})
-        die_with_parent(parent_pid, sig=signal.SIGTERM, on_orphaned=self._orphaned, poll_s=0.1)
-        while not self.stopping.wait(0.5):
-            pass
+        # SIGTERM is blocked in every thread (main() blocks it before the first
+        # thread starts) and taken here synchronously: a Python handler calling
+        # Event.set() can deadlock on the lock its own thread holds inside
+        # Event.wait(), which once left an orphaned service running for good.
+        while not self.stopping.is_set():
+            if signal.sigtimedwait({signal.SIGTERM}, 0.5) is not None:
+                break
         self.shutdown()
 
     def _orphaned(self) -> None:
-        log.error("the web server is gone: stopping every link")
-        self.stopping.set()
-        # Whatever a worker thread is stuck in, this process ends soon.
+        # Whatever a thread is stuck in, this process ends soon: armed first.
         threading.Timer(10.0, lambda: os._exit(1)).start()
+        self.stopping.set()
+        log.error("the web server is gone: stopping every link")
 
     def shutdown(self) -> None:
         self.stopping.set()
@@ -312,8 +316,17 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--parent-pid", type=int, required=True)
     p.add_argument("--config", required=True, help="JSON: settings and emulator URLs")
     ns = p.parse_args(argv)
-    if os.getppid() != ns.parent_pid:
-        return 1  # the parent died before we got here
+    # Armed before anything slow (imports, connecting the robots): a server
+    # killed while this process starts must not leave it running on its own.
+    service: LinkService | None = None
+
+    def orphaned() -> None:
+        if service is None:
+            os._exit(1)
+        service._orphaned()
+
+    signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGTERM})
+    die_with_parent(ns.parent_pid, sig=signal.SIGTERM, on_orphaned=orphaned, poll_s=0.1)
     cfg = json.loads(ns.config)
     logging.basicConfig(
         level=getattr(logging, str(cfg.get("log_level", "info")).upper(), logging.INFO),
@@ -328,9 +341,8 @@ def main(argv: list[str] | None = None) -> int:
     rpc = Channel(socket.socket(fileno=ns.rpc_fd))
     estop = Channel(socket.socket(fileno=ns.estop_fd))
     service = LinkService(settings, rpc, estop, cfg.get("emulator_urls") or {})
-    signal.signal(signal.SIGTERM, lambda *_: service.stopping.set())
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # the parent decides when we stop
-    service.run(ns.parent_pid)
+    service.run()
     # Links are closed and the store is durable: do not wait at interpreter exit
     # for an RPC thread still inside a long call (wait_connected, a busy SQLite).
     logging.shutdown()
