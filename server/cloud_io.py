@@ -417,8 +417,10 @@ def _read_npy(src: Source) -> Iterator[np.ndarray]:
         missing = [c for c in "xyz" if c not in dtype.names]
         if missing:
             raise CloudFormatError(f"structured NPY array lacks fields {missing}")
+        fields = dtype.fields
+        assert fields is not None  # a dtype with names always has fields
         for c in "xyz":
-            sub = dtype.fields[c][0]
+            sub = fields[c][0]
             if sub.shape or not _real(sub):
                 raise CloudFormatError(
                     f"structured NPY field {c!r} must be one real number; got {sub}"
@@ -574,10 +576,10 @@ def parse_upload(raw: Path, content_type: str, out: Path) -> dict[str, Any]:
                 "detail": "multipart upload needs a 'file' field holding the cloud",
             }
         name_part = next((p for p in parts if p.name == "name" and p.filename is None), None)
-        name = None
+        name: str | None = None
         if name_part is not None:
-            name = body.read_at(name_part.start, min(name_part.end - name_part.start, 500))
-            name = name.decode("utf-8", "replace").strip() or None
+            name_bytes = body.read_at(name_part.start, min(name_part.end - name_part.start, 500))
+            name = name_bytes.decode("utf-8", "replace").strip() or None
         filename = file.filename or ""
         try:
             res = parse_to_npy(FileSource(fd, file.start, file.end), filename, out)

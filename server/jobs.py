@@ -19,6 +19,7 @@ one long-lived spawner thread, never on a short-lived request thread.
 from __future__ import annotations
 
 import contextlib
+import functools
 import logging
 import multiprocessing as mp
 import os
@@ -247,22 +248,26 @@ class JobRunner:
         assert self._executor is not None, "JobRunner.start() was not called"
         with self._lock:
             self._cancel[plan_id] = False
-            args = (
-                execute_job,
-                plan.kind,
-                plan.params,
-                plan_id,
-                str(self.store.arrays.path("clouds")),
-                self._queue,
-                self._cancel,
-            )
+            clouds = str(self.store.arrays.path("clouds"))
+
+            def send(executor: Executor) -> Future[Any]:
+                return executor.submit(
+                    execute_job,
+                    plan.kind,
+                    plan.params,
+                    plan_id,
+                    clouds,
+                    self._queue,
+                    self._cancel,
+                )
+
             try:
-                fut = self._executor.submit(*args)
+                fut = send(self._executor)
             except BrokenProcessPool:  # a crashed worker broke the pool: replace it once
                 self._executor = self._new_executor()
-                fut = self._executor.submit(*args)
+                fut = send(self._executor)
             self._futures[plan_id] = fut
-        fut.add_done_callback(lambda f, pid=plan_id: self._finish(pid, f))
+        fut.add_done_callback(functools.partial(self._finish, plan_id))
 
     def cancel(self, plan_id: str, actor: str) -> str:
         """Cancel a queued or running plan; returns what happened."""

@@ -95,7 +95,8 @@ class Store:
     def list_audit(
         self, entity: str | None = None, entity_id: str | None = None, limit: int = 200
     ) -> list[AuditEvent]:
-        sql, args = "SELECT * FROM audit_events WHERE 1=1", []
+        sql = "SELECT * FROM audit_events WHERE 1=1"
+        args: list[Any] = []
         if entity:
             sql += " AND entity = ?"
             args.append(entity)
@@ -224,7 +225,8 @@ class Store:
                 "CASE WHEN program IS NULL THEN NULL ELSE json_array_length(program) END "
                 "AS program_length_hint"
             )
-        sql, args = f"SELECT {cols} FROM plans WHERE 1=1", []
+        sql = f"SELECT {cols} FROM plans WHERE 1=1"
+        args: list[Any] = []
         for col, val in (("kind", kind), ("state", state), ("parent_id", parent_id)):
             if val is not None:
                 sql += f" AND {col} = ?"
@@ -362,7 +364,8 @@ class Store:
     def list_executions(
         self, plan_id: str | None = None, state: str | None = None, limit: int = 100
     ) -> list[ExecutionRecord]:
-        sql, args = "SELECT * FROM executions WHERE 1=1", []
+        sql = "SELECT * FROM executions WHERE 1=1"
+        args: list[Any] = []
         if plan_id:
             sql += " AND plan_id = ?"
             args.append(plan_id)
