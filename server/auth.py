@@ -22,12 +22,14 @@ import hashlib
 import os
 import re
 import secrets
+import threading
 import time
 from dataclasses import dataclass
 from datetime import UTC, datetime, timedelta
 from pathlib import Path
 from typing import Annotated
 
+import anyio
 from fastapi import Depends, HTTPException, Request, status
 
 from server.services import Services, get_services
@@ -160,11 +162,86 @@ def resolve(store: Store, token: str | None) -> Principal:
     return Principal(rec.id, rec.name, rec.role, rec.expires_ts)
 
 
+class TokenCache:
+    """Tokens resolved in the last ``ttl_s`` seconds, so a request needs no SQLite read.
+
+    Every API request authenticates; under load a database read (and the
+    worker-thread hop it needs) per request is what queued reads behind each
+    other.  A hit costs a SHA-256 and a dict lookup.  Entries die after
+    ``ttl_s`` (0.75 s, the same bound :class:`CredentialWatch` gives a
+    revocation made by another process) and all at once when a revocation
+    goes through this process's store; an expiry is checked on every hit.
+    Refusals are not cached.  At most ``max_entries`` tokens are kept.
+    """
+
+    def __init__(self, store: Store, *, ttl_s: float = 0.75, max_entries: int = 4096) -> None:
+        self.store = store
+        self.ttl_s = ttl_s
+        self.max_entries = max_entries
+        self._entries: dict[str, tuple[Principal, float]] = {}
+        self._epoch = store.token_epoch
+        self._lock = threading.Lock()
+
+    def hit(self, token: str) -> Principal | None:
+        """The cached principal for ``token``, or ``None`` (then call :meth:`resolve`)."""
+        key = hash_token(token)
+        now = time.monotonic()
+        with self._lock:
+            if self.store.token_epoch != self._epoch:
+                self._entries.clear()
+                self._epoch = self.store.token_epoch
+            entry = self._entries.get(key)
+            if entry is None:
+                return None
+            principal, until = entry
+            if now >= until or (
+                principal.expires_at is not None and time.time() >= principal.expires_at
+            ):
+                del self._entries[key]
+                return None
+            return principal
+
+    def resolve(self, token: str | None) -> Principal:
+        """Read the token from the store (blocking) and remember it; TokenRefused if unusable."""
+        epoch = self.store.token_epoch
+        principal = resolve(self.store, token)
+        assert token is not None  # resolve refuses a missing token
+        with self._lock:
+            if epoch == self._epoch:  # no revocation raced this read
+                if len(self._entries) >= self.max_entries:
+                    self._entries.clear()
+                self._entries[hash_token(token)] = (principal, time.monotonic() + self.ttl_s)
+        return principal
+
+
+def token_cache(services: Services) -> TokenCache:
+    """The app's :class:`TokenCache` (made on first use)."""
+    cache = services.token_cache
+    if cache is None:
+        cache = services.token_cache = TokenCache(services.store)
+    return cache
+
+
 def authenticate(services: Services, token: str | None) -> Principal | None:
+    """The principal for ``token`` or ``None``; blocking on a cache miss."""
+    if not token:
+        return None
+    cache = token_cache(services)
     try:
-        return resolve(services.store, token)
+        return cache.hit(token) or cache.resolve(token)
     except TokenRefused:
         return None
+
+
+async def authenticate_async(services: Services, token: str | None) -> Principal:
+    """The principal for ``token``, or TokenRefused; the store is read off the event loop."""
+    if not token:
+        raise TokenRefused(MISSING_TOKEN)
+    cache = token_cache(services)
+    principal = cache.hit(token)
+    if principal is None:
+        principal = await anyio.to_thread.run_sync(cache.resolve, token)
+    return principal
 
 
 class CredentialWatch:
@@ -228,12 +305,14 @@ async def until_invalid(
 def require(role: str):
     """Dependency: a principal with at least ``role`` or 401/403."""
 
-    def dependency(
+    # async, so that authenticating costs no worker-thread hop (a cache hit is
+    # a dict lookup); a miss reads the store on a worker thread.
+    async def dependency(
         request: Request, services: Annotated[Services, Depends(get_services)]
     ) -> Principal:
         token = token_from_request(request)
         try:
-            principal = resolve(services.store, token)
+            principal = await authenticate_async(services, token)
         except TokenRefused as exc:
             raise HTTPException(
                 status.HTTP_401_UNAUTHORIZED,

@@ -24,7 +24,9 @@ class Services:
     dispatch: Any = None  # server.linkservice.LinkServiceClient once robots are wired
     emulators: Any = None  # server.linkservice.EmulatorSupervisor when built-in emulators run
     estop_handlers: list[Callable[[str | None, str], None]] = field(default_factory=list)
+    token_cache: Any = None  # server.auth.TokenCache, made on first use
 
 
-def get_services(request: Request) -> Services:
+async def get_services(request: Request) -> Services:
+    # async: a plain attribute read must not cost a worker-thread hop per request.
     return request.app.state.services

@@ -275,6 +275,10 @@ class LinkServiceClient:
     def robot_status(self, name: str) -> dict[str, Any]:
         return dict(self._call("robot_status", {"name": name}))
 
+    def robot_statuses(self) -> list[dict[str, Any]]:
+        """Every robot's status in one round trip (``GET /robots``)."""
+        return [dict(s) for s in self._call("robot_statuses", {})]
+
     def set_connection(
         self, name: str, url: str, actor: str, secret: str | None = None
     ) -> dict[str, Any]:

@@ -118,6 +118,7 @@ class LinkService:
     OPS = (
         "robot_names",
         "robot_status",
+        "robot_statuses",
         "set_connection",
         "takeover",
         "clear_estop",
@@ -219,6 +220,8 @@ class LinkService:
             return eng.robot_names()
         if op == "robot_status":
             return eng.robot_status(args["name"])
+        if op == "robot_statuses":
+            return [eng.robot_status(n) for n in eng.robot_names()]
         if op == "set_connection":
             secret = args.get("secret")
             writer = None

@@ -73,7 +73,7 @@ class ResumeRequest(BaseModel):
 @router.get("/robots")
 def list_robots(services: Svc, _: Viewer) -> list[dict[str, Any]]:
     eng = engine(services)
-    return [eng.robot_status(n) for n in eng.robot_names()]
+    return eng.robot_statuses()  # one round trip to the link service, not one per robot
 
 
 @router.get("/robots/{name}/state")

@@ -129,7 +129,13 @@ async def _read_client(
 
 
 async def _read_main(
-    url: str, token: str, clients: int, mix: list[tuple[str, str]], interval_s: float, stop: Any
+    url: str,
+    token: str,
+    clients: int,
+    mix: list[tuple[str, str]],
+    interval_s: float,
+    first_seed: int,
+    stop: Any,
 ) -> list[tuple[float, str, float, int]]:
     out: list[tuple[float, str, float, int]] = []
     limits = httpx.Limits(max_connections=clients, max_keepalive_connections=clients)
@@ -140,7 +146,7 @@ async def _read_main(
         limits=limits,
     ) as client:
         tasks = [
-            asyncio.create_task(_read_client(client, mix, interval_s, stop, i, out))
+            asyncio.create_task(_read_client(client, mix, interval_s, stop, first_seed + i, out))
             for i in range(clients)
         ]
         await asyncio.gather(*tasks)
@@ -153,13 +159,17 @@ def read_clients(
     clients: int,
     mix: list[tuple[str, str]],
     interval_s: float,
+    first_seed: int,
     stop: Any,
     out_path: str,
 ) -> None:
-    """Process entry: ``clients`` concurrent pollers until ``stop``; results to ``out_path``."""
+    """Process entry: ``clients`` concurrent pollers until ``stop``; results to ``out_path``.
+
+    Client ``i`` draws its reads with seed ``first_seed + i``.
+    """
     if clients < 1:
         raise ValueError(f"clients must be >= 1, got {clients}")
-    samples = asyncio.run(_read_main(url, token, clients, mix, interval_s, stop))
+    samples = asyncio.run(_read_main(url, token, clients, mix, interval_s, first_seed, stop))
     _dump(out_path, {"samples": samples})
 
 
