@@ -4,18 +4,22 @@ A :class:`RobotModel` is built from the robot's URDF (the single source of
 truth for joints, limits, collision shapes and display, DESIGN §7) plus its
 parameters file.  Subclasses supply ``fk``/``jacobian``/``ik``; the
 standard-D-H serial chain of :class:`DHRobotModel` covers the arms.
+Single-configuration FK and Jacobians come from pinocchio built from the URDF
+(:mod:`robots.urdf_model`); batches of configurations use the numpy chains.
 """
 
 from __future__ import annotations
 
 import tomllib
 from dataclasses import dataclass, field
+from functools import cached_property
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from robots.kinematics import dh_chain_transforms, geometric_jacobian, solve_ik_dls
+from robots.urdf_model import UrdfChain, urdf_kinematics
 
 
 @dataclass
@@ -66,7 +70,9 @@ class DHRobotModel(RobotModel):
 
     ``T_i = Rz(θ_i + offset_i) · Tz(d_i) · Tx(a_i) · Rx(α_i)``; the base
     transform is applied first and the link names are ``link_names[i]`` for
-    the frame after joint ``i``.
+    the frame after joint ``i``.  The URDF describes the same chain (its last
+    link is D-H frame n): one configuration's Jacobian comes from pinocchio,
+    batches from :func:`dh_chain_transforms`.
     """
 
     d: np.ndarray = field(default_factory=lambda: np.zeros(0))
@@ -93,8 +99,20 @@ class DHRobotModel(RobotModel):
                 f"unknown link {link!r} for {self.name}; known: {self.link_names}"
             ) from None
 
+    @cached_property
+    def urdf_chain(self) -> UrdfChain:
+        """pinocchio chain of the URDF: ``joint_names`` to the last link."""
+        return urdf_kinematics(self.urdf_path).chain(self.joint_names, self.link_names[-1])
+
     def jacobian(self, q: np.ndarray) -> np.ndarray:
-        return geometric_jacobian(self.frames(q))
+        """6×n geometric Jacobian ``[v; ω]`` of the last frame in the frame
+        ``base`` is expressed in (pinocchio for one configuration)."""
+        q = np.asarray(q, dtype=float)
+        if q.ndim != 1:
+            return geometric_jacobian(self.frames(q))
+        J = self.urdf_chain.jacobian(q)
+        R = self.base[:3, :3]
+        return np.vstack([R @ J[:3], R @ J[3:]])
 
     def ik(self, T: np.ndarray, q0: np.ndarray | None = None) -> np.ndarray | None:
         return solve_ik_dls(self, np.asarray(T, dtype=float), q0)

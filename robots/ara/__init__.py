@@ -13,39 +13,26 @@ are parallel but the wrist axes do not intersect).
 
 from __future__ import annotations
 
-import xml.etree.ElementTree as ET
 from dataclasses import dataclass, field
+from functools import cached_property
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from robots.model import RobotModel, read_params
+from robots.urdf_model import (
+    CollisionPrimitive,
+    UrdfChain,
+    collision_primitives,
+    joint_origin,
+    urdf_description,
+    urdf_kinematics,
+)
 
 HERE = Path(__file__).resolve().parent
 URDF_PATH = HERE / "ara.urdf"
 PARAMS_PATH = HERE / "params.toml"
-
-
-def _rpy_matrix(rpy: np.ndarray) -> np.ndarray:
-    """URDF fixed-axis roll-pitch-yaw: R = Rz(yaw) Ry(pitch) Rx(roll)."""
-    r, p, y = rpy
-    cr, sr, cp, sp, cy, sy = np.cos(r), np.sin(r), np.cos(p), np.sin(p), np.cos(y), np.sin(y)
-    return np.array(
-        [
-            [cy * cp, cy * sp * sr - sy * cr, cy * sp * cr + sy * sr],
-            [sy * cp, sy * sp * sr + cy * cr, sy * sp * cr - cy * sr],
-            [-sp, cp * sr, cp * cr],
-        ]
-    )
-
-
-def _origin(elem: ET.Element | None) -> np.ndarray:
-    T = np.eye(4)
-    if elem is not None:
-        T[:3, 3] = [float(v) for v in elem.get("xyz", "0 0 0").split()]
-        T[:3, :3] = _rpy_matrix(np.array([float(v) for v in elem.get("rpy", "0 0 0").split()]))
-    return T
 
 
 def _axis_rotation(axis: np.ndarray, theta: np.ndarray) -> np.ndarray:
@@ -58,16 +45,8 @@ def _axis_rotation(axis: np.ndarray, theta: np.ndarray) -> np.ndarray:
     return out
 
 
-@dataclass
-class CollisionShape:
-    """One URDF collision primitive: ``kind`` box|cylinder|sphere, ``size``
-    (box: full extents xyz; cylinder: radius, length along local z; sphere:
-    radius), ``origin`` 4×4 in its link frame."""
-
-    link: str
-    kind: str
-    size: tuple[float, ...]
-    origin: np.ndarray
+#: One URDF collision primitive (``link``, ``kind``, ``size``, ``origin``).
+CollisionShape = CollisionPrimitive
 
 
 @dataclass
@@ -106,7 +85,17 @@ class AraModel(RobotModel):
         out[:, -1] = out[:, -2] @ self.end_offset
         return out[0] if single else out
 
+    @cached_property
+    def urdf_chain(self) -> UrdfChain:
+        """pinocchio chain of the URDF: the six joints to ``foot1_sole``."""
+        return urdf_kinematics(self.urdf_path).chain(self.joint_names, self.link_names[-1])
+
     def fk(self, q: np.ndarray, link: str | None = None) -> np.ndarray:
+        """Pose of ``link`` (default foot1_sole) in base_link; one
+        configuration by pinocchio, a batch by :meth:`fk_all`."""
+        q = np.asarray(q, dtype=float)
+        if q.ndim == 1 and q.shape[0] == self.dof and link in (None, *self.link_names):
+            return self.urdf_chain.fk(q, link)
         frames = self.fk_all(q)
         if link is None:
             return frames[..., -1, :, :]
@@ -126,7 +115,11 @@ class AraModel(RobotModel):
 
     def jacobian(self, q: np.ndarray, link: str | None = None) -> np.ndarray:
         """6×n geometric Jacobian ``[v; ω]`` of ``link`` (default foot1_sole) in
-        the base frame; batched for ``q`` (B,6) → (B,6,6)."""
+        the base frame; batched for ``q`` (B,6) → (B,6,6).  One configuration
+        by pinocchio (joints after ``link`` give zero columns there too)."""
+        q = np.asarray(q, dtype=float)
+        if q.ndim == 1 and q.shape[0] == self.dof:
+            return self.urdf_chain.jacobian(q, link)
         frames = self.fk_all(q)
         k = -1 if link is None else self.link_names.index(link)
         axes, origins = self._joint_frames(frames)
@@ -243,54 +236,29 @@ class AraModel(RobotModel):
         return sols[0] if len(sols) else None
 
 
-def _parse(urdf_path: Path) -> dict[str, Any]:
-    root = ET.parse(urdf_path).getroot()
-    joints = {j.get("name"): j for j in root.findall("joint")}
-    by_child = {j.find("child").get("link"): j for j in joints.values()}  # type: ignore[union-attr]
-    # Walk back from the chain's end link to the base.
-    chain: list[ET.Element] = []
-    link = "foot1_sole"
-    while link in by_child:
+def _chain_joints(urdf_path: Path, end: str = "foot1_sole") -> tuple[str, list[Any]]:
+    """Root link and the joints from it to ``end``, root first."""
+    joints = urdf_description(urdf_path).joint_map.values()
+    by_child = {j.child: j for j in joints}
+    chain: list[Any] = []
+    link = end
+    while link in by_child:  # walk back from the chain's end link to the base
         j = by_child[link]
         chain.append(j)
-        link = j.find("parent").get("link")  # type: ignore[union-attr]
-    chain.reverse()
-    shapes: list[CollisionShape] = []
-    for link_el in root.findall("link"):
-        for col in link_el.findall("collision"):
-            geo = col.find("geometry")
-            assert geo is not None
-            prim = next(iter(geo))
-            if prim.tag == "box":
-                size = tuple(float(v) for v in prim.get("size", "").split())
-            elif prim.tag == "cylinder":
-                size = (float(prim.get("radius", 0)), float(prim.get("length", 0)))
-            elif prim.tag == "sphere":
-                size = (float(prim.get("radius", 0)),)
-            else:
-                raise ValueError(f"ara.urdf: unsupported collision geometry {prim.tag}")
-            shapes.append(
-                CollisionShape(link_el.get("name", ""), prim.tag, size, _origin(col.find("origin")))
-            )
-    return {"root": link, "chain": chain, "joints": joints, "shapes": shapes}
+        link = j.parent
+    return link, chain[::-1]
 
 
 def load() -> AraModel:
     """Build the ARA model from ``ara.urdf`` and ``params.toml``."""
     params = read_params(PARAMS_PATH)
-    parsed = _parse(URDF_PATH)
-    revolute = [j for j in parsed["chain"] if j.get("type") == "revolute"]
-    fixed_end = [j for j in parsed["chain"] if j.get("type") == "fixed"]
-    names = [j.get("name", "") for j in revolute]
-    limits = np.array(
-        [
-            [float(j.find("limit").get("lower")), float(j.find("limit").get("upper"))]
-            for j in revolute
-        ]  # type: ignore[union-attr]
-    )
-    axes = np.array([[float(v) for v in j.find("axis").get("xyz").split()] for j in revolute])  # type: ignore[union-attr]
-    links = [parsed["root"]] + [j.find("child").get("link") for j in parsed["chain"]]  # type: ignore[union-attr]
-    cam = parsed["joints"]["camera_joint"]
+    root, chain = _chain_joints(URDF_PATH)
+    revolute = [j for j in chain if j.type == "revolute"]
+    fixed_end = [j for j in chain if j.type == "fixed"]
+    names = [str(j.name) for j in revolute]
+    limits = np.array([[j.limit.lower, j.limit.upper] for j in revolute], dtype=float)
+    axes = np.array([j.axis for j in revolute], dtype=float)
+    links = [root, *[str(j.child) for j in chain]]
     speeds = np.radians(np.array(params["joints"]["max_speed_deg_s"], dtype=float))
     return AraModel(
         name="ara",
@@ -299,11 +267,11 @@ def load() -> AraModel:
         joint_limits=limits,
         params=params,
         link_names=links,
-        joint_origins=np.array([_origin(j.find("origin")) for j in revolute]),
+        joint_origins=np.array([joint_origin(URDF_PATH, n) for n in names]),
         joint_axes=axes / np.linalg.norm(axes, axis=1, keepdims=True),
-        end_offset=_origin(fixed_end[0].find("origin")) if fixed_end else np.eye(4),
-        collision_shapes=parsed["shapes"],
-        camera_to_base=_origin(cam.find("origin")),
+        end_offset=joint_origin(URDF_PATH, fixed_end[0].name) if fixed_end else np.eye(4),
+        collision_shapes=collision_primitives(URDF_PATH),
+        camera_to_base=joint_origin(URDF_PATH, "camera_joint"),
         max_speed=speeds,
         q_mobile=np.radians(np.array(params["poses"]["mobile_deg"], dtype=float)),
         q_conv=np.radians(np.array(params["poses"]["conv_deg"], dtype=float)),

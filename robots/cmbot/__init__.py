@@ -12,8 +12,8 @@ live in :mod:`robots.cmbot.kinematics`.
 
 from __future__ import annotations
 
-import xml.etree.ElementTree as ET
 from dataclasses import dataclass, field
+from functools import cached_property
 from pathlib import Path
 from typing import Any
 
@@ -22,6 +22,15 @@ import numpy as np
 from robots.cmbot.kinematics import climber_ik_batch
 from robots.kinematics import pose_error, solve_ik_dls
 from robots.model import RobotModel, read_params
+from robots.urdf_model import (
+    Inertial,
+    UrdfChain,
+    collision_primitives,
+    joint_origin,
+    link_inertials,
+    urdf_description,
+    urdf_kinematics,
+)
 
 HERE = Path(__file__).resolve().parent
 URDF_PATH = HERE / "cmbot.urdf"
@@ -29,25 +38,6 @@ PARAMS_PATH = HERE / "params.toml"
 
 ARM_JOINTS = [f"J{i}" for i in range(6, 13)]
 CLIMB_JOINTS = [f"J{i}" for i in range(1, 6)]
-
-
-def _rpy_matrix(r: float, p: float, y: float) -> np.ndarray:
-    cr, sr, cp, sp, cy, sy = np.cos(r), np.sin(r), np.cos(p), np.sin(p), np.cos(y), np.sin(y)
-    return np.array(
-        [
-            [cy * cp, cy * sp * sr - sy * cr, cy * sp * cr + sy * sr],
-            [sy * cp, sy * sp * sr + cy * cr, sy * sp * cr - cy * sr],
-            [-sp, cp * sr, cp * cr],
-        ]
-    )
-
-
-def _origin(elem: ET.Element | None) -> np.ndarray:
-    T = np.eye(4)
-    if elem is not None:
-        T[:3, 3] = [float(v) for v in elem.get("xyz", "0 0 0").split()]
-        T[:3, :3] = _rpy_matrix(*[float(v) for v in elem.get("rpy", "0 0 0").split()])
-    return T
 
 
 def rz(theta: np.ndarray) -> np.ndarray:
@@ -64,18 +54,6 @@ def rz(theta: np.ndarray) -> np.ndarray:
     return T
 
 
-@dataclass
-class UrdfJoint:
-    name: str
-    kind: str
-    parent: str
-    child: str
-    origin: np.ndarray
-    lower: float = 0.0
-    upper: float = 0.0
-    velocity: float = 0.0
-
-
 @dataclass(frozen=True)
 class CollisionBox:
     """A URDF collision primitive as an oriented box in its link frame:
@@ -89,51 +67,24 @@ class CollisionBox:
 
 def read_collision_boxes(path: Path) -> dict[str, list[CollisionBox]]:
     """Collision primitives of every link, as boxes (cylinders by their bounding box)."""
-    root = ET.parse(path).getroot()
     out: dict[str, list[CollisionBox]] = {}
-    for link in root.findall("link"):
-        name = link.get("name")
-        for col in link.findall("collision"):
-            geom = col.find("geometry")
-            T = _origin(col.find("origin"))
-            box, cyl = geom.find("box"), geom.find("cylinder")
-            if box is not None:
-                half = np.array([float(v) for v in box.get("size").split()]) / 2
-            elif cyl is not None:
-                r, L = float(cyl.get("radius")), float(cyl.get("length"))
-                half = np.array([r, r, L / 2])
-            else:
-                continue
-            out.setdefault(name, []).append(CollisionBox(name, half, T))
+    for prim in collision_primitives(path):
+        if prim.kind == "box":
+            half = np.array(prim.size) / 2
+        elif prim.kind == "cylinder":
+            r, L = prim.size
+            half = np.array([r, r, L / 2])
+        else:
+            continue
+        out.setdefault(prim.link, []).append(CollisionBox(prim.link, half, prim.origin))
     return out
 
 
-def read_urdf(path: Path) -> tuple[dict[str, UrdfJoint], dict[str, tuple[float, np.ndarray]]]:
-    """Joints by name and inertial ``(mass, com)`` by link name."""
-    root = ET.parse(path).getroot()
-    joints: dict[str, UrdfJoint] = {}
-    for j in root.findall("joint"):
-        lim = j.find("limit")
-        axis = j.find("axis")
-        if axis is not None and axis.get("xyz", "0 0 1").split() != ["0", "0", "1"]:
-            raise ValueError(f"cmbot.urdf: joint {j.get('name')} must turn about z (D-H frames)")
-        joints[j.get("name")] = UrdfJoint(
-            name=j.get("name"),
-            kind=j.get("type"),
-            parent=j.find("parent").get("link"),
-            child=j.find("child").get("link"),
-            origin=_origin(j.find("origin")),
-            lower=float(lim.get("lower")) if lim is not None else 0.0,
-            upper=float(lim.get("upper")) if lim is not None else 0.0,
-            velocity=float(lim.get("velocity")) if lim is not None else 0.0,
-        )
-    masses: dict[str, tuple[float, np.ndarray]] = {}
-    for link in root.findall("link"):
-        inertial = link.find("inertial")
-        if inertial is not None:
-            m = float(inertial.find("mass").get("value"))
-            masses[link.get("name")] = (m, _origin(inertial.find("origin"))[:3, 3])
-    return joints, masses
+def _check_z_axes(path: Path) -> None:
+    """The closed forms assume D-H frames: every moving joint turns about z."""
+    for j in urdf_description(path).joint_map.values():
+        if j.type != "fixed" and not np.allclose(j.axis, [0.0, 0.0, 1.0]):
+            raise ValueError(f"cmbot.urdf: joint {j.name} must turn about z (D-H frames)")
 
 
 @dataclass
@@ -141,8 +92,10 @@ class CmbotChain(RobotModel):
     """Serial chain of z-axis revolute joints read from the URDF.
 
     ``link_frames(q)`` (…,n+2,4,4): the chain base, the n joint (URDF link)
-    frames and the end link; ``fk(q)`` the end link; ``jacobian(q)`` its 6×n
-    geometric Jacobian ``[v; ω]`` in the chain base frame (batched).
+    frames and the end link (numpy, batched); ``fk(q)`` the end link;
+    ``jacobian(q)`` its 6×n geometric Jacobian ``[v; ω]`` in the chain base
+    frame.  One configuration goes to pinocchio (:mod:`robots.urdf_model`),
+    a batch to :meth:`link_frames`.
     """
 
     joint_origins: np.ndarray = field(default_factory=lambda: np.zeros((0, 4, 4)))
@@ -163,7 +116,21 @@ class CmbotChain(RobotModel):
         out[..., -1, :, :] = out[..., -2, :, :] @ self.end_offset
         return out
 
+    @cached_property
+    def urdf_chain(self) -> UrdfChain:
+        """pinocchio chain ``joint_names`` from ``link_names[0]`` to the end link."""
+        return urdf_kinematics(self.urdf_path).chain(
+            self.joint_names, self.link_names[-1], base=self.link_names[0]
+        )
+
     def fk(self, q: np.ndarray, link: str | None = None) -> np.ndarray:
+        q = np.asarray(q, dtype=float)
+        if link is not None and link not in self.link_names:
+            raise ValueError(f"unknown link {link!r} for {self.name}; known: {self.link_names}")
+        if q.ndim == 1:
+            if q.shape[0] != self.dof:
+                raise ValueError(f"{self.name}: expected {self.dof} joint values, got {q.shape}")
+            return self.urdf_chain.fk(q, link)
         frames = self.link_frames(q)
         if link is None:
             return frames[..., -1, :, :]
@@ -175,6 +142,9 @@ class CmbotChain(RobotModel):
             ) from None
 
     def jacobian(self, q: np.ndarray) -> np.ndarray:
+        q = np.asarray(q, dtype=float)
+        if q.ndim == 1 and q.shape[0] == self.dof:
+            return self.urdf_chain.jacobian(q)
         frames = self.link_frames(q)
         z = frames[..., 1:-1, :3, 2]
         o = frames[..., 1:-1, :3, 3]
@@ -258,50 +228,55 @@ class CmbotModel(CmbotChain):
 
 
 def _chain(
-    joints: dict[str, UrdfJoint],
-    masses: dict[str, tuple[float, np.ndarray]],
-    names: list[str],
-    end_joint: str,
+    path: Path, inertials: dict[str, Inertial], names: list[str], end_joint: str
 ) -> dict[str, Any]:
+    joints = urdf_description(path).joint_map
     js = [joints[n] for n in names]
     end = joints[end_joint]
+    none = Inertial(0.0, np.zeros(3))
     return {
         "joint_names": names,
-        "joint_limits": np.array([[j.lower, j.upper] for j in js]),
-        "joint_origins": np.array([j.origin for j in js]),
-        "end_offset": end.origin,
+        "joint_limits": np.array([[j.limit.lower, j.limit.upper] for j in js], dtype=float),
+        "joint_origins": np.array([joint_origin(path, n) for n in names]),
+        "end_offset": joint_origin(path, end_joint),
         "link_names": [js[0].parent, *[j.child for j in js], end.child],
-        "max_speed": np.array([j.velocity for j in js]),
-        "link_masses": np.array([masses.get(j.child, (0.0, None))[0] for j in js]),
-        "link_coms": np.array([masses.get(j.child, (0.0, np.zeros(3)))[1] for j in js]),
+        "max_speed": np.array([j.limit.velocity for j in js], dtype=float),
+        "link_masses": np.array([inertials.get(j.child, none).mass for j in js]),
+        "link_coms": np.array([inertials.get(j.child, none).com for j in js]),
     }
+
+
+def _mass(inertials: dict[str, Inertial], link: str) -> tuple[float, np.ndarray]:
+    i = inertials[link]
+    return i.mass, i.com
 
 
 def load() -> CmbotModel:
     """The CMBOT model from ``cmbot.urdf`` and ``params.toml``."""
     params = read_params(PARAMS_PATH)
-    joints, masses = read_urdf(URDF_PATH)
+    _check_z_axes(URDF_PATH)
+    masses = link_inertials(URDF_PATH)
     c = params["climber"]
-    cl = _chain(joints, masses, CLIMB_JOINTS, "foot_front_fixed")
+    cl = _chain(URDF_PATH, masses, CLIMB_JOINTS, "foot_front_fixed")
     climber = ClimberModel(
         name="cmbot.climber",
         urdf_path=URDF_PATH,
         params=params,
         l1=c["l1"],
         l2=c["l2"],
-        base_mass=masses["foot_rear"],
-        end_mass=masses["foot_front"],
+        base_mass=_mass(masses, "foot_rear"),
+        end_mass=_mass(masses, "foot_front"),
         **cl,
     )
-    arm = _chain(joints, masses, ARM_JOINTS, "tool_fixed")
+    arm = _chain(URDF_PATH, masses, ARM_JOINTS, "tool_fixed")
     model = CmbotModel(
         name="cmbot",
         urdf_path=URDF_PATH,
         params=params,
         climber=climber,
-        arm_mount=joints["arm_mount"].origin,
+        arm_mount=joint_origin(URDF_PATH, "arm_mount"),
         urdf_joint_names=[*CLIMB_JOINTS, *ARM_JOINTS],
-        base_mass=masses["arm_base"],
+        base_mass=_mass(masses, "arm_base"),
         collision_boxes=read_collision_boxes(URDF_PATH),
         **arm,
     )

@@ -48,21 +48,17 @@ class DensoVM6083(DHRobotModel):
     def fk(self, q: np.ndarray, link: str | None = None) -> np.ndarray:
         """Pose of a URDF link (default the flange) in the frame ``base`` is in.
 
-        URDF link k is the D-H frame k-1 turned by θk (its joint origin holds
-        the θ offset), so it equals ``frames[k-1] · Rz(θk)``.
+        One configuration (``q`` (6,)) is evaluated by pinocchio on the URDF;
+        a batch (``q`` (B,6), flange only) by the D-H chain.
         """
-        frames = self.frames(q)
-        if link is None or link == "flange":
-            return frames[-1]
-        if link not in URDF_LINKS:
+        if link is not None and link not in URDF_LINKS:
             raise ValueError(f"unknown link {link!r} for {self.name}; known: {URDF_LINKS}")
-        k = URDF_LINKS.index(link)
-        if k == 0:
-            return frames[0]
-        th = float(np.asarray(q, dtype=float)[k - 1] + self.offset[k - 1])
-        c, s = np.cos(th), np.sin(th)
-        Rz = np.array([[c, -s, 0, 0], [s, c, 0, 0], [0, 0, 1, 0], [0, 0, 0, 1]])
-        return frames[k - 1] @ Rz
+        q = np.asarray(q, dtype=float)
+        if q.ndim != 1:
+            if link not in (None, "flange"):
+                raise ValueError("batched fk gives the flange only")
+            return self.frames(q)[..., -1, :, :]
+        return self.base @ self.urdf_chain.fk(q, link)
 
     def with_base(self, base: np.ndarray) -> DensoVM6083:
         """A copy whose base frame sits at ``base`` (4×4) in the world."""

@@ -14,13 +14,14 @@ IK of its base: where it goes is the planners' job (``planners.sbg``).
 from __future__ import annotations
 
 import math
-import xml.etree.ElementTree as ET
 from dataclasses import dataclass, field
+from functools import cached_property
 from pathlib import Path
 
 import numpy as np
 
 from robots.model import RobotModel, read_params
+from robots.urdf_model import UrdfChain, joint_origin, urdf_description, urdf_kinematics
 
 HERE = Path(__file__).resolve().parent
 URDF_PATH = HERE / "sbg_climber.urdf"
@@ -36,111 +37,36 @@ JOINT_NAMES = [
 ARM_INDEX = 4
 
 
-def _rpy_matrix(r: float, p: float, y: float) -> np.ndarray:
-    """URDF fixed-axis roll-pitch-yaw: R = Rz(yaw) Ry(pitch) Rx(roll)."""
-    cr, sr, cp, sp, cy, sy = (
-        math.cos(r),
-        math.sin(r),
-        math.cos(p),
-        math.sin(p),
-        math.cos(y),
-        math.sin(y),
-    )
-    return np.array(
-        [
-            [cy * cp, cy * sp * sr - sy * cr, cy * sp * cr + sy * sr],
-            [sy * cp, sy * sp * sr + cy * cr, sy * sp * cr - cy * sr],
-            [-sp, cp * sr, cp * cr],
-        ]
-    )
-
-
-def _axis_angle(axis: np.ndarray, theta: float) -> np.ndarray:
-    """4×4 rotation by ``theta`` about the unit ``axis`` (Rodrigues)."""
-    k = np.array([[0.0, -axis[2], axis[1]], [axis[2], 0.0, -axis[0]], [-axis[1], axis[0], 0.0]])
-    T = np.eye(4)
-    T[:3, :3] = np.eye(3) + math.sin(theta) * k + (1.0 - math.cos(theta)) * (k @ k)
-    return T
-
-
-@dataclass
-class _Joint:
-    name: str
-    kind: str
-    parent: str
-    child: str
-    origin: np.ndarray
-    axis: np.ndarray
-
-
-def _parse_urdf(path: Path) -> dict[str, _Joint]:
-    """Joints of the URDF keyed by child link (the tree is rooted at base_link)."""
-    root = ET.parse(path).getroot()
-    joints: dict[str, _Joint] = {}
-    for j in root.findall("joint"):
-        o = j.find("origin")
-        T = np.eye(4)
-        if o is not None:
-            T[:3, 3] = [float(v) for v in o.get("xyz", "0 0 0").split()]
-            T[:3, :3] = _rpy_matrix(*[float(v) for v in o.get("rpy", "0 0 0").split()])
-        ax = j.find("axis")
-        axis = np.array([float(v) for v in (ax.get("xyz") if ax is not None else "1 0 0").split()])
-        parent = j.find("parent").get("link")  # type: ignore[union-attr]
-        child = j.find("child").get("link")  # type: ignore[union-attr]
-        joints[child] = _Joint(j.get("name", ""), j.get("type", "fixed"), parent, child, T, axis)
-    return joints
-
-
 @dataclass
 class SbgClimberModel(RobotModel):
     """Wheels + lifting arm read from the URDF; analytic lift-angle IK.
 
-    Wheel joints are continuous: their limits are ``(-inf, inf)``.
+    Wheel joints are continuous: their limits are ``(-inf, inf)``.  FK and
+    the Jacobian are pinocchio's on the URDF tree (:mod:`robots.urdf_model`).
     """
 
-    joints_by_child: dict[str, _Joint] = field(default_factory=dict)
+    link_names: list[str] = field(default_factory=list)
+    lift_pivot: np.ndarray = field(default_factory=lambda: np.eye(4))
     default_link: str = "arm_tip"
 
-    @property
-    def link_names(self) -> list[str]:
-        return ["base_link", *self.joints_by_child]
-
-    def _chain(self, link: str) -> list[_Joint]:
-        if link != "base_link" and link not in self.joints_by_child:
-            raise ValueError(f"unknown link {link!r} for {self.name}; known: {self.link_names}")
-        chain: list[_Joint] = []
-        while link != "base_link":
-            j = self.joints_by_child[link]
-            chain.append(j)
-            link = j.parent
-        return chain[::-1]
+    @cached_property
+    def urdf_chain(self) -> UrdfChain:
+        """pinocchio tree with the joints in :data:`JOINT_NAMES` order, tip arm_tip."""
+        return urdf_kinematics(self.urdf_path).chain(self.joint_names, self.default_link)
 
     def fk(self, q: np.ndarray, link: str | None = None) -> np.ndarray:
         """4×4 pose of ``link`` (default ``arm_tip``) in ``base_link``."""
         q = self._check_q(q)
-        T = np.eye(4)
-        for j in self._chain(link or self.default_link):
-            T = T @ j.origin
-            if j.kind in ("revolute", "continuous"):
-                T = T @ _axis_angle(j.axis, float(q[JOINT_NAMES.index(j.name)]))
-        return T
+        link = link or self.default_link
+        if link not in self.link_names:
+            raise ValueError(f"unknown link {link!r} for {self.name}; known: {self.link_names}")
+        return self.urdf_chain.fk(q, link)
 
     def jacobian(self, q: np.ndarray) -> np.ndarray:
         """6×n geometric Jacobian ``[v; ω]`` of ``arm_tip`` in ``base_link``:
         only the lifting-arm column is non-zero (wheels do not move the tip
         relative to the body)."""
-        q = self._check_q(q)
-        J = np.zeros((6, self.dof))
-        tip = self.fk(q)[:3, 3]
-        T = np.eye(4)
-        for j in self._chain(self.default_link):
-            T = T @ j.origin
-            if j.kind in ("revolute", "continuous"):
-                z = T[:3, :3] @ j.axis
-                J[:3, JOINT_NAMES.index(j.name)] = np.cross(z, tip - T[:3, 3])
-                J[3:, JOINT_NAMES.index(j.name)] = z
-                T = T @ _axis_angle(j.axis, float(q[JOINT_NAMES.index(j.name)]))
-        return J
+        return self.urdf_chain.jacobian(self._check_q(q))
 
     def ik(self, T: np.ndarray, q0: np.ndarray | None = None) -> np.ndarray | None:
         """Lift angle that puts ``arm_tip`` at ``T`` (position and orientation).
@@ -157,7 +83,7 @@ class SbgClimberModel(RobotModel):
         if T.shape != (4, 4):
             raise ValueError(f"ik target must be a 4×4 pose, got shape {T.shape}")
         q = np.zeros(self.dof) if q0 is None else self._check_q(q0).copy()
-        pivot = self.joints_by_child["lift_arm"].origin
+        pivot = self.lift_pivot
         rel = pivot[:3, :3].T @ (T[:3, 3] - pivot[:3, 3])
         q_arm = math.atan2(-rel[0], -rel[2])
         q[ARM_INDEX] = q_arm
@@ -181,23 +107,22 @@ class SbgClimberModel(RobotModel):
 
 def load() -> SbgClimberModel:
     """The climber's kinematic model from its URDF and params.toml."""
-    joints = _parse_urdf(URDF_PATH)
+    urdf = urdf_description(URDF_PATH)
     limits = np.empty((len(JOINT_NAMES), 2))
-    root = ET.parse(URDF_PATH).getroot()
     for i, name in enumerate(JOINT_NAMES):
-        elem = root.find(f"joint[@name='{name}']")
-        if elem is None:
+        j = urdf.joint_map.get(name)
+        if j is None:
             raise ValueError(f"{URDF_PATH} lacks joint {name!r}")
-        lim = elem.find("limit")
-        if elem.get("type") == "continuous" or lim is None:
+        if j.type == "continuous" or j.limit is None:
             limits[i] = (-np.inf, np.inf)
         else:
-            limits[i] = (float(lim.get("lower", "0")), float(lim.get("upper", "0")))
+            limits[i] = (float(j.limit.lower or 0.0), float(j.limit.upper or 0.0))
     return SbgClimberModel(
         name="sbg_climber",
         urdf_path=URDF_PATH,
         joint_names=list(JOINT_NAMES),
         joint_limits=limits,
         params=read_params(PARAMS_PATH),
-        joints_by_child=joints,
+        link_names=["base_link", *[str(j.child) for j in urdf.joint_map.values()]],
+        lift_pivot=joint_origin(URDF_PATH, "lift_arm_joint"),
     )
