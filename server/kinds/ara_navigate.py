@@ -26,9 +26,23 @@ from pydantic import Field
 
 from planners.errors import InvalidInputError
 from planners.navigation import NavigationParams, NavigationResult, plan_navigation
-from planners.navigation.pibc import steel_union, swept_on_steel
+from planners.navigation.footprint_checks import (
+    Footprint,
+    alg6_spacing_m,
+    bars_covered,
+    poses_on_steel,
+    to_plane,
+)
 from planners.navigation.synthetic import SAMPLES, SHAPES
-from server.kinds.base import Check, JobContext, KindOutput, PlanKind, StrictParams, check_ge
+from server.kinds.base import (
+    Check,
+    JobContext,
+    KindOutput,
+    PlanKind,
+    PlanView,
+    StrictParams,
+    check_ge,
+)
 from server.kinds.programs import wheel_steps
 
 
@@ -108,40 +122,29 @@ def _footprint(p: AraNavigateParams) -> dict[str, float]:
             fp["center_x_m"] if p.footprint_center_x_m is None else p.footprint_center_x_m
         ),
         "footprint_center_y_m": float(fp.get("center_y_m", 0.0)),
-        # Alg. 6's projected points: every centimetre, at least four across
-        # the short side (the body's 0.68 × 0.16 m needs no finer than 4 cm).
-        "footprint_spacing_m": float(min(0.04, max(0.01, min(length, width) / 4.0))),
+        "footprint_spacing_m": alg6_spacing_m(length, width),
     }
 
 
 def _checks(res: NavigationResult, p: AraNavigateParams) -> tuple[list[Check], dict[str, float]]:
     g, route = res.graph, res.route
     bars = [c.id for c in res.clusters if c.kind == "bar"]
-    driven = {g.edges[u, v]["clusters"][0] for u, v, _ in route.edges}
-    covered = sum(b in driven for b in bars)
+    covered = bars_covered(bars, [g.edges[u, v]["clusters"][0] for u, v, _ in route.edges])
     checks = [
         check_ge("bars_covered", covered, len(bars), "bars on the route", ""),
     ]
-    # Every pose the wheels will drive, and the area the footprint sweeps
-    # between consecutive poses, inside the union of the boundary polygons:
-    # an exact geometric test (shapely), independent of the PIBC (Alg. 6)
-    # used while planning and of its footprint margin.
+    # the exact footprint test (planners.navigation.footprint_checks), not
+    # Alg. 6's sampled points used while planning
     params = res.params
-    geom = {
-        "length_m": params.footprint_length_m,
-        "width_m": params.footprint_width_m,
-        "center_x_m": params.footprint_center_x_m,
-        "center_y_m": params.footprint_center_y_m,
-    }
-    steel = steel_union([c.boundary for c in res.clusters])
+    footprint = Footprint(
+        params.footprint_length_m,
+        params.footprint_width_m,
+        params.footprint_center_x_m,
+        params.footprint_center_y_m,
+    )
     poses = [e.poses for e in res.edge_paths if len(e.poses)]
-    n_poses = sum(len(x) for x in poses)
-    if poses:
-        swept = np.concatenate([_swept(x, steel, geom) for x in poses])
-        frac = float(swept.mean())
-        first = np.vstack(poses)[int(np.argmin(swept))] if not swept.all() else None
-    else:
-        frac, first = 1.0, None
+    report = poses_on_steel(poses, [c.boundary for c in res.clusters], footprint)
+    frac, first, n_poses = report.fraction, report.first_off, report.n_poses
     checks.append(
         Check(
             name="poses_on_steel",
@@ -199,17 +202,6 @@ def _checks(res: NavigationResult, p: AraNavigateParams) -> tuple[list[Check], d
         )
     )
     return checks, {"bars_covered": float(covered), "poses_on_steel_fraction": frac}
-
-
-def _swept(poses: np.ndarray, steel: Any, geom: dict[str, float]) -> np.ndarray:
-    return swept_on_steel(
-        poses,
-        steel,
-        geom["length_m"],
-        geom["width_m"],
-        center_x_m=geom["center_x_m"],
-        center_y_m=geom["center_y_m"],
-    )
 
 
 def run(p: AraNavigateParams, ctx: JobContext) -> KindOutput:
@@ -351,7 +343,7 @@ TURN_RATE_RAD_S = 0.5
 REPLAY_TOL_M = 1e-3
 
 
-def compile_program(plan: Any) -> list[dict[str, Any]]:
+def compile_program(plan: PlanView) -> list[dict[str, Any]]:
     """Differential-drive wheel commands that drive exactly the planned poses.
 
     The per-edge paths are planned for the ARA's differential wheels (turns
@@ -375,8 +367,7 @@ def compile_program(plan: Any) -> list[dict[str, Any]]:
     if not res.get("paths") or not all(p_["ok"] for p_ in res["paths"]):
         bad = next((p_["message"] for p_ in res.get("paths", []) if not p_["ok"]), "")
         raise ValueError(
-            "no complete on-steel path to drive"
-            + (f" ({bad})" if bad else " (plan_paths was off)")
+            "no complete on-steel path to drive" + (f" ({bad})" if bad else " (plan_paths was off)")
         )
     poses = np.asarray(plan.array("path_poses"), dtype=float).reshape(-1, 3)
     if len(poses) < 2:
@@ -392,17 +383,18 @@ def compile_program(plan: Any) -> list[dict[str, Any]]:
             f"differential wheels: {exc}"
         ) from exc
     frame = res["frame"]
-    origin, e1, e2 = (np.asarray(frame[k], dtype=float) for k in ("origin", "e1", "e2"))
     polys = [
-        np.stack([(b - origin) @ e1, (b - origin) @ e2], axis=1)
-        for b in (np.asarray(c["boundary"], dtype=float).reshape(-1, 3) for c in res["clusters"])
+        to_plane(c["boundary"], frame["origin"], frame["e1"], frame["e2"]) for c in res["clusters"]
     ]
     fp = res["footprint"]
-    geom = {k: float(fp[k]) for k in ("length_m", "width_m", "center_x_m", "center_y_m")}
+    footprint = Footprint(
+        *(float(fp[k]) for k in ("length_m", "width_m", "center_x_m", "center_y_m"))
+    )
     replay = replay_wheels(poses[0], cmds, track_m=track)
-    ok = _swept(replay, steel_union(polys), geom)
-    if not ok.all():
-        bad = replay[int(np.argmin(ok))]
+    report = poses_on_steel([replay], polys, footprint)
+    bad = report.first_off
+    if bad is not None:
+        ok = report.on_steel
         raise ValueError(
             f"{int((~ok).sum())} of {len(ok)} replayed wheel poses put the footprint off the "
             f"steel (first at x={bad[0]:.3f} m, y={bad[1]:.3f} m, yaw={np.degrees(bad[2]):.0f}°)"

@@ -15,18 +15,19 @@ import time
 from typing import Any
 
 import numpy as np
-import shapely
 from pydantic import Field
 
 from planners.errors import InvalidInputError, PlannerError
 from planners.switching import SwitchingParams, decide_mode
 from planners.switching.jump import JumpParams, plan_inchworm_jump
+from planners.switching.jump_checks import foot_inside_surface, joint_limit_excess, speed_ratio
 from planners.switching.scenes import SCENES, make_scene
 from server.kinds.base import (
     Check,
     JobContext,
     KindOutput,
     PlanKind,
+    PlanView,
     StrictParams,
     check_ge,
     check_le,
@@ -210,11 +211,9 @@ def run(p: AraSwitchParams, ctx: JobContext) -> KindOutput:
             m = plan.metrics(ara)
             Q = plan.joint_trajectory
             # Checks recomputed from the returned trajectory itself.
-            speed = np.abs(np.diff(Q, axis=0)) / np.diff(plan.times)[:, None]
-            ratio = float((speed / ara.max_speed).max()) if len(speed) else 0.0
-            lo, hi = ara.joint_limits[:, 0], ara.joint_limits[:, 1]
-            viol = float(np.maximum(0, np.maximum(lo - Q, Q - hi)).max())
-            foot1_inside = _inside(plan.foot1_requested, foot, surface, 0.01)
+            ratio = speed_ratio(Q, plan.times, ara.max_speed)
+            viol = joint_limit_excess(Q, ara.joint_limits)
+            foot1_inside = foot_inside_surface(plan.foot1_requested, foot, surface, 0.01)
             checks += [
                 Check(
                     name="jump_planned",
@@ -294,14 +293,6 @@ def run(p: AraSwitchParams, ctx: JobContext) -> KindOutput:
     return KindOutput(result=result, arrays=arrays, checks=checks, metrics=metrics)
 
 
-def _inside(T: np.ndarray, foot: tuple[float, float], surface: tuple, tol: float) -> bool:
-    origin, ex, ey, hull = surface
-    hl, hw = foot[0] / 2, foot[1] / 2
-    local = np.array([[hl, hw, 0], [-hl, hw, 0], [-hl, -hw, 0], [hl, -hw, 0]])
-    c = local @ T[:3, :3].T + T[:3, 3] - origin
-    return bool(hull.buffer(tol).covers(shapely.Polygon(np.column_stack([c @ ex, c @ ey]))))
-
-
 def _sample(name: str):
     def make(seed: int) -> np.ndarray:
         return make_scene(name, seed).points
@@ -313,7 +304,7 @@ def _sample(name: str):
 MAGNET_CHANNEL = {"foot1": 0, "foot2": 1}
 
 
-def compile_program(plan: Any, sample_s: float = 0.1) -> list[dict[str, Any]] | None:
+def compile_program(plan: PlanView, sample_s: float = 0.1) -> list[dict[str, Any]] | None:
     """The inch-worm jump as a command program: J1…J6 way-points every
     ``sample_s`` of the timed trajectory (§3.2: magnet 2 touched → Pconv →
     foot 1 to the target → swap → foot 2 follows → mobile configuration),

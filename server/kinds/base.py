@@ -18,6 +18,21 @@ from typing import Any, Protocol
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
+from server.planview import PlanView
+
+__all__ = [
+    "Check",
+    "CloudRef",
+    "JobContext",
+    "KindOutput",
+    "PlanKind",
+    "PlanView",
+    "StrictParams",
+    "check_ge",
+    "check_le",
+    "drop_unknown_keys",
+]
+
 
 class StrictParams(BaseModel):
     """Base of every kind's params model (and its nested parts): unknown keys
@@ -121,21 +136,6 @@ class JobContext(Protocol):
     def load_cloud(self, cloud_id: str) -> np.ndarray:
         """An (N,3) float64 array of a stored cloud; ``KeyError``-free: raises
         :class:`planners.errors.InvalidInputError` for an unknown id."""
-
-
-class PlanView(Protocol):
-    """A stored plan as drawers and compilers see it (read-only)."""
-
-    id: str
-    kind: str
-    state: str
-    params: dict[str, Any]
-    result: dict[str, Any]
-    metrics: dict[str, float]
-    checks: list[dict[str, Any]]
-
-    def array(self, name: str) -> np.ndarray:
-        """Load one of the plan's stored arrays."""
 
 
 SampleFn = Callable[[int], np.ndarray]

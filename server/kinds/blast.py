@@ -20,11 +20,13 @@ from pydantic import Field, field_validator
 
 from planners.blasting import Box, Surface, plan_blasting, scenes
 from planners.blasting.nozzle import check_stream_length
+from planners.blasting.sample_clouds import under_deck_cloud
+from planners.blasting.surface_pick import PickedSurface, nozzle_tip, outline_world, pick_surface
 from planners.errors import InvalidInputError, NoPlaneError
-from server.kinds.base import Check, JobContext, KindOutput, PlanKind, StrictParams
+from server.kinds.base import Check, JobContext, KindOutput, PlanKind, PlanView, StrictParams
+from server.kinds.common import plot, thin
 
 ROBOT = "denso_vm6083"
-FACING_DEG = 30.0  # chosen: a plane point whose local normal is further off is not of the patch
 
 
 class PolygonSurface(StrictParams):
@@ -134,69 +136,26 @@ def validate(p: BlastParams) -> None:
         Box.from_bounds(b.lo_m, b.hi_m)
 
 
-def _surface(p: BlastParams, ctx: JobContext) -> tuple[Surface, np.ndarray | None, dict[str, Any]]:
-    """The surface, obstacle points from the cloud, and what to show of the cloud."""
-    base = np.asarray(p.robot_base_m, dtype=float)
+def _surface(
+    p: BlastParams, ctx: JobContext
+) -> tuple[Surface, PickedSurface | None, np.ndarray | None]:
+    """The surface to blast and, for a cloud, what was picked from it and the cloud."""
     if p.polygon is not None:
-        return p.polygon.build(), None, {}
+        return p.polygon.build(), None, None
     if p.cloud_id is None:
-        return scenes.bridge_surface(int(p.seed_surface or 1)), None, {}
-    from planners.pointcloud.filters import statistical_outliers, voxel_downsample
-    from planners.pointcloud.normals import facing_mask
-    from planners.pointcloud.ransac import detect_planes
-
-    pts = np.asarray(ctx.load_cloud(p.cloud_id), dtype=float)
-    planes = detect_planes(
-        pts, threshold_m=p.plane_threshold_m, min_points=100, cluster_radius_m=0.05
-    )
-    if not planes:
-        raise NoPlaneError(f"no plane with ≥ 100 points found in cloud {p.cloud_id}")
-    # detect_planes reports in discovery order (one plane's pieces together);
-    # the operator picks by index, and index 0 is promised to be the largest
-    planes = sorted(planes, key=lambda pl: -pl.n_inliers)
-    if p.plane_index >= len(planes):
-        raise InvalidInputError(
-            f"plane_index {p.plane_index} out of range: the cloud has {len(planes)} planes"
+        return scenes.bridge_surface(int(p.seed_surface or 1)), None, None
+    cloud = np.asarray(ctx.load_cloud(p.cloud_id), dtype=float)
+    try:
+        picked = pick_surface(
+            cloud,
+            plane_index=p.plane_index,
+            threshold_m=p.plane_threshold_m,
+            toward=np.asarray(p.robot_base_m, dtype=float),
+            obstacles_from_rest=p.cloud_obstacles,
         )
-    mask = planes[p.plane_index].inliers.copy()
-    # a distance threshold also takes the strip where a perpendicular face
-    # (a flange) crosses the plane; only points whose own surface faces
-    # the plane's way outline the patch
-    # (normals from the whole cloud: the strip's neighbours are on its face)
-    if len(pts) >= 12:
-        mask &= facing_mask(pts, planes[p.plane_index].normal, FACING_DEG)
-    # isolated points left in the plane would pull thin spikes into the outline
-    idx = np.nonzero(mask)[0]
-    mask[idx[statistical_outliers(pts[idx])]] = False
-    surf = Surface.from_points(pts[mask], toward=base)
-    label = np.full(len(pts), -1, dtype=np.int32)
-    for i, pl in enumerate(planes):
-        label[pl.inliers & (label < 0)] = i
-    others = pts[~mask] if p.cloud_obstacles else None
-    if others is not None and len(others):
-        others = voxel_downsample(others, 0.02)
-    info = {
-        "planes": [
-            {
-                "index": i,
-                "points": pl.n_inliers,
-                "normal": pl.normal.tolist(),
-                "centroid": pl.centroid.tolist(),
-            }
-            for i, pl in enumerate(planes)
-        ],
-        "cloud_points": pts,
-        "cloud_label": label,
-    }
-    return surf, others, info
-
-
-def _thin(n: int, k: int = 400) -> np.ndarray:
-    return np.unique(np.linspace(0, n - 1, min(n, k)).astype(int))
-
-
-def _finite(v: float) -> float | None:
-    return float(v) if math.isfinite(v) else None
+    except NoPlaneError as exc:
+        raise NoPlaneError(f"{exc} (cloud {p.cloud_id})") from exc
+    return picked.surface, picked, cloud
 
 
 def run(p: BlastParams, ctx: JobContext) -> KindOutput:
@@ -204,7 +163,8 @@ def run(p: BlastParams, ctx: JobContext) -> KindOutput:
 
     t0 = time.perf_counter()
     ctx.progress(0.02, "surface")
-    surface, cloud_obst, cloud_info = _surface(p, ctx)
+    surface, picked, cloud = _surface(p, ctx)
+    cloud_obst = None if picked is None else picked.obstacle_points
     base = np.eye(4)
     base[:3, 3] = p.robot_base_m
     robot = load_robot(ROBOT).with_base(base)
@@ -226,32 +186,20 @@ def run(p: BlastParams, ctx: JobContext) -> KindOutput:
     )  # fmt: skip
     ctx.progress(0.97, "storing")
     q, t, clr = plan.joint_trajectory, plan.times, plan.clearance
-    F = robot.frames(q)[:, -1]
-    tip = F[:, :3, 3] + 0.1 * F[:, :3, 2]  # nozzle tip (100 mm along the flange z axis)
-    k = _thin(len(t))
+    tip, axis = nozzle_tip(robot.frames(q)[:, -1])
+    k = thin(len(t))
     plots = [
-        {
-            "title": "Fig. 4.22 style: ellipsoid clearance to the obstacles",
-            "x": t[k].tolist(),
-            "x_label": "s",
-            "y_label": "mm",
-            "series": {"clearance_mm": [_finite(v * 1000.0) for v in clr[k]]},
-        },
-        {
-            "title": "Fig. 4.16 style: joint angles (speed-limited)",
-            "x": t[k].tolist(),
-            "x_label": "s",
-            "y_label": "deg",
-            "series": {f"J{j + 1}": np.degrees(q[k, j]).round(3).tolist() for j in range(6)},
-        },
-    ]
-    outline = surface.to_world(np.asarray(surface.polygon.exterior.coords) if surface.polygon.geom_type == "Polygon"
-                               else np.asarray(surface.polygon.convex_hull.exterior.coords))  # fmt: skip
-    holes = (
-        [surface.to_world(np.asarray(h.coords)).tolist() for h in surface.polygon.interiors]
-        if surface.polygon.geom_type == "Polygon"
-        else []
-    )
+        plot(
+            "Fig. 4.22 style: ellipsoid clearance to the obstacles",
+            t[k], {"clearance_mm": clr[k] * 1000.0}, x_label="s", y_label="mm",
+        ),
+        plot(
+            "Fig. 4.16 style: joint angles (speed-limited)",
+            t[k], {f"J{j + 1}": np.degrees(q[k, j]).round(3) for j in range(6)},
+            x_label="s", y_label="deg",
+        ),
+    ]  # fmt: skip
+    outline, holes = outline_world(surface)
     result: dict[str, Any] = {
         "surface": {
             "origin": surface.origin.tolist(),
@@ -259,7 +207,7 @@ def run(p: BlastParams, ctx: JobContext) -> KindOutput:
             "x_axis": surface.x_axis.tolist(),
             "y_axis": surface.y_axis.tolist(),
             "outline_world": outline.tolist(),
-            "holes_world": holes,
+            "holes_world": [h.tolist() for h in holes],
             "area_m2": surface.area,
         },
         "robot_base": base.tolist(),
@@ -272,8 +220,16 @@ def run(p: BlastParams, ctx: JobContext) -> KindOutput:
         "timings_s": plan.timings_s,
         "plots": plots,
     }
-    if cloud_info:
-        result["planes"] = cloud_info["planes"]
+    if picked is not None:
+        result["planes"] = [
+            {
+                "index": pl.index,
+                "points": pl.points,
+                "normal": pl.normal.tolist(),
+                "centroid": pl.centroid.tolist(),
+            }
+            for pl in picked.planes
+        ]
         result["plane_index"] = p.plane_index
     checks = [
         Check(**c)
@@ -296,14 +252,14 @@ def run(p: BlastParams, ctx: JobContext) -> KindOutput:
         "segment": plan.segment.astype(np.int8),
         "waypoint_spot": plan.waypoint_spot.astype(np.int32),
         "nozzle_tip": tip,
-        "nozzle_axis": F[:, :3, 2],
+        "nozzle_axis": axis,
     }
     if cloud_obst is not None and len(cloud_obst):
         arrays["obstacle_points"] = cloud_obst
-    if cloud_info:
-        sel = _thin(len(cloud_info["cloud_points"]), 60_000)
-        arrays["cloud_points"] = cloud_info["cloud_points"][sel]
-        arrays["cloud_label"] = cloud_info["cloud_label"][sel]
+    if picked is not None and cloud is not None:
+        sel = thin(len(cloud), 60_000)
+        arrays["cloud_points"] = cloud[sel]
+        arrays["cloud_label"] = picked.cloud_label[sel]
     metrics = {
         "discs": float(len(plan.centers)),
         "distance_m": plan.distance_m,
@@ -330,7 +286,7 @@ def run(p: BlastParams, ctx: JobContext) -> KindOutput:
     return KindOutput(result=result, arrays=arrays, checks=checks, metrics=metrics)
 
 
-def compile_program(plan: Any) -> list[dict[str, Any]]:
+def compile_program(plan: PlanView) -> list[dict[str, Any]]:
     """Timed joint way-points for the arm with the nozzle opened at the
     first spot, closed during reconfigurations and at the end."""
     from robots.protocol.commands import JointMove, Nozzle, Stop
@@ -357,35 +313,6 @@ def compile_program(plan: Any) -> list[dict[str, Any]]:
     return [c.to_dict() for c in cmds]
 
 
-def sample_under_deck(seed: int) -> np.ndarray:
-    """The seed's Fig. 4.4 environment as a cloud (2 mm noise): the three
-    rusted patches (Surfaces 1–3) densely, and the I-beam channel around them
-    sparsely — pick a plane with ``plane_index``."""
-    rng = np.random.default_rng(seed)
-    parts = []
-    import shapely
-
-    for k in (1, 2, 3):
-        s = scenes.bridge_surface(k)
-        minx, miny, maxx, maxy = s.polygon.bounds
-        uv = rng.uniform([minx, miny], [maxx, maxy], size=(int(s.area / 2.5e-5) * 2, 2))
-        uv = uv[shapely.contains_xy(s.polygon, uv[:, 0], uv[:, 1])]
-        parts.append(s.to_world(uv))
-    # sparse context: the flanges of both girders and the far girder's web
-    # (the deck and the near web carry the patches and are left out so the
-    # patches come out as planes of their own)
-    for b in scenes.bridge_obstacles()[1:]:
-        if "x=0 web" in b.name:
-            continue
-        n = int(np.prod(np.sort(b.half)[1:]) * 4 / 4e-4)
-        loc = rng.uniform(-1, 1, size=(n, 3))
-        ax = rng.integers(0, 3, n)
-        loc[np.arange(n), ax] = np.sign(loc[np.arange(n), ax])  # on a face
-        parts.append(b.center + loc * b.half)
-    pts = np.concatenate(parts)
-    return pts + rng.normal(scale=0.002, size=pts.shape)
-
-
 KIND = PlanKind(
     name="blast",
     title="Sand-blasting a rusted surface (DENSO VM-6083)",
@@ -393,7 +320,7 @@ KIND = PlanKind(
     params_model=BlastParams,
     run=run,
     validate=validate,
-    samples={"blast_under_deck": sample_under_deck},
+    samples={"blast_under_deck": under_deck_cloud},
     robot=ROBOT,
     compile=compile_program,
 )

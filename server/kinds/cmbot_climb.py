@@ -22,9 +22,12 @@ from pydantic import Field, model_validator
 from planners.cmbot import SEED_CLIMB_GOAL_X, SEED_CLIMB_START_X, GaitParams, plan_climb
 from planners.cmbot.gait import chain_limits, plan_footholds
 from planners.cmbot.guardrail import SEED_POSTS, SEED_SEGMENTS, Guardrail, GuardrailParams
-from server.kinds.base import Check, JobContext, KindOutput, PlanKind, StrictParams
+from server.kinds.base import Check, JobContext, KindOutput, PlanKind, PlanView, StrictParams
+from server.kinds.common import json_safe, plot, thin
 
 ROBOT = "cmbot"
+#: samples of a console plot (the CMBOT runs are long and fine-stepped)
+PLOT_SAMPLES = 600
 
 
 class GuardrailSpec(StrictParams):
@@ -84,25 +87,6 @@ def boxes_result(boxes: list[Any]) -> list[dict[str, Any]]:
         }
         for b in boxes
     ]
-
-
-def clean(v: Any) -> Any:
-    """JSON-safe copy: non-finite floats become ``None``."""
-    if isinstance(v, dict):
-        return {str(k): clean(x) for k, x in v.items()}
-    if isinstance(v, list | tuple):
-        return [clean(x) for x in v]
-    if isinstance(v, np.ndarray):
-        return clean(v.tolist())
-    if isinstance(v, np.integer):
-        return int(v)
-    if isinstance(v, float | np.floating):
-        return float(v) if math.isfinite(v) else None
-    return v
-
-
-def thin(n: int, k: int = 600) -> np.ndarray:
-    return np.unique(np.linspace(0, n - 1, min(n, k)).astype(int))
 
 
 def gate_checks(gate: Any, prefix: str = "") -> list[Check]:
@@ -183,29 +167,27 @@ def run(p: CmbotClimbParams, ctx: JobContext) -> KindOutput:
     tr = plan.trajectory
     ctx.progress(0.95, "storing")
     sup = tr.support > 0
-    k = thin(len(tr.times))
+    k = thin(len(tr.times), PLOT_SAMPLES)
     hold = plan.metrics["magnet_holding_moment_Nm"]
     plots = [
-        {
-            "title": "flip torque about the holding sole (Eq. 9), single support",
-            "x": tr.times[k].tolist(),
-            "x_label": "s",
-            "y_label": "N·m",
-            "series": {
-                "with counterweight": np.where(sup[k], np.abs(tr.flip_Nm[k, 1]), np.nan).tolist(),
-                "arm held vertical": np.where(
-                    sup[k], np.abs(tr.flip_no_cw_Nm[k, 1]), np.nan
-                ).tolist(),
-                "magnet holding moment": [hold] * len(k),
+        plot(
+            "flip torque about the holding sole (Eq. 9), single support",
+            tr.times[k],
+            {
+                "with counterweight": np.where(sup[k], np.abs(tr.flip_Nm[k, 1]), np.nan),
+                "arm held vertical": np.where(sup[k], np.abs(tr.flip_no_cw_Nm[k, 1]), np.nan),
+                "magnet holding moment": np.full(len(k), hold),
             },
-        },
-        {
-            "title": "climbing joints J1–J5 and the counterweight J6",
-            "x": tr.times[k].tolist(),
-            "x_label": "s",
-            "y_label": "deg",
-            "series": {f"J{j + 1}": np.degrees(tr.q[k, j]).tolist() for j in range(6)},
-        },
+            x_label="s",
+            y_label="N·m",
+        ),
+        plot(
+            "climbing joints J1–J5 and the counterweight J6",
+            tr.times[k],
+            {f"J{j + 1}": np.degrees(tr.q[k, j]) for j in range(6)},
+            x_label="s",
+            y_label="deg",
+        ),
     ]
     phases = [
         {
@@ -265,14 +247,14 @@ def run(p: CmbotClimbParams, ctx: JobContext) -> KindOutput:
     }
     metrics = {k2: float(v) for k2, v in plan.metrics.items() if math.isfinite(v)}
     metrics["gate_samples"] = float(gate.samples)
-    return KindOutput(result=clean(result), arrays=arrays, checks=checks, metrics=metrics)
+    return KindOutput(result=json_safe(result), arrays=arrays, checks=checks, metrics=metrics)
 
 
 #: Protocol channels of the electromagnets and limiting plates (rear = stance 0).
 _CHANNEL = {"rear": 0, "front": 1}
 
 
-def compile_program(plan: Any, sample_s: float = 0.1) -> list[dict[str, Any]]:
+def compile_program(plan: PlanView, sample_s: float = 0.1) -> list[dict[str, Any]]:
     """The walk as a command program: J1…J12 way-points every ``sample_s``
     (climbing chain and the counterweight swing of the arm), with each
     phase's magnet on/off and limiting-plate seize/release commands inserted

@@ -29,15 +29,15 @@ from planners.cmbot import (
 )
 from planners.cmbot.scene import work_stance
 from planners.errors import InvalidInputError
-from server.kinds.base import Check, JobContext, KindOutput, PlanKind, StrictParams
+from server.kinds.base import Check, JobContext, KindOutput, PlanKind, PlanView, StrictParams
 from server.kinds.cmbot_climb import (
+    PLOT_SAMPLES,
     GuardrailSpec,
     boxes_result,
-    clean,
     gate_checks,
     guardrail_result,
-    thin,
 )
+from server.kinds.common import json_safe, plot, thin
 
 ROBOT = "cmbot"
 
@@ -117,37 +117,27 @@ def run(p: CmbotManipulateParams, ctx: JobContext) -> KindOutput:
     )
     run_ = plan.run
     ctx.progress(0.97, "storing")
-    k = thin(len(run_.times))
+    k = thin(len(run_.times), PLOT_SAMPLES)
     label = "with avoidance" if p.avoidance else "without avoidance"
-    series = {label: run_.clearance[k].tolist()}
+    series = {label: run_.clearance[k]}
     if plan.comparison is not None:
         other = "without avoidance" if p.avoidance else "with avoidance"
-        series[other] = plan.comparison.clearance[k].tolist()
-    series["required clearance"] = [p.min_clearance_m] * len(k)
-    series["Eq. 15 d_s"] = [p.d_s_m] * len(k)
+        series[other] = plan.comparison.clearance[k]
+    series["required clearance"] = np.full(len(k), p.min_clearance_m)
+    series["Eq. 15 d_s"] = np.full(len(k), p.d_s_m)
+    t = run_.times[k]
     plots = [
-        {
-            "title": "minimum clearance of the arm's spheres to the cuboids",
-            "x": run_.times[k].tolist(),
-            "x_label": "s",
-            "y_label": "m",
-            "series": series,
-        },
-        {
-            "title": "tool tracking error",
-            "x": run_.times[k].tolist(),
-            "x_label": "s",
-            "y_label": "mm",
-            "series": {label: (run_.pos_error[k] * 1e3).tolist()},
-        },
-        {
-            "title": "arm joints J6–J12",
-            "x": run_.times[k].tolist(),
-            "x_label": "s",
-            "y_label": "deg",
-            "series": {f"J{j + 6}": np.degrees(run_.q[k, j]).tolist() for j in range(7)},
-        },
-    ]
+        plot(
+            "minimum clearance of the arm's spheres to the cuboids",
+            t, series, x_label="s", y_label="m",
+        ),
+        plot("tool tracking error", t, {label: run_.pos_error[k] * 1e3}, x_label="s", y_label="mm"),
+        plot(
+            "arm joints J6–J12",
+            t, {f"J{j + 6}": np.degrees(run_.q[k, j]) for j in range(7)},
+            x_label="s", y_label="deg",
+        ),
+    ]  # fmt: skip
     checks = gate_checks(plan.gate)
     prop = plan.proposal
     proposal: dict[str, Any] | None = None
@@ -201,10 +191,10 @@ def run(p: CmbotManipulateParams, ctx: JobContext) -> KindOutput:
         arrays["q_compare"] = plan.comparison.q
         arrays["clearance_compare"] = plan.comparison.clearance
     metrics = {k2: float(v) for k2, v in plan.metrics.items() if math.isfinite(v)}
-    return KindOutput(result=clean(result), arrays=arrays, checks=checks, metrics=metrics)
+    return KindOutput(result=json_safe(result), arrays=arrays, checks=checks, metrics=metrics)
 
 
-def compile_program(plan: Any) -> list[dict[str, Any]]:
+def compile_program(plan: PlanView) -> list[dict[str, Any]]:
     """Timed way-points of J1…J12 every 0.1 s (the climbing joints J1…J5 held
     in the work stance, the arm J6…J12 as simulated); the nozzle works on the
     straight line of Eq. 21–26 (t ≥ 5 s) and closes at the end."""

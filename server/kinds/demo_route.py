@@ -12,12 +12,24 @@ from __future__ import annotations
 import time
 from typing import Any
 
-import networkx as nx
 import numpy as np
 from pydantic import Field, model_validator
 
-from planners.errors import InfeasibleError, InvalidInputError, UnknownVertexError
-from server.kinds.base import Check, JobContext, KindOutput, PlanKind, StrictParams, check_le
+from planners.postman.shortest_route import (
+    build_graph,
+    check_endpoints,
+    shortest_route,
+    unit_grid_edges,
+)
+from server.kinds.base import (
+    Check,
+    JobContext,
+    KindOutput,
+    PlanKind,
+    PlanView,
+    StrictParams,
+    check_le,
+)
 
 
 def _default_nodes() -> dict[str, list[float]]:
@@ -26,13 +38,7 @@ def _default_nodes() -> dict[str, list[float]]:
 
 
 def _default_edges() -> list[tuple[str, str]]:
-    nodes = _default_nodes()
-    return [
-        (u, v)
-        for u in nodes
-        for v in nodes
-        if u < v and np.isclose(np.linalg.norm(np.subtract(nodes[u], nodes[v])), 1.0)
-    ]
+    return [(str(u), str(v)) for u, v in unit_grid_edges(_default_nodes())]
 
 
 class DemoRouteParams(StrictParams):
@@ -62,49 +68,22 @@ class DemoRouteParams(StrictParams):
         return self
 
 
-def build_graph(p: DemoRouteParams) -> nx.Graph:
-    g = nx.Graph()
-    for node, pos in p.nodes.items():
-        g.add_node(node, pos=tuple(pos))
-    for u, v in p.edges:
-        for w in (u, v):
-            if w not in p.nodes:
-                raise UnknownVertexError(
-                    f"edge ({u}, {v}) names vertex {w!r}, which has no position"
-                )
-        g.add_edge(u, v, weight=float(np.linalg.norm(np.subtract(p.nodes[u], p.nodes[v]))))
-    return g
-
-
 def validate(p: DemoRouteParams) -> None:
-    g = build_graph(p)
-    for role, v in (("start", p.start), ("end", p.end)):
-        if v not in g:
-            known = ", ".join(sorted(g.nodes)[:10])
-            raise UnknownVertexError(f"{role} vertex {v!r} is not in the graph (vertices: {known})")
+    check_endpoints(build_graph(p.nodes, p.edges), p.start, p.end)
 
 
 def run(p: DemoRouteParams, ctx: JobContext) -> KindOutput:
     t0 = time.perf_counter()
     ctx.progress(0.05, "graph")
-    g = build_graph(p)
     validate(p)
     ctx.progress(0.2, "shortest path")
-    try:
-        path = nx.dijkstra_path(g, p.start, p.end, weight="weight")
-    except nx.NetworkXNoPath:
-        raise InfeasibleError(
-            f"no path from {p.start!r} to {p.end!r}: they lie in different components"
-        ) from None
-    xyz = np.array([p.nodes[v] for v in path], dtype=float)
-    seg = np.linalg.norm(np.diff(xyz, axis=0), axis=1)
-    for i in range(len(seg)):
+    route = shortest_route(p.nodes, p.edges, p.start, p.end)
+    path, xyz, length = route.path, route.xyz, route.length_m
+    n = len(route.segment_m)
+    for i in range(n):
         if p.step_delay_s:
             time.sleep(p.step_delay_s)
-        ctx.progress(0.2 + 0.75 * (i + 1) / max(len(seg), 1), f"step {i + 1}/{len(seg)}")
-    length = float(seg.sum())
-    if not np.isfinite(length):
-        raise InvalidInputError("route length is not finite; check the vertex positions")
+        ctx.progress(0.2 + 0.75 * (i + 1) / max(n, 1), f"step {i + 1}/{n}")
     checks = [
         Check(
             name="route_found",
@@ -127,7 +106,7 @@ def run(p: DemoRouteParams, ctx: JobContext) -> KindOutput:
         metrics={
             "route_length_m": length,
             "route_vertices": float(len(path)),
-            "graph_edges": float(g.number_of_edges()),
+            "graph_edges": float(route.graph_edges),
             "planning_time_s": time.perf_counter() - t0,
         },
     )
@@ -140,7 +119,7 @@ DRIVE_SPEED_M_S = 0.1
 TURN_RATE_RAD_S = 0.5
 
 
-def compile_wheels(plan: Any) -> list[dict[str, Any]]:
+def compile_wheels(plan: PlanView) -> list[dict[str, Any]]:
     """The route as ARA wheel commands: turn in place to each segment's heading,
     drive it straight, stop at the end (robot starts at the first vertex facing +x)."""
     from server.kinds.programs import as_dicts, differential_drive

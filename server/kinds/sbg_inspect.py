@@ -29,7 +29,8 @@ from planners.sbg import (
 from planners.sbg import corner as corner_mod
 from planners.sbg import experiments as ex
 from planners.sbg.robot import ClimberParams
-from server.kinds.base import Check, JobContext, KindOutput, PlanKind, StrictParams
+from server.kinds.base import Check, JobContext, KindOutput, PlanKind, PlanView, StrictParams
+from server.kinds.common import json_safe, plot, thin
 
 DEG = math.pi / 180.0
 _DEFAULT_GIRDER = sample_girders()["seed_lab"]
@@ -259,25 +260,6 @@ def validate(p: SbgInspectParams) -> None:
     _config(p).validate()
 
 
-def _clean(v: Any) -> Any:
-    """JSON-safe copy: non-finite floats become ``None``, arrays lists."""
-    if isinstance(v, dict):
-        return {str(k): _clean(x) for k, x in v.items()}
-    if isinstance(v, list | tuple):
-        return [_clean(x) for x in v]
-    if isinstance(v, np.ndarray):
-        return _clean(v.tolist())
-    if isinstance(v, np.integer):
-        return int(v)
-    if isinstance(v, float | np.floating):
-        return float(v) if math.isfinite(v) else None
-    return v
-
-
-def _thin(n: int, k: int = 400) -> np.ndarray:
-    return np.unique(np.linspace(0, n - 1, min(n, k)).astype(int))
-
-
 def run(p: SbgInspectParams, ctx: JobContext) -> KindOutput:
     girder, robot = p.girder.build(), p.robot.build()
     noise, cfg = _noise(p), _config(p)
@@ -313,18 +295,15 @@ def run(p: SbgInspectParams, ctx: JobContext) -> KindOutput:
     seg0 = next(ln.segment for ln in sim.lanes)
     i0 = np.flatnonzero((A["segment"] == seg0) & np.isfinite(A["d_m"]))
     if i0.size:
-        k = i0[_thin(i0.size)]
+        k = i0[thin(i0.size)]
         plots.append(
-            {
-                "title": f"Fig. 14 style: lane {sim.lanes[0].lane} tracking error",
-                "x": (A["t_s"][k] - A["t_s"][i0[0]]).tolist(),
-                "x_label": "s",
-                "y_label": "d (mm), δ (deg)",
-                "series": {
-                    "d_mm": (A["d_m"][k] * 1e3).tolist(),
-                    "delta_deg": np.degrees(A["delta_rad"][k]).tolist(),
-                },
-            }
+            plot(
+                f"Fig. 14 style: lane {sim.lanes[0].lane} tracking error",
+                A["t_s"][k] - A["t_s"][i0[0]],
+                {"d_mm": A["d_m"][k] * 1e3, "delta_deg": np.degrees(A["delta_rad"][k])},
+                x_label="s",
+                y_label="d (mm), δ (deg)",
+            )
         )
     # Fig. 12 style: pitch over the first crossing, and the as-printed law beside it.
     if sim.crossing_pitch:
@@ -336,31 +315,31 @@ def run(p: SbgInspectParams, ctx: JobContext) -> KindOutput:
         def pad(a: np.ndarray) -> np.ndarray:
             return np.r_[a, np.full(n - len(a), a[-1])]
 
-        k = _thin(n)
+        k = thin(n)
         plots.append(
-            {
-                "title": "Fig. 12 style: pitch while crossing a corner",
-                "x": t[k].tolist(),
-                "x_label": "s",
-                "y_label": "deg",
-                "series": {
-                    f"{cfg.corner_profile} (this plan)": np.degrees(pad(th))[k].tolist(),
-                    "Eq. 4 as printed": np.degrees(pad(printed))[k].tolist(),
+            plot(
+                "Fig. 12 style: pitch while crossing a corner",
+                t[k],
+                {
+                    f"{cfg.corner_profile} (this plan)": np.degrees(pad(th))[k],
+                    "Eq. 4 as printed": np.degrees(pad(printed))[k],
                 },
-            }
+                x_label="s",
+                y_label="deg",
+            )
         )
     # Camera margin over the lanes.
     im = np.flatnonzero(np.isfinite(A["margin_m"]))
     if im.size:
-        k = im[_thin(im.size)]
+        k = im[thin(im.size)]
         plots.append(
-            {
-                "title": "weld margin in the camera view (lanes)",
-                "x": A["t_s"][k].tolist(),
-                "x_label": "s",
-                "y_label": "mm",
-                "series": {"margin_mm": (A["margin_m"][k] * 1e3).tolist()},
-            }
+            plot(
+                "weld margin in the camera view (lanes)",
+                A["t_s"][k],
+                {"margin_mm": A["margin_m"][k] * 1e3},
+                x_label="s",
+                y_label="mm",
+            )
         )
     sweep_rows: list[dict[str, Any]] = []
     best = None
@@ -382,13 +361,13 @@ def run(p: SbgInspectParams, ctx: JobContext) -> KindOutput:
                 }
             )
         plots.append(
-            {
-                "title": f"Lx sweep (Fig. 14 set-up, {p.sweep_seeds} seeds): time until |d| stays < 1 mm",
-                "x": values,
-                "x_label": "Lx mm",
-                "y_label": "s (missing: never)",
-                "series": {"settle_time_s": [r["settle_time_mean_s"] for r in sweep_rows]},
-            }
+            plot(
+                f"Lx sweep (Fig. 14 set-up, {p.sweep_seeds} seeds): time until |d| stays < 1 mm",
+                values,
+                {"settle_time_s": [r["settle_time_mean_s"] for r in sweep_rows]},
+                x_label="Lx mm",
+                y_label="s (missing: never)",
+            )
         )
     ctx.progress(0.99, "storing")
     segs = [
@@ -442,10 +421,10 @@ def run(p: SbgInspectParams, ctx: JobContext) -> KindOutput:
     metrics = {k: float(v) for k, v in plan.metrics.items() if math.isfinite(v)}
     if best is not None:
         metrics["lx_sweep_best_mm"] = best * 1e3
-    return KindOutput(result=_clean(result), arrays=arrays, checks=checks, metrics=metrics)
+    return KindOutput(result=json_safe(result), arrays=arrays, checks=checks, metrics=metrics)
 
 
-def compile_program(plan: Any) -> list[dict[str, Any]]:
+def compile_program(plan: PlanView) -> list[dict[str, Any]]:
     """Wheel-speed and lift-arm commands reproducing the simulated run.
 
     The four physical wheels, in order front-left, front-right, rear-left,

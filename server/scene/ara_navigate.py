@@ -4,10 +4,9 @@ the route as numbered arrows, and the robot footprint driven along the path."""
 
 from __future__ import annotations
 
-from typing import Any
-
 import numpy as np
 
+from server.planview import PlanView
 from server.scene.common import (
     FAIL_RGB,
     ROUTE_RGB,
@@ -15,20 +14,14 @@ from server.scene.common import (
     add_polyline,
     add_spheres,
     label_colors,
+    rotation_to_wxyz,
 )
 from server.scene.context import DrawContext
 
 LIFT = 0.01  # metres along the structure normal, so overlays sit above the steel
 
 
-def _wxyz(R: np.ndarray) -> tuple[float, float, float, float]:
-    from scipy.spatial.transform import Rotation
-
-    x, y, z, w = Rotation.from_matrix(R).as_quat()
-    return float(w), float(x), float(y), float(z)
-
-
-def draw(ctx: DrawContext, plan: Any) -> None:
+def draw(ctx: DrawContext, plan: PlanView) -> None:
     res = plan.result
     frame = res["frame"]
     normal = np.asarray(frame["normal"], dtype=float)
@@ -144,7 +137,7 @@ def draw(ctx: DrawContext, plan: Any) -> None:
             R = np.column_stack([x_axis, y_axis, normal])
             centre = path[i] + R @ np.array([fp["center_x_m"], fp.get("center_y_m", 0.0), 0.0])
             box.position = tuple(centre + 2 * LIFT * normal)
-            box.wxyz = _wxyz(R)
+            box.wxyz = rotation_to_wxyz(R)
 
         update(0.0)
         ctx.animate(float(cum[-1] / speed) if cum[-1] > 0 else 1.0, update)

@@ -4,17 +4,16 @@ foothold as axes, and the ARA URDF animated through the inch-worm jump."""
 
 from __future__ import annotations
 
-from typing import Any
-
 import numpy as np
 
+from server.planview import PlanView
 from server.scene.common import FAIL_RGB, PASS_RGB, add_polyline, label_colors
 from server.scene.context import DrawContext, set_frame_pose
 
 LIFT = 0.004  # metres along each plane's normal, so overlays sit above the points
 
 
-def draw(ctx: DrawContext, plan: Any) -> None:
+def draw(ctx: DrawContext, plan: PlanView) -> None:
     res = plan.result
     scene, root = ctx.scene, ctx.root
     pts = np.asarray(plan.array("points"), dtype=np.float32)

@@ -6,10 +6,9 @@ cone (the cone shows while the nozzle is open)."""
 
 from __future__ import annotations
 
-from typing import Any
-
 import numpy as np
 
+from server.planview import PlanView
 from server.scene.common import (
     FAIL_RGB,
     ROUTE_RGB,
@@ -18,8 +17,8 @@ from server.scene.common import (
     add_spheres,
     disc_mesh,
     label_colors,
-    pose_to_wxyz_position,
     ramp_colors,
+    rotation_to_wxyz,
 )
 from server.scene.context import DrawContext
 
@@ -38,12 +37,6 @@ def _rot_z_to(axis: np.ndarray) -> np.ndarray:
     return np.stack([x, np.cross(z, x), z], axis=1)
 
 
-def _wxyz(R: np.ndarray) -> tuple[float, float, float, float]:
-    T = np.eye(4)
-    T[:3, :3] = R
-    return pose_to_wxyz_position(T)[0]
-
-
 def _cone(r0: float, r1: float, z0: float, z1: float, n: int = 24) -> tuple[np.ndarray, np.ndarray]:
     """Open truncated cone along +z (vertices, faces)."""
     a = np.linspace(0, 2 * np.pi, n, endpoint=False)
@@ -57,7 +50,7 @@ def _cone(r0: float, r1: float, z0: float, z1: float, n: int = 24) -> tuple[np.n
     return v, np.asarray(f, dtype=np.uint32)
 
 
-def draw(ctx: DrawContext, plan: Any) -> None:
+def draw(ctx: DrawContext, plan: PlanView) -> None:
     res = plan.result
     scene, root = ctx.scene, ctx.root
     surf = res["surface"]
@@ -86,7 +79,7 @@ def draw(ctx: DrawContext, plan: Any) -> None:
     cols = np.full((len(centers), 3), 110, dtype=np.uint8)
     cols[order] = ramp_colors(len(order))
     verts, faces = disc_mesh(32)
-    q_disc = _wxyz(_rot_z_to(side * n))
+    q_disc = rotation_to_wxyz(_rot_z_to(side * n))
     scene.add_batched_meshes_simple(
         f"{root}/discs",
         vertices=verts,
@@ -187,7 +180,7 @@ def draw(ctx: DrawContext, plan: Any) -> None:
         urdf.update_cfg(q[i])
         R = _rot_z_to(axis[i])
         tool.position = tuple(float(v) for v in tip[i] - NOZZLE_M * axis[i])
-        tool.wxyz = _wxyz(R)
+        tool.wxyz = rotation_to_wxyz(R)
         cone.visible = bool(blasting[i])
 
     update(0.0)

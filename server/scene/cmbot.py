@@ -11,6 +11,7 @@ import numpy as np
 
 from planners.cmbot.distance import Cuboid
 from planners.cmbot.guardrail import Guardrail, GuardrailParams
+from server.planview import PlanView
 from server.scene.common import FAIL_RGB, ROUTE_RGB, STEEL_RGB, add_polyline, add_spheres
 from server.scene.context import DrawContext, set_frame_pose
 
@@ -62,7 +63,7 @@ def _pose(x: np.ndarray) -> np.ndarray:
     return T
 
 
-def draw_climb(ctx: DrawContext, plan: Any) -> None:
+def draw_climb(ctx: DrawContext, plan: PlanView) -> None:
     """Guardrail, footholds, sole paths and the robot walking (J1…J12 from the plan)."""
     res = plan.result
     g = _guardrail(res)
@@ -110,7 +111,7 @@ def draw_climb(ctx: DrawContext, plan: Any) -> None:
     ctx.animate(max(float(t[-1] - t[0]) / CLIMB_SPEEDUP, 1.0), update)
 
 
-def draw_manipulate(ctx: DrawContext, plan: Any) -> None:
+def draw_manipulate(ctx: DrawContext, plan: PlanView) -> None:
     """Guardrail, the robot in its work stance, the arm moving along the plan,
     the tool path (planned and desired) and the covering spheres (toggle)."""
     from planners.cmbot.arm import ArmKinematics

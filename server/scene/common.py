@@ -140,8 +140,15 @@ def add_polyline(
     )
 
 
-def pose_to_wxyz_position(T: np.ndarray) -> tuple[tuple[float, ...], tuple[float, ...]]:
+def rotation_to_wxyz(R: np.ndarray) -> tuple[float, float, float, float]:
+    """A rotation matrix as the (w, x, y, z) quaternion viser expects
+    (scipy's ``as_quat`` is scalar-last, hence the reorder)."""
     from scipy.spatial.transform import Rotation
 
-    x, y, z, w = Rotation.from_matrix(np.asarray(T)[:3, :3]).as_quat()
-    return (float(w), float(x), float(y), float(z)), tuple(float(v) for v in np.asarray(T)[:3, 3])
+    x, y, z, w = Rotation.from_matrix(np.asarray(R, dtype=float)[:3, :3]).as_quat()
+    return float(w), float(x), float(y), float(z)
+
+
+def pose_to_wxyz_position(T: np.ndarray) -> tuple[tuple[float, ...], tuple[float, ...]]:
+    """A 4×4 pose as ((w, x, y, z), (x, y, z))."""
+    return rotation_to_wxyz(T), tuple(float(v) for v in np.asarray(T)[:3, 3])

@@ -2,10 +2,9 @@
 
 from __future__ import annotations
 
-from typing import Any
-
 import numpy as np
 
+from server.planview import PlanView
 from server.scene.common import ROUTE_RGB, STEEL_RGB, add_polyline, add_spheres
 from server.scene.context import DrawContext
 
@@ -15,7 +14,7 @@ LIFT_ROUTE = np.array([0.0, 0.0, 0.01])
 LIFT_MARKER = np.array([0.0, 0.0, 0.05])
 
 
-def draw(ctx: DrawContext, plan: Any) -> None:
+def draw(ctx: DrawContext, plan: PlanView) -> None:
     nodes: dict[str, list[float]] = plan.result.get("nodes") or plan.params["nodes"]
     names = list(nodes)
     pos = np.array([nodes[n] for n in names], dtype=float)

@@ -20,14 +20,16 @@ import importlib
 import threading
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:
+    from server.planview import PlanView
     from server.scene.context import DrawContext
 
-#: ``draw(ctx, plan)``: ``plan`` is the stored record (``PlanRecord``-shaped:
-#: ``id``, ``kind``, ``params``, ``result``, ``checks``, ``array(name)``).
-Drawer = Callable[["DrawContext", Any], None]
+#: ``draw(ctx, plan)``: ``plan`` is the stored record, seen as a
+#: :class:`server.planview.PlanView` (``id``, ``kind``, ``params``, ``result``,
+#: ``checks``, ``array(name)``).
+Drawer = Callable[["DrawContext", "PlanView"], None]
 
 
 @dataclass(frozen=True)

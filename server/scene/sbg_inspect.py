@@ -8,6 +8,7 @@ from typing import Any
 
 import numpy as np
 
+from server.planview import PlanView
 from server.scene.common import ROUTE_RGB, STEEL_RGB
 from server.scene.context import DrawContext
 
@@ -58,7 +59,7 @@ def _add_robot(ctx: DrawContext) -> Any:
     return ctx.add_urdf("sbg_climber", "robot")
 
 
-def draw(ctx: DrawContext, plan: Any) -> None:
+def draw(ctx: DrawContext, plan: PlanView) -> None:
     res = plan.result
     g = res["girder"]
     L = float(g["length_m"])

@@ -221,3 +221,68 @@ def test_a_site_kind_registers_its_own_drawer() -> None:
         assert "site.kind" in drawers.drawable_kinds()
     finally:
         drawers._registered.pop("site.kind")
+
+
+# ------------------------------------------------------------------ kinds are declarations
+#: What a kind module may not use (issue #13 §2): the libraries that do
+#: geometry, search or point-cloud work, and numpy's linear algebra.  A kind
+#: holds a params model, a short ``run`` that calls one planner entry point
+#: and turns its result into the stored form, and ``compile``; a kind that
+#: needs one of these holds an algorithm, which belongs in ``planners/``.
+ALGORITHM_MODULES = [
+    "scipy",
+    "shapely",
+    "sklearn",
+    "networkx",
+    "open3d",
+    "trimesh",
+    "coal",
+    "pinocchio",
+    "ompl",
+    "planners.pointcloud",
+]
+ALGORITHM_ATTRIBUTES = {("np", "linalg"), ("numpy", "linalg"), ("np", "fft"), ("numpy", "fft")}
+
+
+def algorithm_uses(folder: Path, root: Path = ROOT) -> list[str]:
+    """``path:line what`` for every banned import or ``np.linalg``-style use."""
+    out = []
+    for path in sorted(folder.glob("*.py")):
+        rel = path.relative_to(root)
+        for line, module in imports_of(path, _module_name(path) if root == ROOT else path.stem):
+            if any(_within(module, b) for b in ALGORITHM_MODULES) or module in {
+                "numpy.linalg",
+                "numpy.fft",
+            }:
+                out.append(f"{rel}:{line} imports {module}")
+        tree = ast.parse(path.read_text(encoding="utf-8"), filename=str(path))
+        for node in ast.walk(tree):
+            if (
+                isinstance(node, ast.Attribute)
+                and isinstance(node.value, ast.Name)
+                and (node.value.id, node.attr) in ALGORITHM_ATTRIBUTES
+            ):
+                out.append(f"{rel}:{node.lineno} uses {node.value.id}.{node.attr}")
+    return sorted(set(out))
+
+
+def test_kinds_are_declarations() -> None:
+    """No kind module does geometry itself (plane fits, footprint sweeps, graph search)."""
+    assert algorithm_uses(ROOT / "server" / "kinds") == []
+
+
+def test_the_declaration_checker_flags_algorithms(tmp_path: Path) -> None:
+    (tmp_path / "k.py").write_text(
+        "import numpy as np\n"
+        "def run(p, ctx):\n"
+        "    from shapely import Polygon\n"
+        "    from planners.pointcloud.ransac import detect_planes\n"
+        "    return np.linalg.svd(p)\n"
+        "from scipy.spatial import cKDTree\n",
+        encoding="utf-8",
+    )
+    found = algorithm_uses(tmp_path, tmp_path)
+    assert "k.py:3 imports shapely" in found
+    assert "k.py:4 imports planners.pointcloud.ransac" in found
+    assert "k.py:5 uses np.linalg" in found
+    assert "k.py:6 imports scipy.spatial" in found

@@ -1,0 +1,87 @@
+"""Shortest route between two vertices of a small embedded graph (the
+``demo.route`` kind): edge weights are the Euclidean lengths between the
+vertex positions and the route is Dijkstra's shortest path (networkx).  No
+seed equation: this is the product's smallest end-to-end planner.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Hashable, Mapping, Sequence
+from dataclasses import dataclass
+
+import networkx as nx
+import numpy as np
+
+from planners.errors import InfeasibleError, InvalidInputError, UnknownVertexError
+
+
+@dataclass(frozen=True)
+class ShortestRoute:
+    """The route's vertices, their positions (K,3) and its length (m)."""
+
+    path: list[Hashable]
+    xyz: np.ndarray
+    length_m: float
+    segment_m: np.ndarray
+    graph_edges: int
+
+
+def build_graph(
+    nodes: Mapping[Hashable, Sequence[float]], edges: Sequence[tuple[Hashable, Hashable]]
+) -> nx.Graph:
+    """The graph with Euclidean edge weights; an edge naming a vertex with no
+    position raises :class:`planners.errors.UnknownVertexError`."""
+    g = nx.Graph()
+    for node, pos in nodes.items():
+        g.add_node(node, pos=tuple(pos))
+    for u, v in edges:
+        for w in (u, v):
+            if w not in nodes:
+                raise UnknownVertexError(
+                    f"edge ({u}, {v}) names vertex {w!r}, which has no position"
+                )
+        g.add_edge(u, v, weight=float(np.linalg.norm(np.subtract(nodes[u], nodes[v]))))
+    return g
+
+
+def check_endpoints(g: nx.Graph, start: Hashable, end: Hashable) -> None:
+    """Raise :class:`planners.errors.UnknownVertexError` unless both are vertices."""
+    for role, v in (("start", start), ("end", end)):
+        if v not in g:
+            known = ", ".join(sorted(str(n) for n in g.nodes)[:10])
+            raise UnknownVertexError(f"{role} vertex {v!r} is not in the graph (vertices: {known})")
+
+
+def unit_grid_edges(nodes: Mapping[Hashable, Sequence[float]]) -> list[tuple[Hashable, Hashable]]:
+    """Every pair of vertices exactly 1 m apart (a unit grid's edges)."""
+    keys = list(nodes)
+    return [
+        (u, v)
+        for u in keys
+        for v in keys
+        if str(u) < str(v) and np.isclose(np.linalg.norm(np.subtract(nodes[u], nodes[v])), 1.0)
+    ]
+
+
+def shortest_route(
+    nodes: Mapping[Hashable, Sequence[float]],
+    edges: Sequence[tuple[Hashable, Hashable]],
+    start: Hashable,
+    end: Hashable,
+) -> ShortestRoute:
+    """Dijkstra's shortest path from ``start`` to ``end``; raises
+    :class:`planners.errors.InfeasibleError` when they are not connected."""
+    g = build_graph(nodes, edges)
+    check_endpoints(g, start, end)
+    try:
+        path = nx.dijkstra_path(g, start, end, weight="weight")
+    except nx.NetworkXNoPath:
+        raise InfeasibleError(
+            f"no path from {start!r} to {end!r}: they lie in different components"
+        ) from None
+    xyz = np.array([nodes[v] for v in path], dtype=float).reshape(-1, 3)
+    seg = np.linalg.norm(np.diff(xyz, axis=0), axis=1)
+    length = float(seg.sum())
+    if not np.isfinite(length):
+        raise InvalidInputError("route length is not finite; check the vertex positions")
+    return ShortestRoute(path, xyz, length, seg, g.number_of_edges())
