@@ -133,7 +133,11 @@ class Guardrail:
             R = np.column_stack([ax, [1.0, 0.0, 0.0], np.cross(ax, [1.0, 0.0, 0.0])])
             out.append(
                 Cuboid(
-                    (a + b) / 2, [np.linalg.norm(b - a) / 2, r, r], R, f"bracket{i}", "guardrail"
+                    (a + b) / 2,
+                    np.array([np.linalg.norm(b - a) / 2, r, r]),
+                    R,
+                    f"bracket{i}",
+                    "guardrail",
                 )
             )
         lo = self.x_min if np.isinf(x_lo) else x_lo

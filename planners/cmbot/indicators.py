@@ -110,7 +110,7 @@ def workspace_and_payload(
         )
     cap_j = np.where(np.abs(tau0) > limit, -np.inf, cap_j)
     cap = np.where(ok, cap_j.min(axis=-1), -np.inf).max(axis=1)
-    return WorkspaceResult(pts, ok.any(axis=1), cap)
+    return WorkspaceResult(pts, np.asarray(ok.any(axis=1)), cap)
 
 
 @dataclass(frozen=True)

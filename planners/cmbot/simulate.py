@@ -130,6 +130,7 @@ def _resample(
         )
         if i == len(cuts) - 2:
             fine = np.concatenate([fine, ts[-1:]])
+        f: CubicSpline | PchipInterpolator
         if smooth and len(ts) >= 4:
             f = CubicSpline(ts, vs, axis=0)
         else:

@@ -50,7 +50,7 @@ def build_graph(
 
     ``lift`` maps (N, 2) plane coordinates to (N, 3) input-frame points.
     """
-    g = nx.Graph()
+    g: nx.Graph[int] = nx.Graph()
     pos2d: list[np.ndarray] = []
 
     def add_vertex(p: np.ndarray, kind: str, cl: tuple[int, ...]) -> int:

@@ -243,7 +243,7 @@ def poses_valid(
     inside = boundaries.contains(
         pts.reshape(-1, 2), method=method, n_centres=n_centres, m_closest=m_closest
     )
-    return inside.reshape(pts.shape[:2]).all(axis=1)
+    return np.asarray(inside.reshape(pts.shape[:2]).all(axis=1))  # an array for (P, F) input
 
 
 def footprint_corners(
@@ -336,7 +336,10 @@ def swept_on_steel(
     )
     reach = float(np.max(np.hypot(*(corners[0] - poses[0, :2]).T)))
     prev = np.concatenate([corners[:1], corners[:-1]], axis=0)
-    hulls = shapely.convex_hull(shapely.multipoints(np.concatenate([prev, corners], axis=1)))
+    # one hull per pose: an object array (asarray narrows the scalar-or-array stub type)
+    hulls = np.asarray(
+        shapely.convex_hull(shapely.multipoints(np.concatenate([prev, corners], axis=1)))
+    )
     dyaw = np.abs(wrap_angle(np.diff(poses[:, 2], prepend=poses[0, 2])))
     sagitta = reach * (1.0 - np.cos(np.minimum(dyaw, np.pi) / 2.0))
     turned = sagitta > 1e-12

@@ -293,7 +293,9 @@ def rtr_cost(a: np.ndarray, b: np.ndarray, r: float, allow_reverse: bool = True)
     return np.where(dist > 1e-9, dist + r * turn, r * pure)
 
 
-def rtr_waypoints(a: np.ndarray, b: np.ndarray, *, allow_reverse: bool = True) -> list[np.ndarray]:
+def rtr_waypoints(
+    a: np.ndarray, b: np.ndarray, *, allow_reverse: bool = True
+) -> list[list[np.ndarray]]:
     """Candidate rotate–translate–rotate way-point lists a → b, cheapest first.
 
     Each list starts at ``a`` and ends at ``b``; consecutive way-points
@@ -308,7 +310,7 @@ def rtr_waypoints(a: np.ndarray, b: np.ndarray, *, allow_reverse: bool = True) -
         return [[a, np.array([a[0], a[1], b[2]])]]
     theta = float(np.arctan2(d[1], d[0]))
     headings = [theta, float(wrap(theta + np.pi))] if allow_reverse else [theta]
-    out = []
+    out: list[tuple[float, list[np.ndarray]]] = []
     for h in headings:
         cost = abs(float(wrap(h - a[2]))) + abs(float(wrap(b[2] - h)))
         pts = [a]

@@ -80,7 +80,8 @@ def point_spacing(uv: np.ndarray) -> float:
     """Median nearest-neighbour distance (metres) of a 2D cloud."""
     if len(uv) < 2:
         return 0.0
-    d, _ = cKDTree(uv).query(uv, k=2)
+    # k ≥ 2 gives arrays; asarray narrows the stubs' scalar-or-array result
+    d = np.asarray(cKDTree(uv).query(uv, k=2)[0])
     return float(np.median(d[:, 1]))
 
 
@@ -98,7 +99,8 @@ def borders(
     if len(uv) < 2:
         return []
     kk = min(k + 1, len(uv))
-    dist, nb = cKDTree(uv).query(uv, k=kk)
+    dist_q, nb_q = cKDTree(uv).query(uv, k=kk)
+    dist, nb = np.asarray(dist_q), np.asarray(nb_q)  # k ≥ 2: arrays (narrowed for the stubs)
     src = np.repeat(np.arange(len(uv)), kk - 1)
     dst = nb[:, 1:].ravel()
     close = dist[:, 1:].ravel() <= eps_m
@@ -280,7 +282,7 @@ def segment_default(
     c = float(grid_m)
     # Local point spacing: mean distance to the 3 nearest neighbours.  Density
     # falls ~10× with range, so gaps are closed with a radius per point.
-    dk = cKDTree(uv).query(uv, k=min(4, len(uv)))[0]
+    dk = np.asarray(cKDTree(uv).query(uv, k=min(4, len(uv)))[0])  # k ≥ 2: an array
     nn = dk[:, 1]
     local = dk[:, 1:].mean(axis=1)
     r_pt = np.clip(np.ceil(1.2 * local / c), 1, 6).astype(np.int64)

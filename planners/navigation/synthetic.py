@@ -383,7 +383,7 @@ def make_structure(
     order = rng.permutation(len(points))
     points, all_labels = points[order], all_labels[order]
 
-    graph = nx.Graph()
+    graph: nx.Graph[int] = nx.Graph()
     for v, uvn in enumerate(nodes):
         graph.add_node(
             v,

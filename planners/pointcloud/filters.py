@@ -93,6 +93,6 @@ def statistical_outliers(points: np.ndarray, k: int = 8, std_ratio: float = 3.0)
     positive(std_ratio, "std_ratio")
     if len(pts) <= k:
         return np.zeros(len(pts), dtype=bool)
-    d, _ = cKDTree(pts).query(pts, k=k + 1)
+    d = np.asarray(cKDTree(pts).query(pts, k=k + 1)[0])  # k + 1 ≥ 2: an array
     mean_d = d[:, 1:].mean(axis=1)
     return mean_d > mean_d.mean() + float(std_ratio) * mean_d.std()

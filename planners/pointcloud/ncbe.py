@@ -36,6 +36,7 @@ def _diameter_pair(p: np.ndarray) -> tuple[int, int]:
     k = len(p)
     if k == 1:
         return 0, 0
+    cand: np.ndarray  # candidate indices into p
     if k <= 64:
         cand = np.arange(k)
     else:

@@ -12,6 +12,7 @@ from __future__ import annotations
 import numbers
 from collections.abc import Hashable
 from dataclasses import dataclass
+from typing import Any
 
 import networkx as nx
 import numpy as np
@@ -105,12 +106,14 @@ def edge_arrays(graph: object, weight: str | None) -> EdgeArrays:
         )
     nodes = list(graph.nodes)
     index = {node: i for i, node in enumerate(nodes)}
+    # (u, v, key, weight or _MISSING); undirected MultiGraph is the only multigraph left here
+    rows: list[tuple[Any, Any, Any, Any]]
     if weight is None:
-        if graph.is_multigraph():
+        if isinstance(graph, nx.MultiGraph):
             rows = [(a, b, k, 1.0) for a, b, k in graph.edges(keys=True)]
         else:
             rows = [(a, b, 0, 1.0) for a, b in graph.edges()]
-    elif graph.is_multigraph():
+    elif isinstance(graph, nx.MultiGraph):
         rows = list(graph.edges(keys=True, data=weight, default=_MISSING))
     else:
         rows = [(a, b, 0, x) for a, b, x in graph.edges(data=weight, default=_MISSING)]
@@ -161,7 +164,7 @@ def edge_arrays(graph: object, weight: str | None) -> EdgeArrays:
 def vertex_index(ea: EdgeArrays, vertex: object, role: str) -> int:
     """Index of ``vertex`` or :class:`UnknownVertexError` naming it and a few known vertices."""
     try:
-        return ea.index[vertex]  # type: ignore[index]
+        return ea.index[vertex]
     except (KeyError, TypeError):
         known = _fmt_list([repr(x) for x in ea.nodes[:_SHOW]], ea.n)
         raise UnknownVertexError(

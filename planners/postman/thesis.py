@@ -56,7 +56,9 @@ class ThesisAugmentation:
     step23: TJoin
 
 
-def _path_edges(pred: np.ndarray, edge_id: dict[tuple[int, int], int], src: int, dst: int):
+def _path_edges(
+    pred: np.ndarray, edge_id: dict[tuple[int, int], int], src: int, dst: int
+) -> list[int]:
     out: list[int] = []
     x = dst
     while x != src:

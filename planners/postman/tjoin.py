@@ -122,7 +122,9 @@ def grid_weights(w: np.ndarray, distance_bound: float = 0.0) -> tuple[np.ndarray
     return np.floor(np.ldexp(w, p)).astype(np.int64), p
 
 
-def terminal_distance_bound(n: int, su: np.ndarray, sv: np.ndarray, sw: np.ndarray, t: np.ndarray):
+def terminal_distance_bound(
+    n: int, su: np.ndarray, sv: np.ndarray, sw: np.ndarray, t: np.ndarray
+) -> float:
     """Upper bound on the largest shortest-path distance between two terminals.
 
     One Dijkstra from a terminal ``r``: ``d(x, y) ≤ d(x, r) + d(r, y) ≤ 2 max_x d(r, x)``.
@@ -130,11 +132,14 @@ def terminal_distance_bound(n: int, su: np.ndarray, sv: np.ndarray, sw: np.ndarr
     """
     terms = np.flatnonzero(t)
     A = sp.csr_matrix((sw, (su, sv)), shape=(n, n))  # explicit zeros stay edges in csgraph
-    d = dijkstra(A, directed=False, indices=int(terms[0]))
+    # one source given as a list (the stubs take no scalar index): row 0 is its distances
+    d = dijkstra(A, directed=False, indices=[int(terms[0])])[0]
     return 2.0 * float(d[terms].max())
 
 
-def _pymatching_tjoin(n: int, su: np.ndarray, sv: np.ndarray, W: np.ndarray, t: np.ndarray):
+def _pymatching_tjoin(
+    n: int, su: np.ndarray, sv: np.ndarray, W: np.ndarray, t: np.ndarray
+) -> np.ndarray:
     """Minimum T-join for integer weights ``W`` (any size; long edges become chains)."""
     ms = su.size
     k = np.maximum(1, -(-W // MAX_PM_WEIGHT))  # pieces per edge (ceil division)
@@ -179,7 +184,9 @@ def _pymatching_tjoin(n: int, su: np.ndarray, sv: np.ndarray, W: np.ndarray, t: 
     return np.flatnonzero(correction[:ms])
 
 
-def _exact_tjoin_bigint(n: int, su: np.ndarray, sv: np.ndarray, w: np.ndarray, t: np.ndarray):
+def _exact_tjoin_bigint(
+    n: int, su: np.ndarray, sv: np.ndarray, w: np.ndarray, t: np.ndarray
+) -> tuple[np.ndarray, list[int]]:
     """Exact minimum T-join in arbitrary-precision integers (small instances only).
 
     Each double is ``num / 2**j`` exactly; scaling by the largest ``2**j`` gives exact
@@ -196,7 +203,7 @@ def _exact_tjoin_bigint(n: int, su: np.ndarray, sv: np.ndarray, w: np.ndarray, t
         adj[b].append((a, j))
     terms = np.flatnonzero(t).tolist()
     tset = set(terms)
-    closure = nx.Graph()
+    closure: nx.Graph[int] = nx.Graph()
     parents: dict[int, list[int]] = {}
     for s in terms:
         dist: dict[int, int] = {s: 0}

@@ -70,8 +70,8 @@ def footprint(cam: CameraParams) -> Footprint:
 
 
 def weld_margin(
-    d: np.ndarray,
-    delta: np.ndarray,
+    d: np.ndarray | float,
+    delta: np.ndarray | float,
     weld_left: float,
     weld_right: float,
     fp: Footprint,

@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import overload
 
 import numpy as np
 
@@ -140,7 +141,11 @@ class ArmPitchMap:
         #: Largest |dθ/dq| over the stroke (the lift's gear ratio to pitch).
         self.max_gain = float(np.max(np.abs(np.diff(self.theta) / np.diff(self.q))))
 
-    def pitch(self, q: np.ndarray | float) -> np.ndarray:
+    @overload
+    def pitch(self, q: np.ndarray) -> np.ndarray: ...
+    @overload
+    def pitch(self, q: float) -> float: ...
+    def pitch(self, q: np.ndarray | float) -> np.ndarray | float:
         """Pitch for arm angle q (0 above the contact angle, Δθ at the top)."""
         return np.interp(q, self.q[::-1], self.theta[::-1], left=self.delta_theta, right=0.0)
 
@@ -275,8 +280,8 @@ def cross_corner(
     while theta < half_pi - 1e-9:
         if t > max_time_s:
             raise InvalidInputError("corner crossing did not finish; check the robot parameters")
-        v1c, v2c = wheel_speeds(theta, vmax)
-        v1c, v2c = float(v1c), float(v2c)
+        v1s, v2s = wheel_speeds(theta, vmax)
+        v1c, v2c = float(v1s), float(v2s)
         if profile == SMOOTH:
             scale = min(1.0, scale + ramp)
             taper = min(1.0, max(taper_floor, (half_pi - theta) / taper_rad))
