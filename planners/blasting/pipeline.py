@@ -406,7 +406,8 @@ def _sequence(
         ]
 
     family = np.full(len(d.c2), -1)
-    groups = _family_groups(ps.oks[idx]) if ps.Qs is not None else None
+    # oks and Qs are set together (with a robot)
+    groups = _family_groups(ps.oks[idx]) if ps.oks is not None else None
     if groups is None:
         sub = sequence(np.arange(len(idx)))
     else:
@@ -602,6 +603,9 @@ def plan_blasting(
     if robot is not None:
         t3 = time.perf_counter()
         _progress(progress, 0.75, "trajectory")
+        # _spot_poses sets all four whenever there is a robot
+        assert ps.flange is not None and ps.axes is not None
+        assert ps.Qs is not None and ps.oks is not None
         traj = _trajectory(
             robot, order, ps.flange, ps.axes, ps.Qs, ps.oks, st.q_start, step_m,
             approach_waypoints, st.obst, nozzle_length_m, st.kp, joint_planner, seed, family,

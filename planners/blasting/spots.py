@@ -6,7 +6,6 @@ grouping of spots by arm family.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
@@ -70,7 +69,7 @@ def _collision_free(
     ok: np.ndarray,
     obst: Obstacles,
     nozzle_m: float,
-    kp: Sequence[float],
+    kp: tuple[float, ...],
 ) -> np.ndarray:
     """ok & positive ellipsoid clearance for every (spot, branch)."""
     if obst.empty or not ok.any():
@@ -94,7 +93,7 @@ def _penalty_matrix(
     axis: np.ndarray,
     standoff: np.ndarray,
     nozzle_m: float,
-    kp: Sequence[float],
+    kp: tuple[float, ...],
     q_start: np.ndarray,
 ) -> np.ndarray | None:
     """Eq. 3.15 flags: a move i→j is flagged when it passes within r of a

@@ -45,7 +45,7 @@ class _Clearance:
     planner's validity functions: ``val`` (bounded by the horizon, with the
     relative tolerance; > 0 is free) and ``sign`` (sign-exact, cheaper)."""
 
-    def __init__(self, robot: Any, obst: Obstacles, nozzle_m: float, kp: Sequence[float]) -> None:
+    def __init__(self, robot: Any, obst: Obstacles, nozzle_m: float, kp: tuple[float, ...]) -> None:
         self.robot, self.obst, self.nozzle_m, self.kp = robot, obst, nozzle_m, kp
 
     def val(self, qq: np.ndarray) -> np.ndarray:
@@ -185,7 +185,7 @@ def _trajectory(
     approach_waypoints: int,
     obst: Obstacles,
     nozzle_m: float,
-    kp: Sequence[float],
+    kp: tuple[float, ...],
     joint_planner: str,
     seed: int,
     family: np.ndarray | None = None,

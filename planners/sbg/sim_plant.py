@@ -35,6 +35,10 @@ class _Plant:
     the pose on the current wall, skid-steer kinematics with noisy wheels,
     encoders, gyro and the l1 range finder ahead."""
 
+    # Set per segment by the run loop (read by the segment-time guard).
+    seg_index: int
+    seg_t0: float
+
     def __init__(
         self,
         path: InspectionPath,
