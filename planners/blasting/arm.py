@@ -26,6 +26,7 @@ approximate IK when no exact solution exists, way-points and speed limits.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 from scipy.optimize import least_squares, minimize
@@ -33,13 +34,16 @@ from scipy.optimize import least_squares, minimize
 from planners.blasting.collision import Obstacles, Spheroids, clearance
 from planners.errors import UnreachableError
 
+if TYPE_CHECKING:
+    from robots.denso_vm6083 import DensoVM6083
+
 ALPHA_P = 1.0  # Eq. 3.11 weight per metre of position error (chosen)
 ALPHA_O = 0.05  # Eq. 3.11 weight per unit of |a − n| (chosen: 1° ≈ 0.9 mm)
 
 
 # -- geometry of the tool and the force-field ellipsoids --------------------------
 def link_spheroids(
-    robot, q: np.ndarray, nozzle_m: float, kp: tuple[float, ...], foci: tuple[tuple[int, int], ...]
+    robot: DensoVM6083, q: np.ndarray, nozzle_m: float, kp: tuple[float, ...], foci: tuple[tuple[int, int], ...]
 ) -> Spheroids:
     """Spheroids (T,E) covering the links for joint vectors q (T,6): foci are
     D-H frame origins (index −1 = nozzle tip); major axis L·Kp (§3.4.2)."""
@@ -110,13 +114,13 @@ class ApproxIK:
     objective: float
 
 
-def _axis_residual(robot, q5: np.ndarray, q6: float, p: np.ndarray, a: np.ndarray) -> np.ndarray:
+def _axis_residual(robot: DensoVM6083, q5: np.ndarray, q6: float, p: np.ndarray, a: np.ndarray) -> np.ndarray:
     q = np.append(q5, q6)
     T = robot.frames(q)[-1]
     return np.concatenate([ALPHA_P * (T[:3, 3] - p), ALPHA_O * (T[:3, 2] - a)])
 
 
-def _axis_jacobian(robot, q5: np.ndarray, q6: float) -> np.ndarray:
+def _axis_jacobian(robot: DensoVM6083, q5: np.ndarray, q6: float) -> np.ndarray:
     """d[αp·p; αo·z]/dq1..5 from the geometric Jacobian (dz/dqi = ωi × z)."""
     q = np.append(q5, q6)
     F = robot.frames(q)
@@ -126,7 +130,7 @@ def _axis_jacobian(robot, q5: np.ndarray, q6: float) -> np.ndarray:
 
 
 def approximate_ik(
-    robot, p: np.ndarray, a: np.ndarray, q_ref: np.ndarray, *, seed: int = 0
+    robot: DensoVM6083, p: np.ndarray, a: np.ndarray, q_ref: np.ndarray, *, seed: int = 0
 ) -> ApproxIK:
     """Joint vector minimising Eq. 3.11 (αp·|P_t − P_e| + αo·|a − n_t|) inside
     the limits for flange position ``p`` and blast axis ``a``: the seed's GA
@@ -161,7 +165,7 @@ def approximate_ik(
         g = np.zeros(5)
         f = 0.0
         for sl in (slice(0, 3), slice(3, 6)):
-            n = np.linalg.norm(r[sl])
+            n = float(np.linalg.norm(r[sl]))
             f += n
             if n > 1e-15:
                 g += (r[sl] / n) @ J[sl]
@@ -192,7 +196,7 @@ def approximate_ik(
 
 
 def ga_ik(
-    robot,
+    robot: DensoVM6083,
     p: np.ndarray,
     a: np.ndarray,
     q_ref: np.ndarray,
@@ -256,7 +260,7 @@ def ga_ik(
 
 # -- trajectory -------------------------------------------------------------------------
 def follow_line(
-    robot, P: np.ndarray, A: np.ndarray, q_prev: np.ndarray
+    robot: DensoVM6083, P: np.ndarray, A: np.ndarray, q_prev: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray]:
     """Joint vectors along way-point poses (flange P (M,3), axes A (M,3)),
     each the valid closed-form solution nearest the previous one; returns q
@@ -304,12 +308,12 @@ def time_stamps(q: np.ndarray, dt_nominal: np.ndarray, v_max: float) -> np.ndarr
 
 
 def waypoint_clearance(
-    robot,
+    robot: DensoVM6083,
     q: np.ndarray,
     obstacles: Obstacles,
     nozzle_m: float,
-    kp,
-    foci,
+    kp: tuple[float, ...],
+    foci: tuple[tuple[int, int], ...],
     chunk: int = 4096,
     *,
     horizon: float = np.inf,

@@ -26,10 +26,12 @@ from __future__ import annotations
 
 import heapq
 from dataclasses import dataclass
+from typing import cast
 
 import numpy as np
 import shapely
 import shapely.affinity
+from shapely.geometry import MultiPolygon, Polygon
 from shapely.geometry.base import BaseGeometry
 from shapely.ops import polylabel
 
@@ -66,8 +68,11 @@ def centre_point(polygon: BaseGeometry) -> np.ndarray:
     c = polygon.centroid
     if polygon.contains(c) and polygon.boundary.distance(c) > 0.1 * np.sqrt(polygon.area):
         return np.array([c.x, c.y])
+    # anything but a Polygon here is a MultiPolygon (the polygon of a surface)
     biggest = (
-        polygon if polygon.geom_type == "Polygon" else max(polygon.geoms, key=lambda g: g.area)
+        polygon
+        if isinstance(polygon, Polygon)
+        else max(cast(MultiPolygon, polygon).geoms, key=lambda g: g.area)
     )
     p = polylabel(biggest, tolerance=np.sqrt(biggest.area) / 200.0)
     return np.array([p.x, p.y])
@@ -110,7 +115,7 @@ def hex_lattice(
 def classify(centers: np.ndarray, polygon: BaseGeometry, r: float) -> np.ndarray:
     """Eq. 3.2 for discs of radius ``r``: 1 when the disc lies inside the
     polygon, 2 when it does not touch it, 3 when it crosses the boundary."""
-    pts = shapely.points(np.asarray(centers, dtype=float).reshape(-1, 2))
+    pts = np.asarray(shapely.points(np.asarray(centers, dtype=float).reshape(-1, 2)))  # (N,)
     inside = shapely.contains(polygon, pts)
     dist_b = shapely.distance(polygon.boundary, pts)
     cls = np.full(len(pts), BOUNDARY, dtype=np.int8)
@@ -121,7 +126,8 @@ def classify(centers: np.ndarray, polygon: BaseGeometry, r: float) -> np.ndarray
 
 # -- raster ---------------------------------------------------------------------
 def _rings(polygon: BaseGeometry) -> list[np.ndarray]:
-    polys = [polygon] if polygon.geom_type == "Polygon" else list(polygon.geoms)
+    # anything but a Polygon here is a MultiPolygon (the polygon of a surface)
+    polys = [polygon] if isinstance(polygon, Polygon) else list(cast(MultiPolygon, polygon).geoms)
     rings = []
     for p in polys:
         rings.append(np.asarray(p.exterior.coords))
@@ -282,7 +288,7 @@ def measure(
     ras = Raster.of(polygon, h, pad=2 * h, shift=0.37, bounds=(lo[0], lo[1], hi[0], hi[1]))
     cnt = ras.counts(centers, reach, mats=mats)
     inside = ras.inside.reshape(-1)
-    cov = float(np.count_nonzero((cnt > 0) & inside) / max(np.count_nonzero(inside), 1))
+    cov = float(np.count_nonzero((cnt > 0) & inside) / max(int(np.count_nonzero(inside)), 1))
     over = float(np.count_nonzero((cnt > 0) & ~inside) * ras.h**2 / polygon.area)
     return CoverageMetrics(cov, over, ras.h)
 
@@ -470,7 +476,8 @@ def edit_improved(
         cand, cr = cand[near], cr[near]
     else:
         cand, cr = cand[:0], cr[:0]
-    added_c, added_r = [], []
+    added_c: list[np.ndarray] = []
+    added_r: list[float] = []
     max_added = 3 * len(lattice) + 50
     if len(cand):
         idx, _ = ras.disc_pixels(cand, cr)

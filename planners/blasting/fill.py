@@ -31,11 +31,16 @@ from __future__ import annotations
 import heapq
 import itertools
 from dataclasses import dataclass
+from typing import TYPE_CHECKING, cast
 
 import numpy as np
 import shapely
 from scipy.spatial import cKDTree
-from shapely.geometry.base import BaseGeometry
+
+if TYPE_CHECKING:
+    from scipy.sparse import csr_matrix
+from shapely.geometry import Polygon
+from shapely.geometry.base import BaseGeometry, BaseMultipartGeometry
 from shapely.geometry.polygon import orient
 
 QUAD_SEGS = 32  # polygonal discs for the exact uncovered set (inscribed 128-gon)
@@ -45,10 +50,15 @@ def _oriented_edges(polygon: BaseGeometry) -> tuple[np.ndarray, np.ndarray]:
     """Edges (E,2) start/end with exteriors counter-clockwise and holes
     clockwise, so the signed areas of their triangles with any point sum to
     the polygon's area."""
-    polys = [polygon] if polygon.geom_type == "Polygon" else list(polygon.geoms)
+    # anything but a Polygon is a multi-part geometry; its non-polygon parts are skipped
+    polys = (
+        [polygon]
+        if isinstance(polygon, Polygon)
+        else list(cast(BaseMultipartGeometry, polygon).geoms)
+    )
     a, b = [], []
     for p in polys:
-        if p.geom_type != "Polygon" or p.is_empty:
+        if not isinstance(p, Polygon) or p.is_empty:
             continue
         p = orient(p, 1.0)
         for ring in (p.exterior, *p.interiors):
@@ -106,7 +116,9 @@ def _polygonal_discs(centers: np.ndarray, radii: np.ndarray) -> np.ndarray:
     return shapely.buffer(shapely.points(centers), radii, quad_segs=QUAD_SEGS)
 
 
-def _triangle_samples(region: BaseGeometry, max_samples: int, h_max: float):
+def _triangle_samples(
+    region: BaseGeometry, max_samples: int, h_max: float
+) -> tuple[np.ndarray, np.ndarray]:
     """Area-weighted sample points of ``region`` (constrained Delaunay
     triangles, each sampled by a fixed low-discrepancy rule): (M,2), weights
     (M,) summing to the area."""
@@ -151,7 +163,7 @@ class FillResult:
     overspray_after: float
 
 
-def _incidence(cand: np.ndarray, cr: np.ndarray, pts: np.ndarray):
+def _incidence(cand: np.ndarray, cr: np.ndarray, pts: np.ndarray) -> csr_matrix:
     """CSR matrix (candidates × points): 1 where the point lies in the disc."""
     from scipy.sparse import csr_matrix
 

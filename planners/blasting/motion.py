@@ -32,10 +32,15 @@ from __future__ import annotations
 import itertools
 from collections.abc import Callable
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from planners.errors import InvalidInputError
+
+if TYPE_CHECKING:
+    from robots.denso_vm6083 import DensoVM6083
 from planners.motion import plan_motion
 
 # The joint planner behind joint_planner="rrt": "legacy" (below) or "ompl".
@@ -44,7 +49,12 @@ BACKEND = "legacy"
 ClearFn = Callable[[np.ndarray], np.ndarray]  # (T,6) → (T,) clearance minus margin (m)
 
 
-def displacement_weights(robot, nozzle_m: float, kp, foci) -> np.ndarray:
+def displacement_weights(
+    robot: DensoVM6083,
+    nozzle_m: float,
+    kp: tuple[float, ...],
+    foci: tuple[tuple[int, int], ...],
+) -> np.ndarray:
     """(6,) bounds w_i (m per rad): no point of the ellipsoids moves faster
     than Σ w_i |q̇_i|.  A point x of an ellipsoid rigid with a link after
     joint i lies within its semi-major axis a of the ellipsoid centre, whose
@@ -79,7 +89,7 @@ def displacement_weights(robot, nozzle_m: float, kp, foci) -> np.ndarray:
     return w
 
 
-def _focal_length(robot, j1: int, j2: int, nozzle_m: float) -> float:
+def _focal_length(robot: DensoVM6083, j1: int, j2: int, nozzle_m: float) -> float:
     q = np.zeros(6)
     F = robot.frames(q)
     pts = [F[k, :3, 3] for k in range(7)] + [F[-1, :3, 3] + nozzle_m * F[-1, :3, 2]]
@@ -97,8 +107,8 @@ def edge_free(
     clear_fn: ClearFn,
     w: np.ndarray,
     *,
-    ca: np.ndarray | None = None,
-    cb: np.ndarray | None = None,
+    ca: ArrayLike | None = None,
+    cb: ArrayLike | None = None,
     max_depth: int = 12,
 ) -> np.ndarray:
     """Which straight segments qa[k] → qb[k] ((K,6) each) stay free: a piece
@@ -250,11 +260,11 @@ def rrt_connect(
         if status_b == "reached":
             pa = trace(trees[a], ka)[::-1]
             pb = trace(trees[b], kb)[1:]
-            path = pa + pb
+            joined = pa + pb
             if a == 1:
-                path = path[::-1]
+                joined = joined[::-1]
             n = len(trees[0]["x"]) + len(trees[1]["x"])
-            return RRTResult(full(np.asarray(path)), n, it)
+            return RRTResult(full(np.asarray(joined)), n, it)
     return RRTResult(None, len(trees[0]["x"]) + len(trees[1]["x"]), it)
 
 

@@ -16,7 +16,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 import shapely
-from shapely.geometry import MultiPoint, Polygon
+from shapely.geometry import GeometryCollection, MultiPoint, Polygon
 
 from planners.errors import EmptyInputError, InvalidInputError
 
@@ -88,7 +88,7 @@ class Surface:
         self.boundary = _ring("boundary", self.boundary)
         self.holes = tuple(_ring(f"holes[{i}]", h) for i, h in enumerate(self.holes))
         poly = shapely.make_valid(Polygon(self.boundary, [h for h in self.holes]))
-        if poly.geom_type == "GeometryCollection":
+        if isinstance(poly, GeometryCollection):
             poly = shapely.union_all([g for g in poly.geoms if g.area > 0])
         if poly.is_empty or poly.area <= 0.0:
             raise EmptyInputError("boundary encloses no area")
@@ -102,6 +102,7 @@ class Surface:
     @property
     def rotation(self) -> np.ndarray:
         """3×3 with columns x, y, normal (plane frame in the world)."""
+        assert self.x_axis is not None  # __post_init__ sets the unit in-plane x axis
         return np.stack([self.x_axis, self.y_axis, self.normal], axis=1)
 
     def to_plane(self, points3d: np.ndarray) -> np.ndarray:
@@ -143,9 +144,9 @@ class Surface:
         tmp = cls(c, n, np.array([[0.0, 0.0], [1.0, 0.0], [0.0, 1.0]]), x_axis=x_axis)
         uv = tmp.to_plane(pts)
         hull = shapely.concave_hull(MultiPoint(uv), ratio=float(np.clip(concavity, 0.0, 1.0)))
-        if hull.geom_type != "Polygon":
+        if not isinstance(hull, Polygon):
             hull = MultiPoint(uv).convex_hull
-        if hull.geom_type != "Polygon" or hull.area <= 0:
+        if not isinstance(hull, Polygon) or hull.area <= 0:
             raise EmptyInputError("the points span no area on their plane")
         ring = np.asarray(hull.exterior.coords)[:-1]
         holes = [np.asarray(h.coords)[:-1] for h in hull.interiors]

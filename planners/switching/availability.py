@@ -31,6 +31,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import shapely
 from scipy.spatial import cKDTree
+from shapely.geometry.base import BaseGeometry
 
 from planners.pointcloud import alpha_shape, ncbe_boundary_indices
 
@@ -91,7 +92,7 @@ class AreaResult:
     """Outcome of Alg. 1 + Alg. 2 on one plane."""
 
     boundary2d: np.ndarray
-    hull: shapely.Geometry
+    hull: BaseGeometry
     rectangles: list[RectangleCandidate] = field(default_factory=list)
 
     @property
@@ -154,9 +155,12 @@ def area_check(
     with np.errstate(divide="ignore", invalid="ignore"):
         rel = np.where(d_r > 0, (d_r - d_q) / d_r, -np.inf)
     S = (d_r < d_q) | (rel < float(tolerance))  # line 18
-    polys = shapely.polygons(np.concatenate([corners, corners[:, :1]], axis=1))
+    # vectorised shapely calls on arrays return arrays (asarray narrows the stub unions)
+    polys = np.asarray(shapely.polygons(np.concatenate([corners, corners[:, :1]], axis=1)))
     grown = hull.buffer(exact_tolerance_m) if not hull.is_empty else hull
-    inside = shapely.covers(grown, polys) if not hull.is_empty else np.zeros(len(N), bool)
+    inside = (
+        np.asarray(shapely.covers(grown, polys)) if not hull.is_empty else np.zeros(len(N), bool)
+    )
     boundary = hull.boundary
     for i in range(len(N)):  # n = 5 rectangles: bookkeeping only
         fails = np.nonzero(~S[i])[0]
@@ -195,7 +199,7 @@ def area_check(
 
 
 def _signed_margin(
-    hull: shapely.Geometry, boundary: shapely.Geometry, rect: shapely.Geometry, inside: bool
+    hull: BaseGeometry, boundary: BaseGeometry, rect: BaseGeometry, inside: bool
 ) -> float:
     """+ distance from the rectangle to the hull outline when inside; −(how
     far the rectangle's outside part reaches beyond the hull) otherwise."""
@@ -204,7 +208,7 @@ def _signed_margin(
     if inside:
         return float(shapely.distance(boundary, rect))
     outside = shapely.difference(rect, hull)
-    pts = shapely.points(shapely.get_coordinates(outside))
+    pts = np.asarray(shapely.points(shapely.get_coordinates(outside)))  # (k, 2) in: an array
     return -float(np.max(shapely.distance(hull, pts))) if len(pts) else 0.0
 
 
@@ -226,7 +230,7 @@ def height_check(
 
 
 def exact_foot_placements(
-    hull: shapely.Geometry,
+    hull: BaseGeometry,
     foot: tuple[float, float],
     *,
     spacing_m: float = 0.02,
@@ -259,7 +263,7 @@ def exact_foot_placements(
     polys = shapely.polygons(rings.reshape(-1, 5, 2))
     region = hull.buffer(tolerance_m) if tolerance_m > 0 else hull
     shapely.prepare(region)
-    ok = shapely.covers(region, polys)
+    ok = np.asarray(shapely.covers(region, polys))  # one flag per rectangle
     if not ok.any():
         return 0, None
     idx = np.nonzero(ok)[0]

@@ -200,7 +200,8 @@ def check_rigid(T: object, name: str = "camera_to_base", tol: float = 1e-6) -> n
 
 def _check_foot(foot: object) -> tuple[float, float]:
     try:
-        length, width = (float(v) for v in foot)  # type: ignore[union-attr]
+        # an object that is not an iterable of two numbers raises TypeError/ValueError here
+        length, width = (float(v) for v in foot)  # type: ignore[attr-defined]
     except (TypeError, ValueError) as exc:
         raise InvalidInputError(f"foot must be (length_m, width_m), got {foot!r}") from exc
     if not (np.isfinite(length) and np.isfinite(width) and length > 0 and width > 0):
@@ -437,12 +438,14 @@ def decide_mode(
         )
     else:
         with_area = [c for c in cands if c.area_available]
+        # a plane with area available has a passing rectangle, hence a reach distance
+        reaches = [c.reach_distance_m for c in with_area if c.reach_distance_m is not None]
         chosen = max(with_area or cands, key=lambda c: c.area_m2)
         mode, foothold = "none", None
         if with_area:
             msg = (
                 "surfaces with room for a foot are not at base height and out of reach "
-                f"(nearest foothold {min(c.reach_distance_m for c in with_area):.3f} m > "
+                f"(nearest foothold {min(reaches):.3f} m > "
                 f"{params.reach_m} m); the robot must not move"
             )
         else:

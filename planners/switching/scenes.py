@@ -29,6 +29,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 import shapely
+from shapely.geometry.base import BaseGeometry
 
 from planners.errors import InvalidInputError
 from planners.switching.availability import PlaneFrame
@@ -67,7 +68,7 @@ class SceneSurface:
 
     name: str
     frame: PlaneFrame
-    polygon: shapely.Geometry
+    polygon: BaseGeometry
 
 
 @dataclass
@@ -88,14 +89,14 @@ class Scene:
         return self.points @ T[:3, :3].T + T[:3, 3]
 
 
-def _horizontal(name: str, z: float, poly: shapely.Geometry) -> SceneSurface:
+def _horizontal(name: str, z: float, poly: BaseGeometry) -> SceneSurface:
     """Surface in the plane z = const, polygon in base x/y, normal +z."""
     return SceneSurface(
         name, PlaneFrame.from_normal(np.array([0.0, 0.0, z]), np.array([0, 0, 1.0])), poly
     )
 
 
-def _wall_facing_minus_x(name: str, x: float, poly_yz: shapely.Geometry) -> SceneSurface:
+def _wall_facing_minus_x(name: str, x: float, poly_yz: shapely.Polygon) -> SceneSurface:
     """Surface in the plane x = const facing the robot (normal −x); the
     polygon is given in base (y, z) and mapped into the plane frame."""
     frame = PlaneFrame.from_normal(np.array([x, 0.0, 0.0]), np.array([-1.0, 0.0, 0.0]))
