@@ -12,11 +12,12 @@ with bounding spheres so only pairs that can be the nearest are refined.
 
 from __future__ import annotations
 
-from collections.abc import Callable, Sequence
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import coal
 import numpy as np
+from numpy.typing import ArrayLike
 from scipy.spatial import cKDTree
 
 from planners.errors import InvalidInputError
@@ -36,7 +37,7 @@ class Box:
     name: str = ""
 
     @classmethod
-    def from_bounds(cls, lo: Sequence[float], hi: Sequence[float], name: str = "") -> Box:
+    def from_bounds(cls, lo: ArrayLike, hi: ArrayLike, name: str = "") -> Box:
         lo_a, hi_a = np.asarray(lo, dtype=float), np.asarray(hi, dtype=float)
         if lo_a.shape != (3,) or hi_a.shape != (3,) or np.any(hi_a < lo_a):
             raise InvalidInputError(
@@ -80,7 +81,8 @@ class Obstacles:
             return obstacles
         boxes: list[Box] = []
         pts: list[np.ndarray] = []
-        for o in obstacles or ():  # type: ignore[union-attr]
+        # anything but an iterable of boxes and point arrays raises TypeError here
+        for o in obstacles or ():  # type: ignore[attr-defined]
             if isinstance(o, Box):
                 boxes.append(o)
             else:
@@ -131,7 +133,7 @@ class Spheroids:
             np.linalg.norm(p - self.f1, axis=-1) + np.linalg.norm(p - self.f2, axis=-1) <= self.cf
         )
 
-    def __getitem__(self, idx: object) -> Spheroids:
+    def __getitem__(self, idx: int | slice | np.ndarray) -> Spheroids:
         return Spheroids(self.f1[idx], self.f2[idx], self.cf[idx])
 
 
@@ -363,7 +365,7 @@ def clearance(
             rest = np.setdiff1d(np.arange(n), need)
             best[rest] = np.minimum(best[rest], lbs[rest, k])
     if obstacles._tree is not None:
-        d_c, _ = obstacles._tree.query(c, k=1)
+        d_c = np.asarray(obstacles._tree.query(c, k=1)[0])  # (N,) for points c (N,3)
         # only points that could beat the pose's current upper bound (the box
         # distances, and each spheroid's distance to its nearest-centre point,
         # which is ≤ d_c) are refined; in sign-only mode only those within

@@ -252,7 +252,7 @@ def sequence_ga(
         # mutation: one gene takes a random disc; the repeat is repaired by
         # giving its old place the gene's former disc (a swap)
         mut = np.nonzero(rng.random(P) < mutation)[0]
-        for k in mut:
+        for k in mut.tolist():
             i = int(rng.integers(n))
             v = int(rng.integers(n))
             j = int(np.nonzero(children[k] == v)[0][0])
@@ -308,7 +308,7 @@ class _LocalSearch:
         self.c = c
         n = len(points)
         kk = min(k + 1, n)
-        self.nbr = cKDTree(self.X).query(self.X, k=kk)[1][:, 1:]  # (n,k)
+        self.nbr = np.asarray(cKDTree(self.X).query(self.X, k=kk)[1])[:, 1:]  # (n,k)
 
     def g(self, a: np.ndarray, v: np.ndarray, b: np.ndarray) -> np.ndarray:
         """Per-vertex cost; a or b = −1 means none."""
@@ -466,9 +466,11 @@ class _LocalSearch:
             clash = (Ix - 2 == K) | (Ix + L == K)
             for rev in (False, True):
                 h0, h1 = (s1, s0) if rev else (s0, s1)
-                h0n = (s1p if L > 1 else None) if rev else (s0n if L > 1 else None)
-                h1p = (s0n if L > 1 else None) if rev else (s1p if L > 1 else None)
-                seg_new = self.g(x, h0, y) if L == 1 else self.g(x, h0, h0n) + self.g(h1p, h1, y)
+                if L == 1:
+                    seg_new = self.g(x, h0, y)
+                else:  # the inner neighbours of the (reversed) segment's ends
+                    h0n, h1p = (s1p, s0n) if rev else (s0n, s1p)
+                    seg_new = self.g(x, h0, h0n) + self.g(h1p, h1, y)
                 if L == 3:
                     mid = order[Ix + 1]
                     if rev:
@@ -551,6 +553,8 @@ def sequence_default(
         cst = float(path_cost(P2, o, penalty, c, turn_weight))
         if cst < best_cost:
             best, best_cost = o, cst
+    # every polished order has a finite cost, so the first one is taken
+    assert best is not None
     # iterated local search on small sets (≤ 100 spots): double-bridge kicks
     # (A B C D → A C B D) followed by local search, kept when better
     rng = np.random.default_rng(seed)
