@@ -38,8 +38,8 @@ class WallFrame:
     def n(self) -> np.ndarray:
         return np.cross(self.ex, self.ey)
 
-    def to_world(self, x: np.ndarray, y: np.ndarray) -> np.ndarray:
-        """(N,) wall coordinates → (N,3) world points."""
+    def to_world(self, x: np.ndarray | float, y: np.ndarray | float) -> np.ndarray:
+        """(N,) wall coordinates → (N,3) world points (scalars → one (3,) point)."""
         x = np.asarray(x, dtype=float)[..., None]
         y = np.asarray(y, dtype=float)[..., None]
         return self.origin + x * self.ex + y * self.ey
@@ -49,7 +49,7 @@ class WallFrame:
         rel = np.asarray(p, dtype=float) - self.origin
         return rel @ self.ex, rel @ self.ey
 
-    def heading_world(self, phi: np.ndarray) -> np.ndarray:
+    def heading_world(self, phi: np.ndarray | float) -> np.ndarray:
         phi = np.asarray(phi, dtype=float)[..., None]
         return np.cos(phi) * self.ex + np.sin(phi) * self.ey
 
