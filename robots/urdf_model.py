@@ -120,6 +120,11 @@ class UrdfKinematics:
         self._local = threading.local()
         self.joint_names: list[str] = list(self.model.names)[1:]
 
+    def __reduce__(self) -> tuple[Any, tuple[str]]:
+        # Rebuilt from the path (cached) in another process: the pinocchio
+        # model is derived data and the thread-local scratch cannot pickle.
+        return (urdf_kinematics, (str(self.path),))
+
     @property
     def data(self) -> Any:
         # pinocchio Data is scratch space: one per thread so concurrent
@@ -143,9 +148,7 @@ class UrdfKinematics:
 class UrdfChain:
     """FK / Jacobian of one tip link over an ordered subset of joints."""
 
-    def __init__(
-        self, kin: UrdfKinematics, joints: list[str], tip: str, base: str | None
-    ) -> None:
+    def __init__(self, kin: UrdfKinematics, joints: list[str], tip: str, base: str | None) -> None:
         m = kin.model
         self.kin = kin
         self.joints = joints
@@ -159,20 +162,35 @@ class UrdfChain:
         self._any_circle = bool(self._circle.any())
         self._q = pin.neutral(m)
         self.tip = tip
+        self.base = base
         self._tip = kin.frame_id(tip)
         self._base = None if base is None else kin.frame_id(base)
         if self._base is not None and m.frames[self._base].parentJoint == 0:
             # A base rigidly attached to the root moves with nothing: fold its
             # fixed placement in once instead of per call.
-            self._base_fixed: np.ndarray | None = np.linalg.inv(
-                m.frames[self._base].placement.homogeneous
-            )
+            self._base_fixed: Any = m.frames[self._base].placement.inverse()
         else:
             self._base_fixed = None
+        # Contiguous angle-only joints are written with one slice (fancy
+        # indexing costs more than the pinocchio call itself).
+        n = len(ids)
+        start = int(self._iq[0]) if n else 0
+        contiguous = (
+            n > 0 and not self._any_circle and np.array_equal(self._iq, start + np.arange(n))
+        )
+        self._slice = slice(start, start + n) if contiguous else None
+        start_v = int(self._iv[0]) if n else 0
+        contiguous_v = n > 0 and np.array_equal(self._iv, start_v + np.arange(n))
+        self._vslice = slice(start_v, start_v + n) if contiguous_v else self._iv
+
+    def __reduce__(self) -> tuple[Any, tuple[Any, ...]]:
+        return (UrdfChain, (self.kin, self.joints, self.tip, self.base))
 
     def _config(self, q: np.ndarray) -> np.ndarray:
-        x = self._q
-        if self._any_circle:
+        x = self._q.copy()  # per call: chains are shared between threads
+        if self._slice is not None:
+            x[self._slice] = q
+        elif self._any_circle:
             c = self._circle
             x[self._iq[~c]] = q[~c]
             x[self._iq[c]] = np.cos(q[c])
@@ -180,17 +198,6 @@ class UrdfChain:
         else:
             x[self._iq] = q
         return x
-
-    def _base_inv(self, data: Any) -> np.ndarray | None:
-        if self._base is None:
-            return None
-        if self._base_fixed is not None:
-            return self._base_fixed
-        Tb = pin.updateFramePlacement(self.kin.model, data, self._base).homogeneous
-        inv = np.eye(4)
-        inv[:3, :3] = Tb[:3, :3].T
-        inv[:3, 3] = -Tb[:3, :3].T @ Tb[:3, 3]
-        return inv
 
     def _check(self, q: np.ndarray) -> np.ndarray:
         q = np.asarray(q, dtype=float)
@@ -200,15 +207,21 @@ class UrdfChain:
             )
         return q
 
+    def _base_placement(self, data: Any) -> Any:
+        """Inverse placement of the base (pinocchio SE3) or ``None`` for the root."""
+        if self._base is None or self._base_fixed is not None:
+            return self._base_fixed
+        return pin.updateFramePlacement(self.kin.model, data, self._base).inverse()
+
     def fk(self, q: np.ndarray, link: str | None = None) -> np.ndarray:
         """4×4 pose of ``link`` (default the tip) in the base link."""
         q = self._check(q)
         m, data = self.kin.model, self.kin.data
         pin.forwardKinematics(m, data, self._config(q))
         fid = self._tip if link is None else self.kin.frame_id(link)
-        T = np.array(pin.updateFramePlacement(m, data, fid).homogeneous)
-        inv = self._base_inv(data)
-        return T if inv is None else inv @ T
+        T = pin.updateFramePlacement(m, data, fid)
+        inv = self._base_placement(data)
+        return np.array((T if inv is None else inv * T).homogeneous)
 
     def jacobian(self, q: np.ndarray, link: str | None = None) -> np.ndarray:
         """6×n geometric Jacobian ``[v; ω]`` of ``link``'s origin (default the
@@ -218,12 +231,15 @@ class UrdfChain:
         m, data = self.kin.model, self.kin.data
         fid = self._tip if link is None else self.kin.frame_id(link)
         J = pin.computeFrameJacobian(m, data, self._config(q), fid, pin.LOCAL_WORLD_ALIGNED)
-        J = J[:, self._iv]
-        inv = self._base_inv(data)
-        if inv is not None:
-            R = inv[:3, :3]
-            J = np.vstack([R @ J[:3], R @ J[3:]])
-        return np.asarray(J)
+        J = J[:, self._vslice]
+        inv = self._base_placement(data)
+        if inv is None:
+            return np.array(J)
+        R = inv.rotation
+        out = np.empty_like(J)
+        out[:3] = R @ J[:3]
+        out[3:] = R @ J[3:]
+        return out
 
 
 @cache

@@ -1,8 +1,9 @@
 """CMBOT 7-DoF redundant arm: FK, Jacobians, covering spheres, statics (seed §3.2).
 
 Forward kinematics follows Eq. 12 with Table 2 in the modified D-H form of
-Eq. 2 (joint frames read from the robot model, i.e. the URDF); the tool point
-Q sits at e_q = (0, 0, −l7) in frame {12}.  :meth:`ArmKinematics.jacobian`
+Eq. 2: the frames are the robot model's own (:meth:`robots.cmbot.CmbotChain.link_frames`,
+read from the URDF), not a copy here; the tool point Q sits at
+e_q = (0, 0, −l7) in frame {12}.  :meth:`ArmKinematics.jacobian`
 is the 6×7 geometric Jacobian of Eq. 13 (v = [q̇x q̇y q̇z ωx ωy ωz] in (K)),
 :func:`gradient_projection` the general solution Eq. 14
 β = J⁺v + (I − J⁺J)Z.  The arm is covered by spheres (Fig. 12) whose centre
@@ -16,20 +17,9 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
+from scipy.spatial.transform import Rotation
 
 from planners.errors import InvalidInputError
-
-
-def _rz(theta: np.ndarray) -> np.ndarray:
-    c, s = np.cos(theta), np.sin(theta)
-    T = np.zeros((*np.shape(theta), 4, 4))
-    T[..., 0, 0] = c
-    T[..., 0, 1] = -s
-    T[..., 1, 0] = s
-    T[..., 1, 1] = c
-    T[..., 2, 2] = 1.0
-    T[..., 3, 3] = 1.0
-    return T
 
 
 @dataclass(frozen=True)
@@ -116,6 +106,7 @@ class ArmKinematics:
     coms: np.ndarray  # (8,3) in frames 0…7
     spheres: SphereSet
     params: dict[str, Any]
+    chain: Any  # the robot's arm chain (robots.cmbot.CmbotChain): its FK is the one used
 
     @classmethod
     def from_model(cls, model: Any) -> ArmKinematics:
@@ -135,6 +126,7 @@ class ArmKinematics:
             coms,
             spheres,
             model.params,
+            model,
         )
 
     @property
@@ -146,14 +138,13 @@ class ArmKinematics:
         q = np.asarray(q, dtype=float)
         if q.shape[-1] != self.dof:
             raise InvalidInputError(f"arm: expected {self.dof} joint values, got shape {q.shape}")
-        out = np.empty((*q.shape[:-1], self.dof + 2, 4, 4))
-        out[..., 0, :, :] = np.eye(4)
-        for i in range(self.dof):
-            out[..., i + 1, :, :] = out[..., i, :, :] @ self.joint_origins[i] @ _rz(q[..., i])
-        out[..., -1, :, :] = out[..., -2, :, :] @ self.end_offset
-        return out
+        return np.asarray(self.chain.link_frames(q))
 
     def tool_pose(self, q: np.ndarray) -> np.ndarray:
+        """Tool pose Q in (K): one configuration by pinocchio (robot model), a batch by frames."""
+        q = np.asarray(q, dtype=float)
+        if q.shape == (self.dof,):
+            return np.asarray(self.chain.fk(q))
         return self.frames(q)[..., -1, :, :]
 
     @staticmethod
@@ -169,7 +160,11 @@ class ArmKinematics:
         return np.swapaxes(J, -1, -2)
 
     def jacobian(self, q: np.ndarray) -> np.ndarray:
-        """Eq. 13: the 6×7 Jacobian of the tool point in (K)."""
+        """Eq. 13: the 6×7 Jacobian of the tool point in (K) (one configuration
+        by pinocchio on the URDF, a batch from the frames)."""
+        q = np.asarray(q, dtype=float)
+        if q.shape == (self.dof,):
+            return np.asarray(self.chain.jacobian(q))
         return self.jacobian_from_frames(self.frames(q))
 
     def sphere_centers(self, F: np.ndarray) -> np.ndarray:
@@ -254,19 +249,6 @@ def rotation_error(R_target: np.ndarray, R: np.ndarray) -> np.ndarray:
 
 
 def rpy_to_matrix(roll: float, pitch: float, yaw: float) -> np.ndarray:
-    """Fixed-axis roll-pitch-yaw (R = Rz·Ry·Rx), the seed's pose angles (α, β, γ)."""
-    cr, sr, cp, sp, cy, sy = (
-        np.cos(roll),
-        np.sin(roll),
-        np.cos(pitch),
-        np.sin(pitch),
-        np.cos(yaw),
-        np.sin(yaw),
-    )
-    return np.array(
-        [
-            [cy * cp, cy * sp * sr - sy * cr, cy * sp * cr + sy * sr],
-            [sy * cp, sy * sp * sr + cy * cr, sy * sp * cr - cy * sr],
-            [-sp, cp * sr, cp * cr],
-        ]
-    )
+    """Fixed-axis roll-pitch-yaw (R = Rz·Ry·Rx), the seed's pose angles (α, β, γ):
+    extrinsic x-y-z Euler angles in scipy's convention."""
+    return np.asarray(Rotation.from_euler("xyz", [roll, pitch, yaw]).as_matrix())
