@@ -8,11 +8,16 @@ from __future__ import annotations
 
 from collections.abc import Hashable, Mapping, Sequence
 from dataclasses import dataclass
+from typing import Any
 
 import networkx as nx
 import numpy as np
 
 from planners.errors import InfeasibleError, InvalidInputError, UnknownVertexError
+
+# vertex id → position; Any keys because Mapping is invariant in its key type, so a
+# dict[str, ...] would not be a Mapping[Hashable, ...]
+Positions = Mapping[Any, Sequence[float]]
 
 
 @dataclass(frozen=True)
@@ -27,11 +32,11 @@ class ShortestRoute:
 
 
 def build_graph(
-    nodes: Mapping[Hashable, Sequence[float]], edges: Sequence[tuple[Hashable, Hashable]]
+    nodes: Positions, edges: Sequence[tuple[Hashable, Hashable]]
 ) -> nx.Graph:
     """The graph with Euclidean edge weights; an edge naming a vertex with no
     position raises :class:`planners.errors.UnknownVertexError`."""
-    g = nx.Graph()
+    g: nx.Graph[Hashable] = nx.Graph()
     for node, pos in nodes.items():
         g.add_node(node, pos=tuple(pos))
     for u, v in edges:
@@ -52,7 +57,7 @@ def check_endpoints(g: nx.Graph, start: Hashable, end: Hashable) -> None:
             raise UnknownVertexError(f"{role} vertex {v!r} is not in the graph (vertices: {known})")
 
 
-def unit_grid_edges(nodes: Mapping[Hashable, Sequence[float]]) -> list[tuple[Hashable, Hashable]]:
+def unit_grid_edges(nodes: Positions) -> list[tuple[Hashable, Hashable]]:
     """Every pair of vertices exactly 1 m apart (a unit grid's edges)."""
     keys = list(nodes)
     return [
@@ -64,7 +69,7 @@ def unit_grid_edges(nodes: Mapping[Hashable, Sequence[float]]) -> list[tuple[Has
 
 
 def shortest_route(
-    nodes: Mapping[Hashable, Sequence[float]],
+    nodes: Positions,
     edges: Sequence[tuple[Hashable, Hashable]],
     start: Hashable,
     end: Hashable,
