@@ -14,10 +14,12 @@ without its ``Tz(d_i)``.
 from __future__ import annotations
 
 import math
+import warnings
 from pathlib import Path
 from typing import Any
 
 import numpy as np
+from scipy.spatial.transform import Rotation
 
 from robots.cmbot.kinematics import climber_mdh
 
@@ -69,11 +71,14 @@ def _fmt(v: np.ndarray | list[float]) -> str:
 
 
 def _rpy(R: np.ndarray) -> np.ndarray:
-    """URDF roll-pitch-yaw of a rotation matrix (R = Rz(y)·Ry(p)·Rx(r))."""
-    pitch = math.atan2(-R[2, 0], math.hypot(R[0, 0], R[1, 0]))
-    if abs(math.cos(pitch)) < 1e-9:
-        return np.array([math.atan2(-R[1, 2], R[1, 1]), pitch, 0.0])
-    return np.array([math.atan2(R[2, 1], R[2, 2]), pitch, math.atan2(R[1, 0], R[0, 0])])
+    """URDF roll-pitch-yaw of a rotation matrix (R = Rz(y)·Ry(p)·Rx(r)): scipy's
+    extrinsic x-y-z Euler angles."""
+    with warnings.catch_warnings():
+        # Gimbal lock (pitch ±90°) is expected for axis-aligned cylinders;
+        # scipy then sets yaw to 0, which still reproduces R.
+        warnings.simplefilter("ignore", UserWarning)
+        # + 0.0 writes a signed zero as "0" in the file
+        return np.asarray(Rotation.from_matrix(R).as_euler("xyz")) + 0.0
 
 
 def _cylinder(a: np.ndarray, b: np.ndarray, radius: float, material: str) -> str:
