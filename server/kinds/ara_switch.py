@@ -17,11 +17,11 @@ from typing import Any
 import numpy as np
 from pydantic import Field
 
-from planners.errors import InvalidInputError, PlannerError
-from planners.switching import SwitchingParams, decide_mode
-from planners.switching.jump import JumpParams, plan_inchworm_jump
-from planners.switching.jump_checks import foot_inside_surface, joint_limit_excess, speed_ratio
+from planners.errors import InvalidInputError
+from planners.switching import SwitchingParams
+from planners.switching.jump import JumpParams
 from planners.switching.scenes import SCENES, make_scene
+from planners.switching.switch_plan import plan_switch
 from server.kinds.base import (
     Check,
     JobContext,
@@ -106,8 +106,19 @@ def run(p: AraSwitchParams, ctx: JobContext) -> KindOutput:
         reach_m=p.reach_m,
         seed=p.seed,
     )
-    ctx.progress(0.05, "switching decision")
-    d = decide_mode(points, camera_to_base=T, base_height=p.base_height_m, foot=foot, params=sp)
+    out = plan_switch(
+        ara,
+        points,
+        camera_to_base=T,
+        base_height=p.base_height_m,
+        foot=foot,
+        params=sp,
+        jump=JumpParams(clearance_margin_m=p.clearance_margin_m, attempts=p.attempts, seed=p.seed)
+        if p.plan_jump
+        else None,
+        progress=ctx.progress,
+    )
+    d = out.decision
     labels = np.full(len(d.points), -1, dtype=np.int32)
     for c in d.candidates:
         labels[c.points_index] = c.index
@@ -186,108 +197,92 @@ def run(p: AraSwitchParams, ctx: JobContext) -> KindOutput:
         "rect_passed": np.array([r.passed for r in rects], dtype=bool),
         "rect_plane": np.array(rect_plane, dtype=np.int32),
     }
-    if d.mode == "inchworm" and p.plan_jump:
-        ctx.progress(0.3, "inch-worm jump")
-        c = d.chosen
-        assert c is not None
-        surface = (c.frame.origin, c.frame.x_axis, c.frame.y_axis, c.area.hull)
-        try:
-            plan = plan_inchworm_jump(
-                ara,
-                d.foothold_candidates,
-                obstacles=d.points,
-                base_height=p.base_height_m,
-                surface=surface,
-                params=JumpParams(
-                    clearance_margin_m=p.clearance_margin_m, attempts=p.attempts, seed=p.seed
-                ),
+    if out.jump_error is not None:
+        checks.append(
+            Check(
+                name="jump_planned", passed=False, value=False, limit=True, message=out.jump_error
             )
-        except PlannerError as exc:
-            checks.append(
-                Check(name="jump_planned", passed=False, value=False, limit=True, message=str(exc))
-            )
-            plan = None
-        if plan is not None:
-            m = plan.metrics(ara)
-            Q = plan.joint_trajectory
-            # Checks recomputed from the returned trajectory itself.
-            ratio = speed_ratio(Q, plan.times, ara.max_speed)
-            viol = joint_limit_excess(Q, ara.joint_limits)
-            foot1_inside = foot_inside_surface(plan.foot1_requested, foot, surface, 0.01)
-            checks += [
-                Check(
-                    name="jump_planned",
-                    passed=True,
-                    value=True,
-                    limit=True,
-                    message="all phases planned",
-                ),
-                check_le("joint_limits", viol, 0.0, "largest joint-limit excess", " rad"),
-                check_le("joint_speeds", ratio, 1.0, "largest joint speed / limit", ""),
-                check_ge(
-                    "clearance",
-                    float(plan.clearance.min()),
-                    p.clearance_margin_m,
-                    "smallest clearance along the jump",
-                    " m",
-                ),
-                check_ge(
-                    "self_clearance",
-                    float(plan.self_clearance.min()),
-                    0.0,
-                    "smallest self clearance",
-                    " m",
-                ),
-                Check(
-                    name="foothold_inside_surface",
-                    passed=foot1_inside,
-                    value=foot1_inside,
-                    limit=True,
-                    message="foot 1's footprint lies inside the target plane's concave hull"
-                    if foot1_inside
-                    else "foot 1's footprint leaves the target plane's concave hull",
-                ),
-            ]
-            metrics.update(
-                {
-                    "jump_duration_s": m["duration_s"],
-                    "jump_min_clearance_m": m["min_clearance_m"],
-                    "jump_min_self_clearance_m": m["min_self_clearance_m"],
-                    "jump_max_speed_ratio": m["max_speed_ratio"],
-                    "jump_planning_time_s": m["planning_time_s"],
-                    "jump_rrt_attempts": m["attempts_used"],
-                    "foot2_on_seen_surface": float(plan.foot2_target_inside),
-                }
-            )
-            result["jump"] = {
-                "foot1_target": _mat(plan.foot1_target),
-                "foot2_target": _mat(plan.foot2_target),
-                "foot2_on_seen_surface": plan.foot2_target_inside,
-                "phases": [
-                    {
-                        "name": ph.name,
-                        "description": ph.description,
-                        "anchor": ph.anchor,
-                        "magnets": ph.magnets,
-                        "start": ph.start,
-                        "stop": ph.stop,
-                        "t_start_s": ph.t_start_s,
-                        "t_end_s": ph.t_end_s,
-                    }
-                    for ph in plan.phases
-                ],
-                "magnet_commands": plan.magnet_commands,
-                "joint_names": list(ara.joint_names),
-                "timings_s": plan.timings_s,
+        )
+    plan = out.jump
+    if plan is not None:
+        m = plan.metrics(ara)
+        Q = plan.joint_trajectory
+        # checks recomputed from the returned trajectory (planners.switching.jump_checks)
+        ratio, viol, foot1_inside = out.speed_ratio, out.joint_limit_excess_rad, out.foot1_inside
+        checks += [
+            Check(
+                name="jump_planned",
+                passed=True,
+                value=True,
+                limit=True,
+                message="all phases planned",
+            ),
+            check_le("joint_limits", viol, 0.0, "largest joint-limit excess", " rad"),
+            check_le("joint_speeds", ratio, 1.0, "largest joint speed / limit", ""),
+            check_ge(
+                "clearance",
+                float(plan.clearance.min()),
+                p.clearance_margin_m,
+                "smallest clearance along the jump",
+                " m",
+            ),
+            check_ge(
+                "self_clearance",
+                float(plan.self_clearance.min()),
+                0.0,
+                "smallest self clearance",
+                " m",
+            ),
+            Check(
+                name="foothold_inside_surface",
+                passed=foot1_inside,
+                value=foot1_inside,
+                limit=True,
+                message="foot 1's footprint lies inside the target plane's concave hull"
+                if foot1_inside
+                else "foot 1's footprint leaves the target plane's concave hull",
+            ),
+        ]
+        metrics.update(
+            {
+                "jump_duration_s": m["duration_s"],
+                "jump_min_clearance_m": m["min_clearance_m"],
+                "jump_min_self_clearance_m": m["min_self_clearance_m"],
+                "jump_max_speed_ratio": m["max_speed_ratio"],
+                "jump_planning_time_s": m["planning_time_s"],
+                "jump_rrt_attempts": m["attempts_used"],
+                "foot2_on_seen_surface": float(plan.foot2_target_inside),
             }
-            arrays.update(
+        )
+        result["jump"] = {
+            "foot1_target": _mat(plan.foot1_target),
+            "foot2_target": _mat(plan.foot2_target),
+            "foot2_on_seen_surface": plan.foot2_target_inside,
+            "phases": [
                 {
-                    "joint_trajectory": Q.astype(np.float64),
-                    "times": plan.times.astype(np.float64),
-                    "anchor": plan.anchor.astype(np.int32),
-                    "clearance": plan.clearance.astype(np.float64),
+                    "name": ph.name,
+                    "description": ph.description,
+                    "anchor": ph.anchor,
+                    "magnets": ph.magnets,
+                    "start": ph.start,
+                    "stop": ph.stop,
+                    "t_start_s": ph.t_start_s,
+                    "t_end_s": ph.t_end_s,
                 }
-            )
+                for ph in plan.phases
+            ],
+            "magnet_commands": plan.magnet_commands,
+            "joint_names": list(ara.joint_names),
+            "timings_s": plan.timings_s,
+        }
+        arrays.update(
+            {
+                "joint_trajectory": Q.astype(np.float64),
+                "times": plan.times.astype(np.float64),
+                "anchor": plan.anchor.astype(np.int32),
+                "clearance": plan.clearance.astype(np.float64),
+            }
+        )
     metrics["planning_time_s"] = time.perf_counter() - t0
     ctx.progress(1.0, "done")
     return KindOutput(result=result, arrays=arrays, checks=checks, metrics=metrics)

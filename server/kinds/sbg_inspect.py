@@ -22,12 +22,10 @@ from planners.sbg import (
     Girder,
     Limits,
     NoiseModel,
-    plan_inspection,
     plan_path,
     sample_girders,
 )
-from planners.sbg import corner as corner_mod
-from planners.sbg import experiments as ex
+from planners.sbg.inspection_report import plan_inspection_report
 from planners.sbg.robot import ClimberParams
 from server.kinds.base import Check, JobContext, KindOutput, PlanKind, PlanView, StrictParams
 from server.kinds.common import json_safe, plot, thin
@@ -270,24 +268,21 @@ def run(p: SbgInspectParams, ctx: JobContext) -> KindOutput:
         camera_margin_m=p.camera_margin_limit_mm * 1e-3,
         pitch_accel_deg_s2=p.pitch_accel_limit_deg_s2,
     )
-    sweep_share = 0.25 if p.sweep_lx_mm else 0.0
-
-    def prog(f: float, stage: str) -> None:
-        ctx.progress(f * (1.0 - sweep_share), stage)
-
-    plan = plan_inspection(
+    report = plan_inspection_report(
         girder,
         robot,
         start_lane=p.start_lane,
         direction=p.direction,
         start_end=p.start_end,
-        preview_m=cfg.preview_m,
         noise=noise,
         config=cfg,
         seed=p.seed,
         limits=limits,
-        progress=prog,
+        sweep_lx_m=[v * 1e-3 for v in p.sweep_lx_mm],
+        sweep_seeds=p.sweep_seeds,
+        progress=ctx.progress,
     )
+    plan = report.plan
     sim, path = plan.sim, plan.path
     A = sim.arrays
     plots: list[dict[str, Any]] = []
@@ -306,9 +301,8 @@ def run(p: SbgInspectParams, ctx: JobContext) -> KindOutput:
             )
         )
     # Fig. 12 style: pitch over the first crossing, and the as-printed law beside it.
-    if sim.crossing_pitch:
-        th = sim.crossing_pitch[0]
-        printed = corner_mod.cross_corner(robot, profile=corner_mod.PRINTED, dt=sim.dt_s).theta
+    if sim.crossing_pitch and report.printed_pitch is not None:
+        th, printed = sim.crossing_pitch[0], report.printed_pitch
         n = max(len(th), len(printed))
         t = np.arange(n) * sim.dt_s
 
@@ -343,12 +337,9 @@ def run(p: SbgInspectParams, ctx: JobContext) -> KindOutput:
         )
     sweep_rows: list[dict[str, Any]] = []
     best = None
-    if p.sweep_lx_mm:
-        ctx.progress(1.0 - sweep_share, "Lx sweep")
-        values = sorted({float(v) for v in p.sweep_lx_mm})
-        sw = ex.lx_sweep(
-            [v * 1e-3 for v in values], range(p.sweep_seeds), robot, noise=noise, time_limit_s=300.0
-        )
+    if report.sweep is not None:
+        sw = report.sweep
+        values = sorted({float(v) for v in p.sweep_lx_mm})  # the rows' order (mm as given)
         best = sw.best_preview_m
         for r in sw.rows:
             sweep_rows.append(
