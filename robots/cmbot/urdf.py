@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import math
 import warnings
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
@@ -81,7 +82,9 @@ def _rpy(R: np.ndarray) -> np.ndarray:
         return np.asarray(Rotation.from_matrix(R).as_euler("xyz")) + 0.0
 
 
-def _cylinder(a: np.ndarray, b: np.ndarray, radius: float, material: str) -> str:
+def _cylinder(
+    a: np.ndarray | Sequence[float], b: np.ndarray | Sequence[float], radius: float, material: str
+) -> str:
     """Visual + collision cylinder from point a to b in the link frame."""
     a, b = np.asarray(a, float), np.asarray(b, float)
     v = b - a
@@ -177,7 +180,7 @@ def build_urdf(p: dict[str, Any]) -> str:
     def origin(alpha: float, a: float, d_prev: float) -> np.ndarray:
         ca_, sa_ = math.cos(alpha), math.sin(alpha)
         T = np.eye(4)
-        T[:3, :3] = [[1, 0, 0], [0, ca_, -sa_], [0, sa_, ca_]]
+        T[:3, :3] = np.array([[1.0, 0.0, 0.0], [0.0, ca_, -sa_], [0.0, sa_, ca_]])
         T[:3, 3] = [a, 0.0, d_prev]
         return T
 
