@@ -130,8 +130,19 @@ def execute_job(
     clouds_dir: str,
     progress_q: Any,
     cancel_flags: Any,
-) -> tuple[dict[str, Any], dict[str, np.ndarray], list[dict[str, Any]], dict[str, float]]:
-    """Run one plan (in a worker).  Module-level so process pools can pickle it."""
+) -> tuple[
+    dict[str, Any],
+    dict[str, np.ndarray],
+    list[dict[str, Any]],
+    dict[str, float],
+    list[dict[str, Any]] | None,
+    dict[str, Any] | None,
+]:
+    """Run one plan and compile its robot program (in a worker).
+
+    Module-level so process pools can pickle it.  Returns the result, arrays,
+    checks, metrics, the program (or ``None``) and the program's check.
+    """
     from server.kinds import get_kind
     from server.kinds.base import drop_unknown_keys
 
@@ -147,7 +158,22 @@ def execute_job(
     metrics.setdefault("job_time_s", time.perf_counter() - t0)
     checks = [c.model_dump() for c in out.checks]
     arrays = {k: np.asarray(v) for k, v in out.arrays.items()}
-    return out.result, arrays, checks, metrics
+    # Compiled here, in the worker, not in the server: a long program's
+    # compile and limit check is 30-150 ms of Python the web server's event
+    # loop and E-stop path would otherwise wait behind.
+    program, check = compile_program(
+        _PlanRef(plan_id, kind_name, params), out.result, arrays, checks, metrics
+    )
+    return out.result, arrays, checks, metrics, program, check
+
+
+@dataclass(frozen=True)
+class _PlanRef:
+    """What :func:`compile_program` reads of a plan while it is still planning."""
+
+    id: str
+    kind: str
+    params: dict[str, Any]
 
 
 class JobRunner:
@@ -363,8 +389,7 @@ class JobRunner:
                 self._transition(plan_id, "start", "planner")
             exc = fut.exception()
             if exc is None:
-                result, arrays, checks, metrics = fut.result()
-                program, check = compile_program(plan, result, arrays, checks, metrics)
+                result, arrays, checks, metrics, program, check = fut.result()
                 if check is not None:
                     checks = [*checks, check]
                 try:

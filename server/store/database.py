@@ -13,6 +13,7 @@ import os
 import sqlite3
 import stat
 import threading
+import weakref
 from collections.abc import Iterator
 from contextlib import contextmanager
 from datetime import UTC, datetime
@@ -61,12 +62,17 @@ def secure_database_files(path: Path) -> None:
 
 
 class Database:
-    """One SQLite connection shared by the service's threads.
+    """One SQLite writer connection shared by the service's threads, a reader per thread.
 
-    SQLite serialises writers anyway; one connection behind a re-entrant lock
-    keeps transactions simple and avoids ``database is locked`` between our
-    own threads.  WAL lets external readers (backups, the CLI) read while we
-    write, and ``synchronous=FULL`` makes every commit durable.
+    SQLite serialises writers anyway; one writer connection behind a
+    re-entrant lock keeps transactions simple and avoids ``database is
+    locked`` between our own threads, and ``synchronous=FULL`` makes every
+    commit durable.  Reads (``SELECT``) go to a read-only connection of the
+    calling thread, so under WAL they see the last commit without waiting for
+    a writer: with one shared connection every API read queued behind each
+    plan result, upload row and robot-state write, which is what made reads
+    take seconds on a busy server.  A thread inside a transaction reads
+    through the writer, so it sees its own uncommitted rows.
     """
 
     def __init__(self, path: Path, *, migrate_to: int | None = None) -> None:
@@ -90,6 +96,34 @@ class Database:
             else:
                 migrate(self._conn, migrate_to)
         secure_database_files(self.path)  # the -wal/-shm exist once WAL has written
+        self._local = threading.local()
+        # Weak: a reader is freed (and closed) with its thread's locals, e.g.
+        # when an idle worker thread ends; close() closes those still alive.
+        self._readers: weakref.WeakSet[_Reader] = weakref.WeakSet()
+        self._readers_lock = threading.Lock()
+        self._writer_thread: int | None = None
+        self._closed = False
+
+    def _reader(self) -> sqlite3.Connection | None:
+        """This thread's read-only connection; ``None`` when the writer must serve the read."""
+        if self._writer_thread == threading.get_ident() or self._closed:
+            return None
+        reader: _Reader | None = getattr(self._local, "reader", None)
+        if reader is None:
+            conn = sqlite3.connect(
+                self.path, check_same_thread=False, isolation_level=None, timeout=30.0
+            )
+            conn.row_factory = sqlite3.Row
+            conn.execute("PRAGMA query_only=1")
+            conn.execute("PRAGMA cache_size=-1024")  # 1 MiB a thread, not the 2 MiB default
+            reader = _Reader(conn)
+            with self._readers_lock:
+                if self._closed:
+                    conn.close()
+                    return None
+                self._readers.add(reader)
+            self._local.reader = reader
+        return reader.conn
 
     @property
     def journal_mode(self) -> str:
@@ -104,21 +138,51 @@ class Database:
                 yield self._conn
                 return
             self._conn.execute("BEGIN IMMEDIATE")
+            self._writer_thread = threading.get_ident()
             try:
                 yield self._conn
             except BaseException:
                 self._conn.execute("ROLLBACK")
                 raise
-            self._conn.execute("COMMIT")
+            else:
+                self._conn.execute("COMMIT")
+            finally:
+                self._writer_thread = None
 
     def query(self, sql: str, args: tuple[Any, ...] | list[Any] = ()) -> list[sqlite3.Row]:
+        reader = self._reader() if _is_read(sql) else None
+        if reader is not None:
+            return list(reader.execute(sql, args).fetchall())
         with self._lock:
             return list(self._conn.execute(sql, args).fetchall())
 
     def query_one(self, sql: str, args: tuple[Any, ...] | list[Any] = ()) -> sqlite3.Row | None:
+        reader = self._reader() if _is_read(sql) else None
+        if reader is not None:
+            row: sqlite3.Row | None = reader.execute(sql, args).fetchone()
+            return row
         with self._lock:
             return self._conn.execute(sql, args).fetchone()
 
     def close(self) -> None:
+        with self._readers_lock:
+            self._closed = True
+            readers = list(self._readers)
+        for reader in readers:
+            reader.conn.close()
         with self._lock:
             self._conn.close()
+
+
+class _Reader:
+    """A thread's read-only connection (a holder, as connections take no weak references)."""
+
+    __slots__ = ("__weakref__", "conn")
+
+    def __init__(self, conn: sqlite3.Connection) -> None:
+        self.conn = conn
+
+
+def _is_read(sql: str) -> bool:
+    """A plain ``SELECT`` (anything else, a write or a PRAGMA, goes to the writer)."""
+    return sql.lstrip()[:6].upper() == "SELECT"
