@@ -116,16 +116,15 @@ class ApproxIK:
 
 def _axis_residual(robot: DensoVM6083, q5: np.ndarray, q6: float, p: np.ndarray, a: np.ndarray) -> np.ndarray:
     q = np.append(q5, q6)
-    T = robot.frames(q)[-1]
+    T = robot.fk(q)  # one configuration: pinocchio on the URDF
     return np.concatenate([ALPHA_P * (T[:3, 3] - p), ALPHA_O * (T[:3, 2] - a)])
 
 
 def _axis_jacobian(robot: DensoVM6083, q5: np.ndarray, q6: float) -> np.ndarray:
     """d[αp·p; αo·z]/dq1..5 from the geometric Jacobian (dz/dqi = ωi × z)."""
     q = np.append(q5, q6)
-    F = robot.frames(q)
     J = robot.jacobian(q)[:, :5]
-    z = F[-1, :3, 2]
+    z = robot.fk(q)[:3, 2]
     return np.vstack([ALPHA_P * J[:3], ALPHA_O * np.cross(J[3:].T, z).T])
 
 
