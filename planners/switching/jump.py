@@ -581,33 +581,51 @@ def _second_foot_candidates(
     return [(T, inside, margin) for T, inside, _, margin in out]
 
 
-def plan_inchworm_jump(
-    robot: Any,
-    foothold: np.ndarray,
-    *,
-    obstacles: np.ndarray,
-    base_height: float = 0.0,
-    surface: tuple[np.ndarray, np.ndarray, np.ndarray, shapely.Geometry] | None = None,
-    surface_tolerance_m: float = 0.01,
-    params: JumpParams | dict[str, Any] | None = None,
-    progress: Progress | None = None,
-) -> JumpPlan:
-    """Plan the inch-worm jump (seed §3.2) onto ``foothold``.
+@dataclass
+class _JumpContext:
+    """What every phase of one jump shares: the adapted robot, its params,
+    the scene (points + the standing patch), self-collision pairs, the mobile
+    start configuration and the random stream of the whole plan."""
 
-    ``robot`` a :class:`JumpRobot` or a RobotModel (adapted by
-    :meth:`JumpRobot.from_model`); ``foothold`` the 4×4 target sole pose of
-    foot 1 in the base frame (z = surface normal towards the robot; Alg. 2's
-    pose); ``obstacles`` (N,3) scene points in the base frame; ``surface`` =
-    (origin, x_axis, y_axis, hull polygon) of the target plane, used to keep
-    the second foot on seen steel.  Raises :class:`UnreachableError` when no
-    IK solution lands foot 1, :class:`MotionPlanningError` when no
-    collision-free path is found within ``params.attempts``.
-    """
-    t_all = time.perf_counter()
-    if params is None:
-        params = JumpParams()
-    elif isinstance(params, dict):
-        params = replace(JumpParams(), **params)
+    rob: JumpRobot
+    params: JumpParams
+    footholds: list[np.ndarray]
+    all_pts: np.ndarray
+    full: PointObstacles
+    pairs: list[tuple[int, int, bool, np.ndarray, np.ndarray]]
+    q0: np.ndarray
+    foot1_start: np.ndarray
+    rng: np.random.Generator
+    timings: dict[str, float] = field(default_factory=dict)
+    attempts: int = 0
+    foot2_start: np.ndarray = field(default_factory=lambda: np.eye(4))
+
+    def zone(self, T: np.ndarray) -> PointObstacles:
+        """Scene points outside the contact zone of a foot at ``T`` (the
+        moving foot may touch the surface only inside its own footprint)."""
+        p = self.params
+        keep = ~_contact_zone(self.all_pts, T, self.rob.foot, p.contact_band_m, p.contact_pad_m)
+        return PointObstacles(self.all_pts[keep])
+
+    def checker(self, anchor: int, W_anchor: np.ndarray, zone: PointObstacles | None) -> _Checker:
+        """Validity checker with foot ``anchor`` standing at ``W_anchor``."""
+        return _Checker(self.rob, anchor, W_anchor, self.full, zone, self.pairs, self.params)
+
+    def plan_free(
+        self, checker: _Checker, start: np.ndarray, goals: np.ndarray
+    ) -> np.ndarray | None:
+        """:func:`_plan_free` on the plan's random stream, counting attempts."""
+        path, used = _plan_free(checker, start, goals, self.params, self.rng)
+        self.attempts += used
+        return path
+
+
+def _jump_context(
+    robot: Any, foothold: np.ndarray, obstacles: np.ndarray, base_height: float, params: JumpParams
+) -> _JumpContext:
+    """Set-up: adapt the robot, check footholds (rigid 4×4) and obstacle
+    points, add the known standing patch under the robot (the camera cannot
+    see it) and seed the plan's random stream with ``params.seed``."""
     rob = (
         robot
         if isinstance(robot, JumpRobot)
@@ -624,7 +642,6 @@ def plan_inchworm_jump(
     if not np.all(np.isfinite(pts)):
         raise InvalidInputError("obstacles has NaN/inf rows; drop them first")
     rng = np.random.default_rng(params.seed)
-    timings: dict[str, float] = {}
 
     # Known standing surface under the robot (the camera cannot see it).
     (x0, x1), (y0, y1) = params.standing_patch_m
@@ -640,61 +657,76 @@ def plan_inchworm_jump(
     q0 = rob.q_mobile.copy()
     F0 = rob.fk_all(q0[None])[0]
     foot1_start = F0[-1]  # base frame (foot 2 = identity)
+    return _JumpContext(rob, params, footholds, all_pts, full, pairs, q0, foot1_start, rng)
 
-    def zone(T: np.ndarray) -> PointObstacles:
-        keep = ~_contact_zone(all_pts, T, rob.foot, params.contact_band_m, params.contact_pad_m)
-        return PointObstacles(all_pts[keep])
 
-    # ---- phase B/C: anchor foot 2 (chain base, identity pose) --------------
-    t0 = time.perf_counter()
-    free2 = _Checker(rob, 0, np.eye(4), full, None, pairs, params)
-    lift1_zone = _Checker(rob, 0, np.eye(4), full, zone(foot1_start), pairs, params)
-    lift_pose = _translate(foot1_start, foot1_start[:3, 2] * params.lift_m)
-    lift = rob.ik_track(_cartesian_line(foot1_start, lift_pose, params.cartesian_steps), q0)
+def _phase_b(cx: _JumpContext, free2: _Checker) -> tuple[list[np.ndarray], np.ndarray]:
+    """Phase B (seed §3.2): foot 1 lifts straight off (Cartesian line of
+    ``lift_m`` along its normal, tracked by IK), then to P_conv — a straight
+    joint move when free, else planned.  Returns the segment's joint
+    way-points and the configuration phase C starts from."""
+    rob, params = cx.rob, cx.params
+    lift1_zone = cx.checker(0, np.eye(4), cx.zone(cx.foot1_start))
+    lift_pose = _translate(cx.foot1_start, cx.foot1_start[:3, 2] * params.lift_m)
+    lift = rob.ik_track(_cartesian_line(cx.foot1_start, lift_pose, params.cartesian_steps), cx.q0)
     if lift is None or not lift1_zone.valid(lift).all():
         raise MotionPlanningError("foot 1 cannot lift straight off the standing surface")
     start_c = lift[-1]
-    seg_b: list[np.ndarray] = [q0[None], lift]
-    attempts = 0
+    seg_b: list[np.ndarray] = [cx.q0[None], lift]
     if params.use_conv and free2.valid(rob.q_conv[None])[0]:
         # P_conv (seed §3.2) first; a straight joint move when free, else planned.
-        path_b, used = _plan_free(free2, start_c, rob.q_conv[None], params, rng)
-        attempts += used
+        path_b = cx.plan_free(free2, start_c, rob.q_conv[None])
         if path_b is not None:
             seg_b.append(path_b[1:])
             start_c = rob.q_conv.copy()
-    if progress:
-        progress(0.1, "foot 1")
-    # Footholds in the caller's order, each also turned 180° about its
-    # normal (the foot rectangle is symmetric): the first one that lands.
-    options = _foothold_options(footholds, rob.foot, surface, surface_tolerance_m, params)
-    foot2_start = np.eye(4)
-    zone2_start = zone(foot2_start)
-    lift2_world = _cartesian_line(
-        foot2_start,
-        _translate(foot2_start, foot2_start[:3, 2] * params.lift_m),
-        params.cartesian_steps,
-    )
+    return seg_b, start_c
 
-    def lift2_from(q_contact: np.ndarray) -> np.ndarray | None:
-        """Foot 2's straight lift-off once foot 1 stands at FK(q_contact);
-        a foot-1 landing from which foot 2 cannot lift is useless."""
+
+class _Lift2:
+    """Foot 2's straight lift-off once foot 1 stands at FK(q_contact): a
+    foot-1 landing from which foot 2 cannot lift is useless."""
+
+    def __init__(self, cx: _JumpContext) -> None:
+        self.cx = cx
+        self.zone2_start = cx.zone(cx.foot2_start)
+        self.world = _cartesian_line(
+            cx.foot2_start,
+            _translate(cx.foot2_start, cx.foot2_start[:3, 2] * cx.params.lift_m),
+            cx.params.cartesian_steps,
+        )
+
+    def __call__(self, q_contact: np.ndarray) -> np.ndarray | None:
+        rob = self.cx.rob
         W = rob.fk_all(q_contact[None])[0, -1]
-        rel = np.einsum("bij,jk->bik", np.linalg.inv(lift2_world), W)
+        rel = np.einsum("bij,jk->bik", np.linalg.inv(self.world), W)
         track = rob.ik_track(rel, q_contact)
         if track is None:
             return None
-        chk = _Checker(rob, 1, W, full, zone2_start, pairs, params)
+        chk = self.cx.checker(1, W, self.zone2_start)
         return track if chk.valid(track).all() else None
 
+
+def _phase_c(
+    cx: _JumpContext,
+    free2: _Checker,
+    start_c: np.ndarray,
+    options: list[np.ndarray],
+    lift2_from: _Lift2,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Phase C (seed §3.2): for each foothold option in turn, landing
+    configurations (IK hovering ``standoff_m`` above it with a straight
+    approach, kept only when foot 2 can lift afterwards), then RRT-Connect
+    from ``start_c`` to any of them; the first option with a path wins.
+    Returns (joint path, approach to contact, the foothold used)."""
+    params, timings = cx.params, cx.timings
     timings["ik_foot1"] = timings["rrt_foot1"] = 0.0
-    path_c, W1, goals1, unreachable = None, footholds[0], [], 0
+    path_c, W1, goals1, unreachable = None, cx.footholds[0], [], 0
     for W in options:
         t0 = time.perf_counter()
-        land1_zone = _Checker(rob, 0, np.eye(4), full, zone(W), pairs, params)
+        land1_zone = cx.checker(0, np.eye(4), cx.zone(W))
         hover1 = _translate(W, W[:3, 2] * params.standoff_m)
         goals1 = _landing_configs(
-            rob,
+            cx.rob,
             W,
             hover1,
             free2,
@@ -708,8 +740,7 @@ def plan_inchworm_jump(
             unreachable += 1
             continue
         t0 = time.perf_counter()
-        path_c, used = _plan_free(free2, start_c, np.array([g for g, _ in goals1]), params, rng)
-        attempts += used
+        path_c = cx.plan_free(free2, start_c, np.array([g for g, _ in goals1]))
         timings["rrt_foot1"] += time.perf_counter() - t0
         if path_c is not None:
             W1 = W
@@ -717,48 +748,53 @@ def plan_inchworm_jump(
     if path_c is None:
         if unreachable == len(options):
             raise UnreachableError(
-                f"no collision-free IK solution lands foot 1 on any of {len(footholds)} foothold(s) "
-                f"(first at {np.round(footholds[0][:3, 3], 3).tolist()} m in the base frame)"
+                f"no collision-free IK solution lands foot 1 on any of {len(cx.footholds)} foothold(s) "
+                f"(first at {np.round(cx.footholds[0][:3, 3], 3).tolist()} m in the base frame)"
             )
         raise MotionPlanningError(
             f"RRT-Connect found no collision-free path for foot 1 ({params.attempts} attempts "
             f"per foothold, {len(options)} foothold poses)"
         )
     goal_idx = int(np.argmin([np.abs(path_c[-1] - g).max() for g, _ in goals1]))
-    approach1 = goals1[goal_idx][1]
-    q_land1 = approach1[-1]
-    if progress:
-        progress(0.5, "foot 2")
+    return path_c, goals1[goal_idx][1], W1
 
-    # ---- phase E: anchor foot 1 at W1; foot 2 swings ------------------------
+
+def _flatness(S: np.ndarray) -> np.ndarray:
+    # Mobile configuration: prefer the arm flat (joints 2, 5 near 0).
+    return np.abs(S[:, 1]) + np.abs(S[:, 4])
+
+
+def _phase_e(
+    cx: _JumpContext,
+    W1_actual: np.ndarray,
+    lift2: np.ndarray,
+    surface: tuple[np.ndarray, np.ndarray, np.ndarray, shapely.Geometry] | None,
+    surface_tolerance_m: float,
+) -> tuple[np.ndarray, bool, np.ndarray, np.ndarray]:
+    """Phase E (seed §3.2): foot 1 anchored at ``W1_actual``; foot 2 lifts
+    off, swings by RRT-Connect and lands beside foot 1 — candidates from
+    :func:`_second_foot_candidates`, best first; the first with a landing
+    and a path wins.  Returns (foot-2 pose, inside the seen surface, joint
+    path, approach to contact)."""
+    params = cx.params
     t0 = time.perf_counter()
-    W1_actual = rob.fk_all(q_land1[None])[0, -1]
-    free1 = _Checker(rob, 1, W1_actual, full, None, pairs, params)
-    lift2 = lift2_from(q_land1)
-    if lift2 is None:  # pragma: no cover - landings are filtered on this
-        raise MotionPlanningError("foot 2 cannot lift straight off the standing surface")
-    cands = _second_foot_candidates(W1_actual, rob.foot, surface, params, surface_tolerance_m)
+    free1 = cx.checker(1, W1_actual, None)
+    cands = _second_foot_candidates(W1_actual, cx.rob.foot, surface, params, surface_tolerance_m)
     landing2 = None
     for T2, inside, _ in cands[: params.max_second_foot_candidates]:
-        land2_zone = _Checker(rob, 1, W1_actual, full, zone(T2), pairs, params)
+        land2_zone = cx.checker(1, W1_actual, cx.zone(T2))
         target_rel = np.linalg.inv(T2) @ W1_actual
         # Foot 2 hovers above its spot: in foot 2's frame foot 1 is lower.
         hover_rel = np.linalg.inv(_translate(T2, T2[:3, 2] * params.standoff_m)) @ W1_actual
-
-        def flatness(S: np.ndarray) -> np.ndarray:
-            # Mobile configuration: prefer the arm flat (joints 2, 5 near 0).
-            return np.abs(S[:, 1]) + np.abs(S[:, 4])
-
         goals2 = _landing_configs(
-            rob, target_rel, hover_rel, free1, land2_zone, params, params.seed + 1, flatness
+            cx.rob, target_rel, hover_rel, free1, land2_zone, params, params.seed + 1, _flatness
         )
         if not goals2:
             if _DEBUG:
                 print("foot2 cand", np.round(T2[:3, 3], 3), inside, "no landing")
             continue
         tt = time.perf_counter()
-        path_e, used = _plan_free(free1, lift2[-1], np.array([g for g, _ in goals2]), params, rng)
-        attempts += used
+        path_e = cx.plan_free(free1, lift2[-1], np.array([g for g, _ in goals2]))
         if _DEBUG:
             print(
                 "foot2 cand",
@@ -773,25 +809,23 @@ def plan_inchworm_jump(
         gi = int(np.argmin([np.abs(path_e[-1] - g).max() for g, _ in goals2]))
         landing2 = (T2, inside, path_e, goals2[gi][1])
         break
-    timings["foot2"] = time.perf_counter() - t0
+    cx.timings["foot2"] = time.perf_counter() - t0
     if landing2 is None:
         raise MotionPlanningError("no collision-free landing found for foot 2 beside foot 1")
-    T2, inside2, path_e, approach2 = landing2
+    return landing2
 
-    # ---- assemble, time-parameterise, re-check every sample ------------------
-    t0 = time.perf_counter()
-    vmax = rob.max_speed * params.speed_scale
-    segs = [
-        ("B", "foot 1 lifts off and moves to P_conv", 0, np.vstack(seg_b)),
-        ("C", "foot 1 swings to the target and lands", 0, np.vstack([path_c, approach1])),
-        (
-            "E",
-            "foot 2 lifts off, swings and lands beside foot 1",
-            1,
-            np.vstack([q_land1[None], lift2, path_e, approach2]),
-        ),
-    ]
-    times_all, q_all, anchor_all, phases = [], [], [], []
+
+def _assemble(
+    segs: list[tuple[str, str, int, np.ndarray]], vmax: np.ndarray, params: JumpParams
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, list[JumpPhase], list[dict[str, Any]]]:
+    """Phases A–F and magnet commands around the planned segments B, C, E,
+    each time-parameterised rest to rest (:func:`_time_parameterise`:
+    trapezoids under the joint speed and acceleration limits).  Returns
+    (times, joint trajectory, anchor per sample, phases, magnet commands)."""
+    times_all: list[np.ndarray] = []
+    q_all: list[np.ndarray] = []
+    anchor_all: list[np.ndarray] = []
+    phases: list[JumpPhase] = []
     magnets = [
         {"t_s": 0.0, "foot": "foot2", "state": "touched"},
     ]
@@ -864,24 +898,28 @@ def plan_inchworm_jump(
             t_off,
         )
     )
-    times = np.concatenate(times_all)
-    Q = np.vstack(q_all)
-    anchor = np.concatenate(anchor_all)
+    return np.concatenate(times_all), np.vstack(q_all), np.concatenate(anchor_all), phases, magnets
 
-    # Clearance at every sample, with the contact exemptions used in
-    # planning: the moving foot may touch the surface only inside its
-    # footprint, and only while within lift/standoff of that contact.
+
+def _recheck(
+    cx: _JumpContext, Q: np.ndarray, anchor: np.ndarray, W1_actual: np.ndarray, T2: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """Clearance at every sample, with the contact exemptions used in
+    planning: the moving foot may touch the surface only inside its
+    footprint, and only while within lift/standoff of that contact.
+    Returns (scene clearance, self clearance) per sample."""
+    params = cx.params
     clear = np.empty(len(Q))
     selfc = np.empty(len(Q))
     for a_val, W_anchor, start_pose, land_pose in (
-        (0, np.eye(4), foot1_start, W1_actual),
-        (1, W1_actual, foot2_start, T2),
+        (0, np.eye(4), cx.foot1_start, W1_actual),
+        (1, W1_actual, cx.foot2_start, T2),
     ):
         sel = np.nonzero(anchor == a_val)[0]
         if len(sel) == 0:
             continue
         Qs = Q[sel]
-        chk_full = _Checker(rob, a_val, W_anchor, full, None, pairs, params)
+        chk_full = cx.checker(a_val, W_anchor, None)
         c_full, s_all = chk_full.clearances(Qs)
         Wm = chk_full.world(Qs)
         foot_pos = Wm[:, -1 if a_val == 0 else 0, :3, 3]
@@ -890,11 +928,85 @@ def plan_inchworm_jump(
         c = c_full.copy()
         for near, pose in ((near_land, land_pose), (near_start, start_pose)):
             if near.any():
-                chk = _Checker(rob, a_val, W_anchor, full, zone(pose), pairs, params)
+                chk = cx.checker(a_val, W_anchor, cx.zone(pose))
                 c[near] = chk.clearances(Qs[near])[0]
         clear[sel] = c
         selfc[sel] = s_all
-    timings["time_parameterise"] = time.perf_counter() - t0
+    return clear, selfc
+
+
+def plan_inchworm_jump(
+    robot: Any,
+    foothold: np.ndarray,
+    *,
+    obstacles: np.ndarray,
+    base_height: float = 0.0,
+    surface: tuple[np.ndarray, np.ndarray, np.ndarray, shapely.Geometry] | None = None,
+    surface_tolerance_m: float = 0.01,
+    params: JumpParams | dict[str, Any] | None = None,
+    progress: Progress | None = None,
+) -> JumpPlan:
+    """Plan the inch-worm jump (seed §3.2) onto ``foothold``.
+
+    ``robot`` a :class:`JumpRobot` or a RobotModel (adapted by
+    :meth:`JumpRobot.from_model`); ``foothold`` the 4×4 target sole pose of
+    foot 1 in the base frame (z = surface normal towards the robot; Alg. 2's
+    pose); ``obstacles`` (N,3) scene points in the base frame; ``surface`` =
+    (origin, x_axis, y_axis, hull polygon) of the target plane, used to keep
+    the second foot on seen steel.  Raises :class:`UnreachableError` when no
+    IK solution lands foot 1, :class:`MotionPlanningError` when no
+    collision-free path is found within ``params.attempts``.
+
+    Steps: :func:`_jump_context` (set-up) → :func:`_phase_b` (lift, P_conv)
+    → :func:`_phase_c` (foot 1 to the target) → :func:`_phase_e` (foot 2
+    beside it) → :func:`_assemble` (phases A–F, time parameterisation) →
+    :func:`_recheck` (clearance at every sample).
+    """
+    t_all = time.perf_counter()
+    if params is None:
+        params = JumpParams()
+    elif isinstance(params, dict):
+        params = replace(JumpParams(), **params)
+    cx = _jump_context(robot, foothold, obstacles, base_height, params)
+    rob = cx.rob
+
+    # ---- phase B/C: anchor foot 2 (chain base, identity pose) --------------
+    free2 = cx.checker(0, np.eye(4), None)
+    seg_b, start_c = _phase_b(cx, free2)
+    if progress:
+        progress(0.1, "foot 1")
+    # Footholds in the caller's order, each also turned 180° about its
+    # normal (the foot rectangle is symmetric): the first one that lands.
+    options = _foothold_options(cx.footholds, rob.foot, surface, surface_tolerance_m, params)
+    lift2_from = _Lift2(cx)
+    path_c, approach1, W1 = _phase_c(cx, free2, start_c, options, lift2_from)
+    q_land1 = approach1[-1]
+    if progress:
+        progress(0.5, "foot 2")
+
+    # ---- phase E: anchor foot 1 at W1; foot 2 swings ------------------------
+    W1_actual = rob.fk_all(q_land1[None])[0, -1]
+    lift2 = lift2_from(q_land1)
+    if lift2 is None:  # pragma: no cover - landings are filtered on this
+        raise MotionPlanningError("foot 2 cannot lift straight off the standing surface")
+    T2, inside2, path_e, approach2 = _phase_e(cx, W1_actual, lift2, surface, surface_tolerance_m)
+
+    # ---- assemble, time-parameterise, re-check every sample ------------------
+    t0 = time.perf_counter()
+    vmax = rob.max_speed * params.speed_scale
+    segs = [
+        ("B", "foot 1 lifts off and moves to P_conv", 0, np.vstack(seg_b)),
+        ("C", "foot 1 swings to the target and lands", 0, np.vstack([path_c, approach1])),
+        (
+            "E",
+            "foot 2 lifts off, swings and lands beside foot 1",
+            1,
+            np.vstack([q_land1[None], lift2, path_e, approach2]),
+        ),
+    ]
+    times, Q, anchor, phases, magnets = _assemble(segs, vmax, params)
+    clear, selfc = _recheck(cx, Q, anchor, W1_actual, T2)
+    cx.timings["time_parameterise"] = time.perf_counter() - t0
     plan = JumpPlan(
         times=times,
         joint_trajectory=Q,
@@ -908,9 +1020,9 @@ def plan_inchworm_jump(
         foot2_target=T2,
         foot2_target_inside=bool(inside2) if surface is not None else False,
         waypoints=[w for _, _, _, w in segs],
-        attempts_used=attempts,
+        attempts_used=cx.attempts,
         planning_time_s=time.perf_counter() - t_all,
-        timings_s=timings,
+        timings_s=cx.timings,
     )
     if progress:
         progress(1.0, "done")
