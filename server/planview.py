@@ -8,6 +8,7 @@ issue #13 §2); :mod:`server.kinds.base` re-exports it.
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from typing import Any, Protocol
 
 import numpy as np
@@ -23,6 +24,10 @@ class PlanView(Protocol):
     result: dict[str, Any]
     metrics: dict[str, float]
     checks: list[dict[str, Any]]
+
+    @property
+    def arrays(self) -> Mapping[str, str]:
+        """The stored arrays' names (→ where each is stored); test membership here."""
 
     def array(self, name: str) -> np.ndarray:
         """Load one of the plan's stored arrays."""

@@ -26,6 +26,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+import shapely
 
 from planners.blasting.surface import Surface
 from planners.errors import InvalidInputError, NoPlaneError
@@ -123,11 +124,13 @@ def outline_world(surface: Surface) -> tuple[np.ndarray, list[np.ndarray]]:
     closed rings on the plane; a multi-part surface is outlined by its convex
     hull and drawn without holes."""
     poly = surface.polygon
-    if poly.geom_type == "Polygon":
+    if isinstance(poly, shapely.Polygon):
         ring = np.asarray(poly.exterior.coords)
         holes = [surface.to_world(np.asarray(h.coords)) for h in poly.interiors]
     else:
-        ring = np.asarray(poly.convex_hull.exterior.coords)
+        hull = poly.convex_hull
+        assert isinstance(hull, shapely.Polygon)  # the hull of an area-spanning surface
+        ring = np.asarray(hull.exterior.coords)
         holes = []
     return surface.to_world(ring), holes
 

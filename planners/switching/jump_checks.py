@@ -9,10 +9,11 @@ from __future__ import annotations
 
 import numpy as np
 import shapely
+from shapely.geometry.base import BaseGeometry
 
 #: A target surface as the jump takes it: (origin (3,), x axis (3,), y axis (3,),
 #: concave hull in those plane coordinates).
-SurfaceFrame = tuple[np.ndarray, np.ndarray, np.ndarray, shapely.Geometry]
+SurfaceFrame = tuple[np.ndarray, np.ndarray, np.ndarray, BaseGeometry]
 
 
 def joint_limit_excess(q: np.ndarray, limits: np.ndarray) -> float:
