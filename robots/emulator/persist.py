@@ -189,7 +189,7 @@ def restore_robot_state(robot: SimRobot, state: Mapping[str, Any], source: str =
                 q_start=q_start,
                 lift_start=float(raw["lift_start_rad"]),
             )
-        values = {
+        values: dict[str, Any] = {
             "lift": float(state["lift_rad"]),
             "magnets": int(state["magnets"]),
             "plates": int(state["plates"]),

@@ -35,6 +35,7 @@ Usage in tests::
 from __future__ import annotations
 
 import contextlib
+import functools
 import heapq
 import itertools
 import json
@@ -621,7 +622,7 @@ class Emulator:
                 self._drop(port, now, None)
                 return
             if f.delay_s and f.delay_direction in ("rx", "both"):
-                self._later(now + f.delay_s, lambda t, p=port, fr=frame: self._handle(p, fr, t))
+                self._later(now + f.delay_s, functools.partial(self._handle, port, frame))
             else:
                 self._handle(port, frame, now)
 
@@ -778,7 +779,7 @@ class Emulator:
             wire = self._corrupt(wire)
         self.stats["frames_tx"] += 1
         if f.delay_s and f.delay_direction in ("tx", "both"):
-            self._later(now + f.delay_s, lambda t, p=port, w=wire: self._write(p, w, t))
+            self._later(now + f.delay_s, functools.partial(self._write, port, wire))
         else:
             self._write(port, wire, now)
 

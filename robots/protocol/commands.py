@@ -78,7 +78,7 @@ class JointMove(Command):
 
     OP = "joints"
     q_rad: tuple[float, ...]
-    duration_s: float = 0.0  # type: ignore[assignment]
+    duration_s: float = 0.0
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "q_rad", tuple(float(v) for v in self.q_rad))
@@ -101,7 +101,7 @@ class WheelSpeeds(Command):
 
     OP = "wheels"
     speeds_m_s: tuple[float, ...]
-    duration_s: float = 0.0  # type: ignore[assignment]
+    duration_s: float = 0.0
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "speeds_m_s", tuple(float(v) for v in self.speeds_m_s))
@@ -141,7 +141,7 @@ class LiftArm(Command):
 
     OP = "lift"
     angle_rad: float
-    duration_s: float = 0.0  # type: ignore[assignment]
+    duration_s: float = 0.0
 
     def to_message(self, run_id: int, index: int) -> LiftCmd:
         return LiftCmd(

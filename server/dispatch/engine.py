@@ -21,6 +21,7 @@ bookkeeping (streamers, store transitions) comes after.
 
 from __future__ import annotations
 
+import functools
 import logging
 import queue
 import secrets
@@ -28,7 +29,7 @@ import threading
 import time
 from collections.abc import Callable
 from dataclasses import asdict, dataclass, is_dataclass
-from typing import Any
+from typing import Any, Protocol
 
 from robots import ROBOT_NAMES
 from robots.adapters.link import (
@@ -61,11 +62,10 @@ class DispatchError(Exception):
         self.status = status
 
 
-class EventSink:
+class EventSink(Protocol):
     """Where the engine publishes plan/execution/robot changes (``EventBus`` or a channel)."""
 
-    def publish(self, type_: str, data: dict[str, Any]) -> Any:  # pragma: no cover - protocol
-        raise NotImplementedError
+    def publish(self, type_: str, data: dict[str, Any]) -> Any: ...
 
 
 @dataclass
@@ -138,7 +138,7 @@ class DispatchEngine:
         if secret is not None and "secret" in fields:
             fields["secret"] = secret
         link = RobotLink(url, LinkConfig(**fields), name=name)
-        link.subscribe(lambda ev, n=name: self._on_link_event(n, ev))
+        link.subscribe(functools.partial(self._on_link_event, name))
         return link.start()
 
     def shutdown(self) -> None:
@@ -333,6 +333,7 @@ class DispatchEngine:
     # ------------------------------------------------------- operator actions
     def pause(self, execution_id: str, actor: str) -> ExecutionRecord:
         ex = self._transition(execution_id, "pause", actor, "operator pause", strict=True)
+        assert ex is not None  # strict: a refused transition raised
         s = self._streamers.get(execution_id)
         if s is not None:
             s.pause()
@@ -365,9 +366,11 @@ class DispatchEngine:
         if why:
             raise DispatchError(f"robot {ex.robot} {why}")
         s = self._streamers.get(execution_id)
-        ex = self._transition(
+        resumed = self._transition(
             execution_id, "resume", actor, f"resume from command {ex.acked}", strict=True
         )
+        assert resumed is not None  # strict: a refused transition raised
+        ex = resumed
         if s is not None and s.state not in (
             ExecState.COMPLETED,
             ExecState.ABORTED,
@@ -568,7 +571,7 @@ def _allowed(state: str) -> list[str]:
 def _plain(obj: Any) -> Any:
     if obj is None:
         return None
-    if is_dataclass(obj):
+    if is_dataclass(obj) and not isinstance(obj, type):
         return {k: _plain(v) for k, v in asdict(obj).items()}
     if isinstance(obj, tuple | list):
         return [_plain(v) for v in obj]

@@ -59,7 +59,7 @@ class EmulatorProcess:
         """The emulator's own execution log (``robots.emulator.robot.ExecutionRecord``s)."""
         from robots.emulator.robot import ExecutionRecord
 
-        out = []
+        out: list[ExecutionRecord] = []
         if not self.log_path.exists():
             return out
         fields = set(ExecutionRecord.__dataclass_fields__)
