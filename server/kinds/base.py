@@ -2,10 +2,10 @@
 
 A plan kind couples a pydantic params model, a function that runs a pure
 planner, the checks it computes, sample clouds and a compiler to robot
-commands.  Adding a kind touches one new module plus one line in
-:data:`server.kinds.KIND_MODULES` (DESIGN §5, §6); its scene drawer is found
-by kind name in :data:`server.scene.drawers.DRAWERS` (kinds never import the
-scene, the scene never imports the kinds).
+commands.  Adding a kind is one new module assigning ``KIND`` (found by
+:mod:`server.kinds.catalog`; DESIGN §5, §6); its scene drawer is a module
+of :mod:`server.scene` declaring ``DRAWS`` (found by kind name; kinds never
+import the scene, the scene never imports the kinds).
 """
 
 from __future__ import annotations

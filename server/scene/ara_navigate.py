@@ -21,6 +21,10 @@ from server.scene.context import DrawContext
 LIFT = 0.01  # metres along the structure normal, so overlays sit above the steel
 
 
+#: What this module draws (read by server.scene.drawers): kind → (function, robot shown live).
+DRAWS = {"ara.navigate": ("draw", "ara")}
+
+
 def draw(ctx: DrawContext, plan: PlanView) -> None:
     res = plan.result
     frame = res["frame"]

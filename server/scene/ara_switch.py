@@ -13,6 +13,10 @@ from server.scene.context import DrawContext, set_frame_pose
 LIFT = 0.004  # metres along each plane's normal, so overlays sit above the points
 
 
+#: What this module draws (read by server.scene.drawers): kind → (function, robot shown live).
+DRAWS = {"ara.switch": ("draw", "ara")}
+
+
 def draw(ctx: DrawContext, plan: PlanView) -> None:
     res = plan.result
     scene, root = ctx.scene, ctx.root

@@ -28,6 +28,10 @@ NOZZLE_M = 0.1
 CONE_RGB = (240, 200, 60)
 
 
+#: What this module draws (read by server.scene.drawers): kind → (function, robot shown live).
+DRAWS = {"blast": ("draw", "denso_vm6083")}
+
+
 def _rot_z_to(axis: np.ndarray) -> np.ndarray:
     """A rotation taking +z to ``axis``."""
     z = np.asarray(axis, dtype=float) / np.linalg.norm(axis)

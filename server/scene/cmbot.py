@@ -27,6 +27,10 @@ CLIMB_SPEEDUP = 10.0  # seed gait: 10 s per swing; show it 10× faster
 ARM_SPEEDUP = 1.0
 
 
+#: What this module draws (read by server.scene.drawers): kind → (function, robot shown live).
+DRAWS = {"cmbot.climb": ("draw_climb", "cmbot"), "cmbot.manipulate": ("draw_manipulate", "cmbot")}
+
+
 def _guardrail(res: dict[str, Any]) -> Guardrail:
     g = res["guardrail"]
     p = GuardrailParams(**g.get("params", {}))

@@ -14,6 +14,10 @@ LIFT_ROUTE = np.array([0.0, 0.0, 0.01])
 LIFT_MARKER = np.array([0.0, 0.0, 0.05])
 
 
+#: What this module draws (read by server.scene.drawers): kind → (function, robot shown live).
+DRAWS = {"demo.route": ("draw", "ara")}
+
+
 def draw(ctx: DrawContext, plan: PlanView) -> None:
     nodes: dict[str, list[float]] = plan.result.get("nodes") or plan.params["nodes"]
     names = list(nodes)

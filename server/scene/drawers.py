@@ -3,9 +3,11 @@
 The scene draws a stored plan from what the plan record holds (its kind name,
 result and arrays), so it needs neither the kinds registry nor the kind
 modules, and a kind module never imports its drawer: the two layers meet
-only in the kind *name* (issue #13 §2, "one-way imports").  The built-in
-drawers are a static table of ``"module:function"`` targets, imported on the
-first draw so that importing the scene service stays as cheap as it was.
+only in the kind *name* (issue #13 §2, "one-way imports").  Each built-in
+drawer module declares the kinds it draws in a ``DRAWS`` literal, read from
+its source (:func:`discover_drawers`), so adding a kind's drawer is adding
+its module; a drawer is imported on its first draw, so that importing the
+scene service stays as cheap as it was.
 Site-specific kinds (``STEELPATH_EXTRA_KINDS``) add theirs with
 :func:`register_drawer` from their own module.
 
@@ -16,10 +18,12 @@ the robot each registered kind drives.
 
 from __future__ import annotations
 
+import ast
 import importlib
 import threading
 from collections.abc import Callable
 from dataclasses import dataclass
+from pathlib import Path
 from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:
@@ -40,16 +44,39 @@ class DrawerSpec:
     robot: str | None = None
 
 
-#: Kind name → drawer of every built-in kind (DESIGN §6 kinds plus the demo).
-DRAWERS: dict[str, DrawerSpec] = {
-    "demo.route": DrawerSpec("server.scene.demo_route:draw", "ara"),
-    "sbg.inspect": DrawerSpec("server.scene.sbg_inspect:draw", "sbg_climber"),
-    "ara.navigate": DrawerSpec("server.scene.ara_navigate:draw", "ara"),
-    "blast": DrawerSpec("server.scene.blast:draw", "denso_vm6083"),
-    "ara.switch": DrawerSpec("server.scene.ara_switch:draw", "ara"),
-    "cmbot.climb": DrawerSpec("server.scene.cmbot:draw_climb", "cmbot"),
-    "cmbot.manipulate": DrawerSpec("server.scene.cmbot:draw_manipulate", "cmbot"),
-}
+def discover_drawers(package_dir: Path, package: str) -> dict[str, DrawerSpec]:
+    """Kind name → drawer, from the ``DRAWS`` literal of each module in ``package_dir``.
+
+    A drawer module declares what it draws at top level, e.g.
+    ``DRAWS = {"sbg.inspect": ("draw", "sbg_climber")}`` (kind → function
+    name, robot shown live).  The literal is read from the source with
+    :func:`ast.literal_eval`, so finding the drawers imports none of them;
+    a kind declared twice raises ``ValueError``.
+    """
+    found: dict[str, DrawerSpec] = {}
+    for path in sorted(package_dir.glob("*.py")):
+        source = path.read_text(encoding="utf-8")
+        if "DRAWS" not in source:
+            continue
+        for node in ast.parse(source, filename=str(path)).body:
+            if isinstance(node, ast.Assign) and len(node.targets) == 1:
+                target, value = node.targets[0], node.value
+            elif isinstance(node, ast.AnnAssign) and node.value is not None:
+                target, value = node.target, node.value
+            else:
+                continue
+            if not (isinstance(target, ast.Name) and target.id == "DRAWS"):
+                continue
+            table = ast.literal_eval(value)
+            for kind, (function, robot) in table.items():
+                if kind in found:
+                    raise ValueError(f"plan kind {kind!r} has two drawers ({path.name})")
+                found[kind] = DrawerSpec(f"{package}.{path.stem}:{function}", robot)
+    return found
+
+
+#: Kind name → drawer of every built-in kind, found in this package's modules.
+DRAWERS: dict[str, DrawerSpec] = discover_drawers(Path(__file__).resolve().parent, "server.scene")
 
 _registered: dict[str, tuple[Drawer, str | None]] = {}
 _lock = threading.Lock()  # registration may race the scene thread's first lookup

@@ -27,6 +27,10 @@ LIFT = 0.003  # draw lines this far off the steel so they are not hidden in it
 PLAYBACK_SPEEDUP = 20.0  # the robot drives at 20 mm/s; show it 20× faster
 
 
+#: What this module draws (read by server.scene.drawers): kind → (function, robot shown live).
+DRAWS = {"sbg.inspect": ("draw", "sbg_climber")}
+
+
 def _rib_mesh(y: float, girder: dict[str, Any]) -> tuple[np.ndarray, np.ndarray]:
     """Open trapezoid (two webs and the bottom) extruded along X."""
     L, wt, wb, h = (
