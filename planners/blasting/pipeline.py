@@ -329,6 +329,8 @@ def _spot_poses(
     flange = surface.to_world(d.aim2) - axes * standoff
     Qs, oks = robot.ik_axis(flange, axes, st.q_start)
     ok_free = _collision_free(robot, Qs, oks, obst, nozzle_length_m, kp)
+    # Surface.__post_init__ always resolves x_axis (None only as an argument)
+    assert surface.x_axis is not None
     # spots with no collision-free closed-form solution: tilt, then Eq. 3.11
     for i in np.nonzero(~ok_free.any(axis=1))[0]:
         tilts = np.arange(5.0, MAX_TILT_DEG - np.degrees(beta) + 1e-9, 5.0)

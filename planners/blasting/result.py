@@ -13,6 +13,22 @@ import numpy as np
 from planners.blasting.constants import OVERSPRAY_TARGET
 
 
+@dataclass(frozen=True)
+class RobotMotion:
+    """The with-robot fields of a :class:`BlastPlan`, none of them optional
+    (see :meth:`BlastPlan.robot_motion`)."""
+
+    joint_trajectory: np.ndarray
+    times: np.ndarray
+    clearance: np.ndarray
+    waypoint_spot: np.ndarray
+    segment: np.ndarray
+    ik_residual_mm: np.ndarray
+    ik_residual_deg: np.ndarray
+    joint_limits: np.ndarray
+    speed_limit_rad_s: float
+
+
 @dataclass
 class BlastPlan:
     """Result of :func:`plan_blasting`.
@@ -81,7 +97,36 @@ class BlastPlan:
     coverage_bound: float | None = None
     min_radius_m: float | None = None
     unreached: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=int))
-    motion: dict[str, float] = field(default_factory=dict)
+    motion: dict[str, int] = field(default_factory=dict)
+
+    def robot_motion(self) -> RobotMotion | None:
+        """The trajectory fields narrowed to arrays, or ``None`` without a robot.
+
+        ``_attach_trajectory`` sets them all together, so ``joint_trajectory``
+        being set implies every other one is; a partial set is a bug."""
+        if self.joint_trajectory is None:
+            return None
+        assert (
+            self.times is not None
+            and self.clearance is not None
+            and self.waypoint_spot is not None
+            and self.segment is not None
+            and self.ik_residual_mm is not None
+            and self.ik_residual_deg is not None
+            and self.joint_limits is not None
+            and self.speed_limit_rad_s is not None
+        ), "BlastPlan: joint_trajectory set without the other trajectory fields"
+        return RobotMotion(
+            joint_trajectory=self.joint_trajectory,
+            times=self.times,
+            clearance=self.clearance,
+            waypoint_spot=self.waypoint_spot,
+            segment=self.segment,
+            ik_residual_mm=self.ik_residual_mm,
+            ik_residual_deg=self.ik_residual_deg,
+            joint_limits=self.joint_limits,
+            speed_limit_rad_s=self.speed_limit_rad_s,
+        )
 
     def _coverage_message(self, coverage_min: float) -> str:
         msg = f"coverage {self.coverage:.2%} (min {coverage_min:.0%})"
@@ -97,10 +142,11 @@ class BlastPlan:
 
     @property
     def max_joint_speed_rad_s(self) -> float:
-        if self.joint_trajectory is None or len(self.times) < 2:
+        m = self.robot_motion()
+        if m is None or len(m.times) < 2:
             return 0.0
-        dt = np.diff(self.times)
-        dq = np.abs(np.diff(self.joint_trajectory, axis=0)).max(axis=1)
+        dt = np.diff(m.times)
+        dq = np.abs(np.diff(m.joint_trajectory, axis=0)).max(axis=1)
         v = np.where(dt > 0, dq / np.where(dt > 0, dt, 1.0), np.where(dq > 0, np.inf, 0.0))
         return float(v.max())
 
@@ -114,10 +160,11 @@ class BlastPlan:
 
     @property
     def within_joint_limits(self) -> bool:
-        if self.joint_trajectory is None:
+        m = self.robot_motion()
+        if m is None:
             return True
-        lo, hi = self.joint_limits[:, 0], self.joint_limits[:, 1]
-        q = self.joint_trajectory
+        lo, hi = m.joint_limits[:, 0], m.joint_limits[:, 1]
+        q = m.joint_trajectory
         return bool(np.all(q >= lo - 1e-9) and np.all(q <= hi + 1e-9))
 
     def checks(
@@ -134,16 +181,17 @@ class BlastPlan:
             _check("overspray", self.overspray <= overspray_max, self.overspray, overspray_max,
                    f"overspray {self.overspray:.3%} of the surface (max {overspray_max:.1%})"),
         ]  # fmt: skip
-        if self.joint_trajectory is not None:
+        m = self.robot_motion()
+        if m is not None:
             v = self.max_joint_speed_rad_s
-            res = float(np.max(self.ik_residual_mm)) if len(self.ik_residual_mm) else 0.0
+            vmax = m.speed_limit_rad_s
+            res = float(np.max(m.ik_residual_mm)) if len(m.ik_residual_mm) else 0.0
             out += [
                 _check("joint_limits", self.within_joint_limits, self.within_joint_limits, True,
                        "all way-points inside the joint limits" if self.within_joint_limits
                        else "a way-point leaves the joint limits"),
-                _check("joint_speed", v <= self.speed_limit_rad_s * (1 + 1e-9), np.degrees(v),
-                       np.degrees(self.speed_limit_rad_s),
-                       f"max joint speed {np.degrees(v):.2f}°/s (limit {np.degrees(self.speed_limit_rad_s):.0f}°/s)"),
+                _check("joint_speed", v <= vmax * (1 + 1e-9), np.degrees(v), np.degrees(vmax),
+                       f"max joint speed {np.degrees(v):.2f}°/s (limit {np.degrees(vmax):.0f}°/s)"),
                 _check("clearance", self.min_clearance_m > 0, self.min_clearance_m, 0.0,
                        f"min ellipsoid clearance {self.min_clearance_m * 1000:.1f} mm"),
                 _check("ik_residual", res <= residual_max_mm, res, residual_max_mm,

@@ -11,6 +11,7 @@ from typing import Any
 import numpy as np
 import shapely
 from scipy.spatial import cKDTree
+from shapely.geometry import Polygon
 
 from planners.blasting import arm as _arm
 from planners.blasting.collision import Obstacles
@@ -39,9 +40,10 @@ def _choose_tilt(
     gx, gy = np.meshgrid(np.arange(minx, maxx + h, h), np.arange(miny, maxy + h, h))
     g = np.stack([gx.ravel(), gy.ravel()], axis=1)
     g = g[shapely.contains_xy(poly, g[:, 0], g[:, 1])]
-    ext = np.asarray(
-        poly.exterior.coords if poly.geom_type == "Polygon" else poly.convex_hull.exterior.coords
-    )
+    outer = poly if isinstance(poly, Polygon) else poly.convex_hull
+    # the surface encloses area (Surface.__post_init__), so its hull is a Polygon
+    assert isinstance(outer, Polygon)
+    ext = np.asarray(outer.exterior.coords)
     pts = surface.to_world(np.vstack([g, ext]))
     Binv = np.linalg.inv(robot.base)
     best = None
@@ -60,6 +62,8 @@ def _choose_tilt(
             key = (round(reach, 3), round(rho, 3), -beta_deg)
             if best is None or key > best[0]:
                 best = (key, np.deg2rad(beta_deg), d2)
+    # β = 0 is always tried, so best holds a candidate
+    assert best is not None
     return best[1], best[2]
 
 
@@ -123,7 +127,8 @@ def _penalty_matrix(
             c2[None, :, :] - c2[i][None, None, :]
         ).transpose(1, 0, 2)
         d, _ = tree.query(seg.reshape(-1, 2), k=1)
-        pen[i] = (d.reshape(n, len(samples)) < r).any(axis=1)
+        # k=1 over many points gives an array (the stubs also allow a scalar)
+        pen[i] = (np.asarray(d).reshape(n, len(samples)) < r).any(axis=1)
     np.fill_diagonal(pen, 0.0)
     return pen
 

@@ -37,7 +37,7 @@ class _Traj:
     segment: np.ndarray
     spot: np.ndarray
     unreached: np.ndarray
-    stats: dict[str, float]
+    stats: dict[str, int]  # joint-planner counters (calls, failures, nodes, ...)
 
 
 class _Clearance:
