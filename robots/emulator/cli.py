@@ -114,9 +114,26 @@ def build_parser(prog: str = "steelpath emulate") -> argparse.ArgumentParser:
     return p
 
 
+#: Signals that stop the emulator, taken synchronously by the main thread.
+STOP_SIGNALS = frozenset({signal.SIGINT, signal.SIGTERM})
+
+
 def main(argv: list[str] | None = None) -> int:
     """Entry point of ``steelpath emulate``; returns the exit status."""
     args = build_parser().parse_args(argv)
+    # Blocked before any thread starts (threads inherit the mask) and taken
+    # with sigtimedwait: a handler calling Event.set() can deadlock on the lock
+    # the main thread holds inside its own Event.wait().
+    in_main = threading.current_thread() is threading.main_thread()
+    old_mask = signal.pthread_sigmask(signal.SIG_BLOCK, STOP_SIGNALS) if in_main else None
+    try:
+        return _run(args, in_main)
+    finally:
+        if old_mask is not None:
+            signal.pthread_sigmask(signal.SIG_SETMASK, old_mask)
+
+
+def _run(args: argparse.Namespace, in_main: bool) -> int:
     listen = args.listen
     stop = threading.Event()  # set by SIGINT/SIGTERM, or when the emulator is orphaned
     if listen is None and not args.pty:
@@ -159,10 +176,6 @@ def main(argv: list[str] | None = None) -> int:
         print(f"steelpath emulate: {exc}", file=sys.stderr)
         return 2
     logging.basicConfig(level=logging.INFO, format="%(asctime)s %(name)s %(message)s")
-    previous = {}
-    if threading.current_thread() is threading.main_thread():
-        for sig in (signal.SIGINT, signal.SIGTERM):
-            previous[sig] = signal.signal(sig, lambda *_: stop.set())
     try:
         emu.start()
     except OSError as exc:
@@ -175,11 +188,14 @@ def main(argv: list[str] | None = None) -> int:
             print(f"listening on {emu.url}", flush=True)
         if args.pty:
             print(f"pty {emu.pty_path}", flush=True)
-        stop.wait()
+        while not stop.is_set():
+            if in_main:
+                if signal.sigtimedwait(STOP_SIGNALS, 0.5) is not None:
+                    break
+            else:
+                stop.wait(0.5)
     finally:
         emu.close()
-        for sig, handler in previous.items():
-            signal.signal(sig, handler)
     return 0
 
 
