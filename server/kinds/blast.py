@@ -167,7 +167,12 @@ def run(p: BlastParams, ctx: JobContext) -> KindOutput:
     cloud_obst = None if picked is None else picked.obstacle_points
     base = np.eye(4)
     base[:3, 3] = p.robot_base_m
-    robot = load_robot(ROBOT).with_base(base)
+    from robots.denso_vm6083 import DensoVM6083
+
+    arm = load_robot(ROBOT)
+    # ROBOT names the DENSO arm; its loader returns DensoVM6083 (with_base is its own)
+    assert isinstance(arm, DensoVM6083)
+    robot = arm.with_base(base)
     boxes = [
         Box.from_bounds(b.lo_m, b.hi_m, b.name)
         for b in (_channel() if p.obstacles is None else p.obstacles)
@@ -185,7 +190,10 @@ def run(p: BlastParams, ctx: JobContext) -> KindOutput:
         editing=p.editing, fill_stream_mm=p.fill_stream_mm, progress=prog,
     )  # fmt: skip
     ctx.progress(0.97, "storing")
-    q, t, clr = plan.joint_trajectory, plan.times, plan.clearance
+    motion = plan.robot_motion()
+    # plan_blasting was given a robot, so it attached the trajectory
+    assert motion is not None
+    q, t, clr = motion.joint_trajectory, motion.times, motion.clearance
     tip, axis = nozzle_tip(robot.frames(q)[:, -1])
     k = thin(len(t))
     plots = [
@@ -200,6 +208,8 @@ def run(p: BlastParams, ctx: JobContext) -> KindOutput:
         ),
     ]  # fmt: skip
     outline, holes = outline_world(surface)
+    # Surface.__post_init__ always resolves x_axis (None only as an argument)
+    assert surface.x_axis is not None
     result: dict[str, Any] = {
         "surface": {
             "origin": surface.origin.tolist(),
@@ -249,8 +259,8 @@ def run(p: BlastParams, ctx: JobContext) -> KindOutput:
         "q": q,
         "times": t,
         "clearance": clr,
-        "segment": plan.segment.astype(np.int8),
-        "waypoint_spot": plan.waypoint_spot.astype(np.int32),
+        "segment": motion.segment.astype(np.int8),
+        "waypoint_spot": motion.waypoint_spot.astype(np.int32),
         "nozzle_tip": tip,
         "nozzle_axis": axis,
     }
@@ -275,8 +285,8 @@ def run(p: BlastParams, ctx: JobContext) -> KindOutput:
         "waypoints": float(len(t)),
         "trajectory_duration_s": float(t[-1]),
         "max_joint_speed_deg_s": math.degrees(plan.max_joint_speed_rad_s),
-        "max_ik_residual_mm": float(np.max(plan.ik_residual_mm))
-        if len(plan.ik_residual_mm)
+        "max_ik_residual_mm": float(np.max(motion.ik_residual_mm))
+        if len(motion.ik_residual_mm)
         else 0.0,
         "planning_time_s": time.perf_counter() - t0,
         **{f"stage_{k2}": float(v) for k2, v in plan.timings_s.items() if k2 != "total_s"},
