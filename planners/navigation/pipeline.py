@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Hashable
+from typing import SupportsIndex, SupportsInt, TypedDict
 
 import networkx as nx
 import numpy as np
@@ -72,14 +73,34 @@ def _validate_points(points: object) -> np.ndarray:
     return pts
 
 
+def vertex_id(v: Hashable) -> int:
+    """A structure-graph vertex as the ``int`` it is: :func:`build_graph`
+    numbers vertices ``0..V-1``; a :class:`Route` carries them as ``Hashable``."""
+    assert isinstance(v, SupportsInt), f"structure-graph vertex {v!r} is not an integer"
+    return int(v)
+
+
+class _RrtSettings(TypedDict):
+    """Keyword arguments shared by :class:`EdgePlanner` and :class:`DiffDrivePlanner`."""
+
+    yaw_radius_m: float
+    step_m: float
+    resolution_m: float
+    max_iterations: int
+    shortcut_rounds: int
+
+
 def _check_vertex(g: nx.Graph, v: Hashable, role: str) -> Hashable:
     if v in g:
         return v
     # Accept numeric strings ("3") from REST callers.
-    try:
-        iv = int(v)  # type: ignore[arg-type]
-    except (TypeError, ValueError):
-        iv = None
+    iv: int | None = None
+    # int() accepts exactly these; any other vertex cannot name an int id
+    if isinstance(v, (str, bytes, SupportsInt, SupportsIndex)):
+        try:
+            iv = int(v)
+        except (TypeError, ValueError):
+            iv = None
     if iv is not None and iv in g:
         return iv
     leaves = sorted(n for n in g.nodes if g.degree(n) == 1)
@@ -161,8 +182,8 @@ def _edge_paths(
             which = "start" if start is None else "end"
             out.append(
                 EdgePath(
-                    int(u),
-                    int(v),
+                    vertex_id(u),
+                    vertex_id(v),
                     np.zeros((0, 3)),
                     False,
                     f"no pose near the {which} of edge ({u}, {v}) keeps the {size} on steel",
@@ -170,7 +191,7 @@ def _edge_paths(
             )
             prev = None
         else:
-            common = {
+            common: _RrtSettings = {
                 "yaw_radius_m": 0.5 * p.footprint_length_m,
                 "step_m": p.rrt_step_m,
                 "resolution_m": p.rrt_resolution_m,
@@ -206,8 +227,8 @@ def _edge_paths(
                 )
                 out.append(
                     EdgePath(
-                        int(u),
-                        int(v),
+                        vertex_id(u),
+                        vertex_id(v),
                         np.zeros((0, 3)),
                         False,
                         f"RRT-Connect found no on-steel {what} for edge ({u}, {v}) in "
@@ -218,7 +239,7 @@ def _edge_paths(
                 )
                 prev = None
             else:
-                out.append(EdgePath(int(u), int(v), dense, True, "", iters))
+                out.append(EdgePath(vertex_id(u), vertex_id(v), dense, True, "", iters))
                 prev = dense[-1]
         if progress is not None:
             progress(0.75 + 0.24 * (k + 1) / max(n_edges, 1), f"path {k + 1}/{n_edges}")

@@ -19,7 +19,7 @@ overhang.  Explicit ``footprint_*_m`` values override both.
 from __future__ import annotations
 
 import time
-from typing import Any, Literal
+from typing import Any, Literal, TypedDict
 
 import numpy as np
 from pydantic import Field
@@ -33,6 +33,7 @@ from planners.navigation.footprint_checks import (
     poses_on_steel,
     to_plane,
 )
+from planners.navigation.pipeline import vertex_id
 from planners.navigation.synthetic import SAMPLES, SHAPES
 from server.kinds.base import (
     Check,
@@ -105,7 +106,17 @@ def validate(p: AraNavigateParams) -> None:
 CONTACT_PATCH = {"length_m": 0.08, "width_m": 0.025, "center_x_m": 0.0, "center_y_m": 0.0}
 
 
-def _footprint(p: AraNavigateParams) -> dict[str, float]:
+class _Footprint(TypedDict):
+    """The footprint fields of :class:`NavigationParams` (metres)."""
+
+    footprint_length_m: float
+    footprint_width_m: float
+    footprint_center_x_m: float
+    footprint_center_y_m: float
+    footprint_spacing_m: float
+
+
+def _footprint(p: AraNavigateParams) -> _Footprint:
     from robots import load_robot
 
     fp = (
@@ -290,8 +301,8 @@ def run(p: AraNavigateParams, ctx: JobContext) -> KindOutput:
             ],
         },
         "route": {
-            "vertices": [int(v) for v in route.vertices],
-            "edges": [[int(u), int(v)] for u, v, _ in route.edges],
+            "vertices": [vertex_id(v) for v in route.vertices],
+            "edges": [[vertex_id(u), vertex_id(v)] for u, v, _ in route.edges],
             "length_m": route.length,
             "lower_bound_m": route.lower_bound,
             "deadhead_m": route.deadhead,
