@@ -124,9 +124,8 @@ class _CornerUTurnControl(_LaneControl):
         cfg, r, B = self.cfg, self.r, self.r.track_m
         seg = self.path.segments[seg_i]
         cb = self.g.wall(seg.wall)
-        sx, sy = cb.to_wall(seg.points[0])
-        exx, eyy = cb.to_wall(seg.points[-1])
-        sx, sy, exx, eyy = float(sx), float(sy), float(exx), float(eyy)
+        w0, w1 = cb.to_wall(seg.points[0]), cb.to_wall(seg.points[-1])
+        sx, sy, exx, eyy = float(w0[0]), float(w0[1]), float(w1[0]), float(w1[1])
         length = seg.length_m
         ux, uz = (exx - sx) / length, (eyy - sy) / length
         theta_ref = math.atan2(ux, uz)

@@ -38,6 +38,7 @@ from typing import Any
 
 import numpy as np
 import shapely
+from shapely.geometry.base import BaseGeometry
 
 from planners.errors import InvalidInputError, MotionPlanningError, UnreachableError
 from planners.switching.collision import PointObstacles, SphereCover, self_pairs, sphere_cover
@@ -238,7 +239,7 @@ def _translate(T: np.ndarray, offset: np.ndarray) -> np.ndarray:
 def _foothold_options(
     footholds: list[np.ndarray],
     foot: tuple[float, float],
-    surface: tuple[np.ndarray, np.ndarray, np.ndarray, shapely.Geometry] | None,
+    surface: tuple[np.ndarray, np.ndarray, np.ndarray, BaseGeometry] | None,
     tolerance: float,
     params: JumpParams,
 ) -> list[np.ndarray]:
@@ -526,7 +527,7 @@ def _landing_configs(
 def _second_foot_candidates(
     foot1: np.ndarray,
     foot: tuple[float, float],
-    surface: tuple[np.ndarray, np.ndarray, np.ndarray, shapely.Geometry] | None,
+    surface: tuple[np.ndarray, np.ndarray, np.ndarray, BaseGeometry] | None,
     params: JumpParams,
     tolerance: float,
 ) -> list[tuple[np.ndarray, bool, float]]:
@@ -768,7 +769,7 @@ def _phase_e(
     cx: _JumpContext,
     W1_actual: np.ndarray,
     lift2: np.ndarray,
-    surface: tuple[np.ndarray, np.ndarray, np.ndarray, shapely.Geometry] | None,
+    surface: tuple[np.ndarray, np.ndarray, np.ndarray, BaseGeometry] | None,
     surface_tolerance_m: float,
 ) -> tuple[np.ndarray, bool, np.ndarray, np.ndarray]:
     """Phase E (seed §3.2): foot 1 anchored at ``W1_actual``; foot 2 lifts
@@ -941,7 +942,7 @@ def plan_inchworm_jump(
     *,
     obstacles: np.ndarray,
     base_height: float = 0.0,
-    surface: tuple[np.ndarray, np.ndarray, np.ndarray, shapely.Geometry] | None = None,
+    surface: tuple[np.ndarray, np.ndarray, np.ndarray, BaseGeometry] | None = None,
     surface_tolerance_m: float = 0.01,
     params: JumpParams | dict[str, Any] | None = None,
     progress: Progress | None = None,

@@ -173,6 +173,8 @@ def run(p: AraSwitchParams, ctx: JobContext) -> KindOutput:
         "decision_time_s": float(d.timings_s.get("total", 0.0)),
     }
     if d.height_error_m is not None:
+        # decide sets height_m and height_error_m together (both None without a plane)
+        assert d.height_m is not None
         metrics["height_error_m"] = float(d.height_error_m)
         metrics["plane_height_m"] = float(d.height_m)
     if d.alg2_exact_agreement is not None:

@@ -34,7 +34,7 @@ class GuardrailSpec(StrictParams):
     """The guardrail along which CMBOT works (defaults: the sample scene)."""
 
     segments_m: list[tuple[float, float]] = Field(
-        default_factory=lambda: [tuple(s) for s in SEED_SEGMENTS],
+        default_factory=lambda: list(SEED_SEGMENTS),
         description="continuous top-bar segments [x_start, x_end] in metres, increasing",
     )
     posts_m: list[float] = Field(
@@ -153,8 +153,11 @@ def validate(p: CmbotClimbParams) -> None:
 
 def run(p: CmbotClimbParams, ctx: JobContext) -> KindOutput:
     from robots import load_robot
+    from robots.cmbot import CmbotModel
 
     model = load_robot(ROBOT)
+    # ROBOT is CMBOT, whose loader returns CmbotModel (urdf_joint_names is its own)
+    assert isinstance(model, CmbotModel)
     g = p.guardrail.build()
     plan = plan_climb(
         model,
@@ -208,6 +211,8 @@ def run(p: CmbotClimbParams, ctx: JobContext) -> KindOutput:
         for ph in plan.phases
     ]
     gate = plan.gate
+    # plan_climb simulates by default (simulate=True), so the gate report is there
+    assert gate is not None
     checks = [
         Check(
             name="footholds",
@@ -261,10 +266,10 @@ def compile_program(plan: PlanView, sample_s: float = 0.1) -> list[dict[str, Any
     at their times — after the last way-point reached by then, so a magnet
     lets go only once the other foot holds.  Foot lift/touch-down are the
     way-points themselves; range-finder checks run on the robot."""
-    from robots.protocol.commands import LimitingPlate, SetMagnet
+    from robots.protocol.commands import Command, LimitingPlate, SetMagnet
     from server.kinds.programs import as_dicts, sampled_joints_with_events
 
-    events = []
+    events: list[tuple[float, Command]] = []
     for ph in plan.result["phases"]:
         for c in ph["commands"]:
             dev, _, side = c["device"].partition("_")

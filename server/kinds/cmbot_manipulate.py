@@ -75,7 +75,7 @@ class CmbotManipulateParams(StrictParams):
 def _params(p: CmbotManipulateParams) -> ExperimentParams:
     return ExperimentParams(
         trajectory=Section4Trajectory(
-            start_mm_deg=tuple(p.start_mm_deg), angular_unit=p.angular_unit
+            start_mm_deg=p.start_mm_deg, angular_unit=p.angular_unit
         ),
         avoidance=AvoidanceParams(d_s=p.d_s_m, v_max=p.v_max_m_s),
         min_clearance_m=p.min_clearance_m,
@@ -199,11 +199,15 @@ def compile_program(plan: PlanView) -> list[dict[str, Any]]:
     in the work stance, the arm J6…J12 as simulated); the nozzle works on the
     straight line of Eq. 21–26 (t ≥ 5 s) and closes at the end."""
     from robots import load_robot
+    from robots.cmbot import CmbotModel
     from robots.protocol.commands import JointMove, Nozzle, Stop
 
     t = plan.array("times")
     arm = plan.array("q")
-    stance = load_robot("cmbot").stance_climber_q()
+    model = load_robot("cmbot")
+    # the CMBOT loader returns CmbotModel (stance_climber_q is its own)
+    assert isinstance(model, CmbotModel)
+    stance = model.stance_climber_q()
     q = np.hstack([np.tile(stance, (len(arm), 1)), arm])
     idx = np.unique(
         np.r_[np.arange(0, len(t), max(1, round(0.1 / max(t[1] - t[0], 1e-6)))), len(t) - 1]

@@ -159,19 +159,19 @@ _NOISE_HELP = {
     "init_delta_sigma_deg": "initial yaw deviation",
 }
 _NOISE_DEFAULT = NoiseModel()
+# (type, FieldInfo) per field; typed Any as create_model's **field_definitions are
+_NOISE_FIELDS: dict[str, Any] = {
+    f.name: (
+        float,
+        Field(getattr(_NOISE_DEFAULT, f.name), ge=0, description=_NOISE_HELP.get(f.name, f.name)),
+    )
+    for f in fields(NoiseModel)
+}
 NoiseParams = create_model(
     "NoiseParams",
     __base__=StrictParams,
     __doc__="Noise model of the simulation (planners.sbg.NoiseModel; all chosen, see docs/sbg.md).",
-    **{
-        f.name: (
-            float,
-            Field(
-                getattr(_NOISE_DEFAULT, f.name), ge=0, description=_NOISE_HELP.get(f.name, f.name)
-            ),
-        )
-        for f in fields(NoiseModel)
-    },
+    **_NOISE_FIELDS,
 )
 
 
@@ -205,7 +205,7 @@ class SbgInspectParams(StrictParams):
     corner_profile: Literal["smooth", "printed"] = Field(
         "smooth", description="corner wheel/arm profile"
     )
-    noise: NoiseParams = Field(default_factory=NoiseParams, description="noise model")  # type: ignore[valid-type]
+    noise: NoiseParams = Field(default_factory=NoiseParams, description="noise model")
     seed: int = Field(0, ge=0, description="random seed of the simulation")
     sweep_lx_mm: list[float] = Field(
         default_factory=lambda: [0.0, 10.0, 20.0, 40.0, 80.0],
@@ -231,7 +231,7 @@ class SbgInspectParams(StrictParams):
 
 
 def _noise(p: SbgInspectParams) -> NoiseModel:
-    return NoiseModel(**p.noise.model_dump())  # type: ignore[attr-defined]
+    return NoiseModel(**p.noise.model_dump())
 
 
 def _config(p: SbgInspectParams) -> ControllerConfig:

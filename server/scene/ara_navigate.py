@@ -45,11 +45,12 @@ def draw(ctx: DrawContext, plan: PlanView) -> None:
     for c in res["clusters"]:
         b = np.asarray(c["boundary"], dtype=float)
         if len(b) >= 2:
+            rgb = label_colors(np.array([c["id"]]))[0]
             add_polyline(
                 ctx.scene,
                 f"{ctx.root}/boundaries/{c['id']}",
                 b + LIFT * normal,
-                tuple(int(v) for v in label_colors(np.array([c["id"]]))[0]),
+                (int(rgb[0]), int(rgb[1]), int(rgb[2])),
                 width=2.0,
                 closed=True,
             )

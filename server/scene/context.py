@@ -64,7 +64,13 @@ class DrawContext:
         if root_pose is not None:
             set_frame_pose(frame, root_pose)
         target = self.server if self.server is not None else _SceneOnly(self.scene)
-        return ViserUrdf(target, Path(model.urdf_path), root_node_name=f"{self.root}/{name}")
+        # ViserUrdf reads only ``target.scene``; its annotation names the two viser
+        # types that have one, so the scene-only stand-in is outside it
+        return ViserUrdf(
+            target,  # type: ignore[arg-type]
+            Path(model.urdf_path),
+            root_node_name=f"{self.root}/{name}",
+        )
 
     def animate(self, duration_s: float, update: Callable[[float], None]) -> None:
         self.animations.append(Animation(max(float(duration_s), 1e-3), update))

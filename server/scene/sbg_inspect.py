@@ -133,8 +133,9 @@ def draw(ctx: DrawContext, plan: PlanView) -> None:
     quat = plan.array("traj_quat")
     tt = plan.array("traj_t")
     arm = plan.array("traj_arm")
-    k = np.unique(np.linspace(0, len(pos) - 1, min(len(pos), 4000)).astype(int))
-    tp = _lift_off_walls(pos[k], L) if len(k) > 1 else pos[k]
+    # samples kept for the drawn line (k is the lane counter above)
+    keep = np.unique(np.linspace(0, len(pos) - 1, min(len(pos), 4000)).astype(int))
+    tp = _lift_off_walls(pos[keep], L) if len(keep) > 1 else pos[keep]
     if len(tp) > 1:
         scene.add_line_segments(
             f"{root}/trajectory",
