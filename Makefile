@@ -31,6 +31,7 @@ system-test-deps:
 
 lint: install-test
 	$(BIN)/ruff check .
+	$(BIN)/mypy
 
 test: install-test system-test-deps lint
 	$(BIN)/pytest
