@@ -43,7 +43,8 @@ def test_restart_requeues_interrupted_planning(make_api, tmp_path) -> None:
     first = make_api(data=data)
     store = first.services.store
     # Simulate a crash while planning: the row says planning, no worker has it.
-    p = store.create_plan("demo.route", first.get("/api/v1/kinds").json()[0]["defaults"], "t")
+    kinds = {k["name"]: k for k in first.get("/api/v1/kinds").json()}
+    p = store.create_plan("demo.route", kinds["demo.route"]["defaults"], "t")
     store.transition_plan(p.id, "start", "t")
     first.client.__exit__(None, None, None)
     second = make_api(data=data)
