@@ -325,10 +325,7 @@ class DispatchEngine:
 
     def _active_execution_for(self, robot: str, running_only: bool = False) -> str | None:
         states = {ExecutionState.PENDING, ExecutionState.RUNNING} if running_only else ACTIVE
-        for ex in self.store.list_executions(limit=10_000):
-            if ex.robot == robot and ex.state in states:
-                return ex.id
-        return None
+        return self.store.newest_execution_of(robot, states)
 
     # ------------------------------------------------------- operator actions
     def pause(self, execution_id: str, actor: str) -> ExecutionRecord:

@@ -72,6 +72,10 @@ def _raise(error: dict[str, Any]) -> None:
     raise DispatchError(f"link service error ({kind}): {msg}", 500)
 
 
+#: Calls that change nothing (the others drop the cached robot statuses).
+_READ_OPS = frozenset({"robot_names", "robot_status", "robot_statuses", "stats", "wait_connected"})
+
+
 class LinkServiceClient:
     """Same public methods as :class:`server.dispatch.DispatchEngine`, across a process."""
 
@@ -105,6 +109,8 @@ class LinkServiceClient:
         self._want_spawn = threading.Event()
         self._spawner: threading.Thread | None = None
         self.restarts = 0
+        self._status_lock = threading.Lock()
+        self._status_cache: tuple[float, list[dict[str, Any]]] | None = None
 
     # -------------------------------------------------------------- lifecycle
     def start(self, timeout: float = 60.0) -> LinkServiceClient:
@@ -229,6 +235,7 @@ class LinkServiceClient:
             p.done.set()
 
     def _on_event(self, type_: str, data: dict[str, Any]) -> None:
+        self._status_cache = None  # something changed: the next GET /robots asks afresh
         if type_ == "linkservice":
             self._ready.set()
             return
@@ -241,6 +248,11 @@ class LinkServiceClient:
 
     # ---------------------------------------------------------------- calling
     def _call(self, op: str, args: dict[str, Any], timeout: float = RPC_TIMEOUT_S) -> Any:
+        if op not in _READ_OPS:
+            self._status_cache = None  # an operator action: statuses after it are fresh
+        return self._roundtrip(op, args, timeout)
+
+    def _roundtrip(self, op: str, args: dict[str, Any], timeout: float) -> Any:
         rpc = self._rpc
         if rpc is None:
             raise LinkServiceUnavailable("the robot-link service is not running")
@@ -275,9 +287,23 @@ class LinkServiceClient:
     def robot_status(self, name: str) -> dict[str, Any]:
         return dict(self._call("robot_status", {"name": name}))
 
+    #: How long one answer of :meth:`robot_statuses` serves every caller.
+    STATUS_TTL_S = 0.1
+
     def robot_statuses(self) -> list[dict[str, Any]]:
-        """Every robot's status in one round trip (``GET /robots``)."""
-        return [dict(s) for s in self._call("robot_statuses", {})]
+        """Every robot's status in one round trip (``GET /robots``).
+
+        Callers within :data:`STATUS_TTL_S` of the last round trip share its
+        answer, so however many clients poll, the link service (whose threads
+        send the heartbeats) answers at most ten of these a second.
+        """
+        with self._status_lock:
+            cached = self._status_cache
+            if cached is not None and time.monotonic() - cached[0] < self.STATUS_TTL_S:
+                return [dict(s) for s in cached[1]]
+            statuses = [dict(s) for s in self._call("robot_statuses", {})]
+            self._status_cache = (time.monotonic(), statuses)
+            return [dict(s) for s in statuses]
 
     def set_connection(
         self, name: str, url: str, actor: str, secret: str | None = None

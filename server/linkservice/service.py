@@ -329,6 +329,9 @@ def main(argv: list[str] | None = None) -> int:
         service._orphaned()
 
     signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGTERM})
+    # A link's I/O thread waiting for the GIL gets it from a busy RPC thread
+    # within 1 ms, not the default 5 ms: heartbeats come first.
+    sys.setswitchinterval(0.001)
     die_with_parent(ns.parent_pid, sig=signal.SIGTERM, on_orphaned=orphaned, poll_s=0.1)
     cfg = json.loads(ns.config)
     logging.basicConfig(

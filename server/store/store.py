@@ -12,7 +12,7 @@ from __future__ import annotations
 import json
 import secrets
 import threading
-from collections.abc import Mapping
+from collections.abc import Iterable, Mapping
 from pathlib import Path
 from typing import Any
 
@@ -375,6 +375,23 @@ class Store:
         sql += " ORDER BY created_at DESC LIMIT ?"
         args.append(limit)
         return [ExecutionRecord.from_row(r) for r in self.db.query(sql, args)]
+
+    def newest_execution_of(self, robot: str, states: Iterable[str]) -> str | None:
+        """Id of ``robot``'s newest execution in one of ``states``, or ``None``.
+
+        One SQL query, not a record decoded per row in Python:
+        the link service asks this for every robot on every ``GET /robots``.
+        """
+        wanted = [str(s) for s in states]
+        if not wanted:
+            return None
+        marks = ",".join("?" * len(wanted))
+        row = self.db.query_one(
+            f"SELECT id FROM executions WHERE robot = ? AND state IN ({marks}) "
+            "ORDER BY created_at DESC LIMIT 1",
+            [robot, *wanted],
+        )
+        return str(row["id"]) if row is not None else None
 
     def transition_execution(
         self,

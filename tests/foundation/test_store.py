@@ -155,3 +155,33 @@ def test_not_found_and_delete_rules(tmp_path: Path) -> None:
     assert store.get_plan(child.id).parent_id is None
     assert not (tmp_path / "arrays" / "plans" / pid).exists()
     assert store.list_audit("plan", pid)[0].action == "delete"
+
+
+def test_newest_execution_of_agrees_with_a_scan_of_every_record(tmp_path: Path) -> None:
+    import random
+
+    store = Store(tmp_path / "var")
+    plan = store.create_plan("demo.route", {}, "t")
+    rng = random.Random(7)
+    states = ["pending", "running", "paused", "interrupted", "completed", "aborted", "faulted"]
+    robots = ["ara", "cmbot", "denso_vm6083"]
+    with store.db.transaction() as conn:
+        for i in range(300):
+            conn.execute(
+                "INSERT INTO executions (id, plan_id, robot, state, created_at, updated_at,"
+                " created_by) VALUES (?, ?, ?, ?, ?, ?, 't')",
+                (
+                    f"ex_{i:04d}",
+                    plan.id,
+                    rng.choice(robots),
+                    rng.choice(states),
+                    f"2026-01-01T00:{i // 60:02d}:{i % 60:02d}.000+00:00",
+                    "x",
+                ),
+            )
+    every = store.list_executions(limit=10_000)
+    for robot in [*robots, "sbg_climber"]:
+        for wanted in ({"pending", "running"}, {"paused", "interrupted", "running"}, set()):
+            brute = next((e.id for e in every if e.robot == robot and e.state in wanted), None)
+            assert store.newest_execution_of(robot, wanted) == brute, (robot, wanted)
+    store.close()

@@ -1,0 +1,48 @@
+"""GET /robots load cannot reach the link service unbounded: statuses are shared for 0.1 s."""
+
+from __future__ import annotations
+
+from typing import Any
+
+from server.linkservice.client import LinkServiceClient
+
+
+class Sink:
+    def __init__(self) -> None:
+        self.published: list[str] = []
+
+    def publish(self, type_: str, data: dict[str, Any]) -> None:
+        self.published.append(type_)
+
+
+class Counting(LinkServiceClient):
+    def __init__(self) -> None:
+        super().__init__(store=None, events=Sink(), settings=None)  # type: ignore[arg-type]
+        self.calls: list[str] = []
+
+    def _roundtrip(self, op: str, args: dict[str, Any], timeout: float) -> Any:
+        self.calls.append(op)
+        return [{"name": "ara", "state": "ready", "n": len(self.calls)}]
+
+
+def test_pollers_share_one_round_trip_and_changes_refresh_it() -> None:
+    c = Counting()
+    c.STATUS_TTL_S = 60.0  # type: ignore[misc]
+    first = [c.robot_statuses() for _ in range(20)]
+    assert c.calls == ["robot_statuses"]
+    assert all(f == first[0] for f in first)
+    first[0][0]["state"] = "mutated by a caller"
+    assert c.robot_statuses()[0]["state"] == "ready"  # callers get copies
+    c._on_event("execution", {"id": "ex_1"})  # pushed change
+    assert c.robot_statuses()[0]["n"] == 2
+    c._call("clear_estop", {"name": "ara"})  # an operator action
+    assert c.robot_statuses()[0]["n"] == 4
+    assert c.calls == ["robot_statuses", "robot_statuses", "clear_estop", "robot_statuses"]
+
+
+def test_the_answer_expires_after_the_ttl() -> None:
+    c = Counting()
+    c.STATUS_TTL_S = 0.0  # type: ignore[misc]
+    c.robot_statuses()
+    c.robot_statuses()
+    assert c.calls == ["robot_statuses", "robot_statuses"]
