@@ -4,11 +4,13 @@ executed twice (asserted from the emulator's own execution log)."""
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import os
 import signal
 import time
 from collections.abc import Iterator
+from typing import Any
 
 import pytest
 from fastapi.testclient import TestClient
@@ -21,6 +23,7 @@ from server.app import create_app
 from server.auth import create_token
 from server.kinds import import_errors, registry
 from server.linkservice import robot_key_path
+from server.linkservice.client import LinkServiceUnavailable
 from tests.conftest import Api, make_settings
 
 pytestmark = pytest.mark.slow
@@ -169,6 +172,7 @@ def test_fault_matrix(mapi, base_plans, kind: str, fault: str) -> None:
 
     emulator._later = counting_later  # type: ignore[method-assign]
     emulator.start()
+    eid = None
     try:
         r = mapi.put(f"/api/v1/robots/{robot}/connection", "admin", json={"url": emulator.url})
         assert r.status_code == 200, r.text
@@ -194,7 +198,7 @@ def test_fault_matrix(mapi, base_plans, kind: str, fault: str) -> None:
                 break
             assert ex["state"] != "aborted", ex
             stopped = ex["state"] in ("interrupted", "faulted")
-            if stopped and mapi.services.dispatch.wait_connected(robot, 0.2):
+            if stopped and _connected(mapi, robot, 0.2):
                 # The operator's decision: resume (clearing a robot fault once "fixed").
                 body = {"clear_faults": True} if "robot_fault" in (ex["fault"] or "") else {}
                 r = mapi.post(f"/api/v1/executions/{eid}/resume", json=body)
@@ -221,4 +225,18 @@ def test_fault_matrix(mapi, base_plans, kind: str, fault: str) -> None:
             link_stats = mapi.services.dispatch.robot_status(robot)["stats"]
             assert link_stats.get("naks", 0) >= 1, link_stats
     finally:
+        if eid is not None:  # a failed cell must not leave the robot busy for the next ones
+            with contextlib.suppress(Exception):
+                state = mapi.get(f"/api/v1/executions/{eid}").json()["state"]
+                if state not in ("completed", "aborted"):
+                    mapi.post(f"/api/v1/executions/{eid}/abort")
         emulator.close()
+
+
+def _connected(mapi: Any, robot: str, timeout: float) -> bool:
+    """Whether the link is up; ``False`` while a killed link service is being respawned."""
+    try:
+        return bool(mapi.services.dispatch.wait_connected(robot, timeout))
+    except LinkServiceUnavailable:
+        time.sleep(timeout)
+        return False
