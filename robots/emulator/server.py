@@ -49,11 +49,11 @@ import time
 import tty
 from collections.abc import Callable, Sequence
 from dataclasses import asdict
-from typing import IO
 from urllib.parse import urlsplit
 
 import numpy as np
 
+from robots.background_io import LineWriter
 from robots.emulator.faults import FaultConfig
 from robots.emulator.persist import OrphanTimer, StateFile, remove_port_file, write_port_file
 from robots.emulator.profiles import RobotProfile, resolve_profile
@@ -258,9 +258,9 @@ class Emulator:
         self.faults = faults or FaultConfig()
         self._listen = listen
         self._want_pty = pty
-        self._log_file: IO[str] | None = (
-            open(log_path, "a", encoding="utf-8") if log_path is not None else None  # noqa: SIM115
-        )
+        # Records go through a writer thread: a write() throttled by the
+        # kernel's dirty-page flushing must not stall the loop (its watchdog).
+        self._log_file: LineWriter | None = LineWriter(log_path) if log_path is not None else None
         self.robot = SimRobot(
             self.profile,
             buffer_capacity=buffer_capacity,
@@ -824,13 +824,11 @@ class Emulator:
         # records (StopEvent; ``t`` is this process's time.monotonic(), which on
         # Linux is system-wide, so other processes can time a stop against it).
         if self._log_file is not None:
-            self._log_file.write(json.dumps({"record": "command", **asdict(rec)}) + "\n")
-            self._log_file.flush()
+            self._log_file.write(json.dumps({"record": "command", **asdict(rec)}))
 
     def _write_stop(self, stop: StopEvent) -> None:
         if self._log_file is not None:
-            self._log_file.write(json.dumps({"record": "stop", **asdict(stop)}) + "\n")
-            self._log_file.flush()
+            self._log_file.write(json.dumps({"record": "stop", **asdict(stop)}))
 
 
 def _handshake_answer(msg: Message) -> bool:

@@ -38,6 +38,7 @@ import time
 from pathlib import Path
 from typing import Any
 
+from robots.background_io import log_through_a_queue
 from server.dispatch.engine import DispatchEngine, DispatchError
 from server.lifecycle import IllegalTransitionError
 from server.lifetime import die_with_parent
@@ -339,6 +340,9 @@ def main(argv: list[str] | None = None) -> int:
         format="%(asctime)s link-service %(levelname)s %(name)s: %(message)s",
         stream=sys.stderr,
     )
+    # A link thread that logs must not wait for stderr (a file or pipe the
+    # server drains when it can): records go through a queue.
+    log_listener = log_through_a_queue()
     try:
         os.nice(-5)
     except OSError:
@@ -351,5 +355,6 @@ def main(argv: list[str] | None = None) -> int:
     service.run()
     # Links are closed and the store is durable: do not wait at interpreter exit
     # for an RPC thread still inside a long call (wait_connected, a busy SQLite).
+    log_listener.stop()
     logging.shutdown()
     os._exit(0)
