@@ -3,11 +3,13 @@
 from __future__ import annotations
 
 import io
+import json
 import logging
 from typing import Annotated, Any
 
 import numpy as np
 from fastapi import APIRouter, Depends, HTTPException, Query, Response, status
+from fastapi.encoders import jsonable_encoder
 from pydantic import BaseModel, Field, ValidationError
 
 from planners.errors import PlannerError
@@ -131,15 +133,22 @@ def list_plans(
     return [p.public(include_result=False) for p in plans]
 
 
-@router.get("/{plan_id}", responses=errors(404))
-def get_plan(plan_id: str, services: Svc, _: Viewer) -> dict[str, Any]:
-    plan = services.store.get_plan(plan_id)
-    out = plan.public()
+@router.get("/{plan_id}", responses=errors(404), response_model=dict[str, Any])
+def get_plan(plan_id: str, services: Svc, _: Viewer) -> Response:
+    """The plan with its result, program, audit trail and revisions.
+
+    ``result`` and ``program`` go out as the JSON text they are stored as
+    (strict JSON, written by the store), never decoded here.
+    """
+    plan, result_json, program_json = services.store.get_plan_json(plan_id)
+    out = plan.public(include_result=False)
     out["audit"] = [e.public() for e in services.store.list_audit("plan", plan_id)]
     out["revisions"] = [
         p.id for p in services.store.list_plans(parent_id=plan_id, limit=500, summary=True)
     ]
-    return out
+    head = json.dumps(jsonable_encoder(out), allow_nan=False, separators=(",", ":"))
+    body = f'{head[:-1]},"result":{result_json},"program":{program_json}}}'
+    return Response(body.encode("utf-8"), media_type="application/json")
 
 
 @router.post("/{plan_id}/revise", status_code=status.HTTP_202_ACCEPTED, responses=errors(404))

@@ -75,7 +75,10 @@ class PlanRecord:
 
     @classmethod
     def from_row(cls, row: sqlite3.Row, loader: Any = None) -> PlanRecord:
-        d = dict(row)
+        return cls.from_mapping(dict(row), loader)
+
+    @classmethod
+    def from_mapping(cls, d: dict[str, Any], loader: Any = None) -> PlanRecord:
         d["params"] = json.loads(d["params"])
         d["result"] = _loads(d["result"], {})
         d["metrics"] = _loads(d["metrics"], {})

@@ -53,6 +53,17 @@ def _json(value: Any) -> str:
     return json.dumps(value, allow_nan=False, separators=(",", ":"))
 
 
+#: A plan row without its (possibly megabytes of) ``result`` and ``program``;
+#: ``program_length_hint`` counts the program's commands in SQL.
+_PLAN_SUMMARY_COLUMNS = (
+    "id, kind, state, params, parent_id, progress, stage, NULL AS result, metrics, "
+    "checks, arrays, error, created_at, updated_at, created_by, approved_by, "
+    "approved_at, NULL AS program, "
+    "CASE WHEN program IS NULL THEN NULL ELSE json_array_length(program) END "
+    "AS program_length_hint"
+)
+
+
 class Store:
     """All persistent state under one data directory."""
 
@@ -203,6 +214,26 @@ class Store:
             raise NotFoundError(f"no plan with id {plan_id!r}")
         return PlanRecord.from_row(row, loader=self.arrays.load)
 
+    def get_plan_json(self, plan_id: str) -> tuple[PlanRecord, str, str]:
+        """A plan without ``result``/``program`` decoded, and those two as their
+        stored JSON text (``null`` when unset).
+
+        For answers that only pass them on: decoding and re-encoding a
+        multi-megabyte result was most of a busy server's CPU on ``GET
+        /plans/{id}``.
+        """
+        row = self.db.query_one(
+            f"SELECT {_PLAN_SUMMARY_COLUMNS}, result AS result_json, program AS program_json "
+            "FROM plans WHERE id = ?",
+            (plan_id,),
+        )
+        if row is None:
+            raise NotFoundError(f"no plan with id {plan_id!r}")
+        d = dict(row)
+        result_json, program_json = d.pop("result_json"), d.pop("program_json")
+        rec = PlanRecord.from_mapping(d, loader=self.arrays.load)
+        return rec, result_json or "{}", program_json or "null"
+
     def list_plans(
         self,
         *,
@@ -216,15 +247,7 @@ class Store:
         """Plans, newest first.  ``summary`` leaves out ``result`` and ``program``
         (``program_length`` is kept): a listing then costs no JSON decoding of
         results, which can be megabytes per plan."""
-        cols = "*"
-        if summary:
-            cols = (
-                "id, kind, state, params, parent_id, progress, stage, NULL AS result, metrics, "
-                "checks, arrays, error, created_at, updated_at, created_by, approved_by, "
-                "approved_at, NULL AS program, "
-                "CASE WHEN program IS NULL THEN NULL ELSE json_array_length(program) END "
-                "AS program_length_hint"
-            )
+        cols = _PLAN_SUMMARY_COLUMNS if summary else "*"
         sql = f"SELECT {cols} FROM plans WHERE 1=1"
         args: list[Any] = []
         for col, val in (("kind", kind), ("state", state), ("parent_id", parent_id)):
