@@ -111,7 +111,7 @@ def create_plan(
     return plan.public()
 
 
-@router.get("")
+@router.get("", response_model=list[dict[str, Any]])
 def list_plans(
     services: Svc,
     _: Viewer,
@@ -120,17 +120,16 @@ def list_plans(
     parent_id: str | None = None,
     limit: Annotated[int, Query(ge=1, le=500)] = 50,
     offset: Annotated[int, Query(ge=0, le=10**9)] = 0,
-) -> list[dict[str, Any]]:
+) -> Response:
     """Plans, newest first, without their (possibly large) results."""
-    plans = services.store.list_plans(
+    body = services.store.list_plans_json(
         kind=kind,
         state=None if state is None else state.value,
         parent_id=parent_id,
         limit=limit,
         offset=offset,
-        summary=True,
     )
-    return [p.public(include_result=False) for p in plans]
+    return Response(body.encode("utf-8"), media_type="application/json")
 
 
 @router.get("/{plan_id}", responses=errors(404), response_model=dict[str, Any])

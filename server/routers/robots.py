@@ -135,10 +135,7 @@ def list_executions(
 def get_execution(execution_id: str, services: Svc, _: Viewer) -> dict[str, Any]:
     ex = services.store.get_execution(execution_id)
     out = ex.public()
-    plan = services.store.get_plan(ex.plan_id)
-    out["current_command"] = (
-        plan.program[ex.acked] if plan.program and ex.acked < len(plan.program) else None
-    )
+    out["current_command"] = services.store.plan_command(ex.plan_id, ex.acked)
     out["audit"] = [e.public() for e in services.store.list_audit("execution", execution_id)]
     return out
 

@@ -87,6 +87,39 @@ class PlanRecord:
         d["program"] = _loads(d.get("program"), None)
         return cls(**d, _loader=loader)
 
+    @staticmethod
+    def summary_json(row: sqlite3.Row | dict[str, Any]) -> str:
+        """``public(include_result=False)`` of a summary row as JSON text, with
+        ``params``, ``metrics`` and ``checks`` spliced in as stored (strict
+        JSON written by the store): a listing decodes none of them."""
+        from server.lifecycle import allowed_actions
+
+        d = dict(row)
+        arrays = _loads(d["arrays"], {})
+        head = {
+            "id": d["id"],
+            "kind": d["kind"],
+            "state": d["state"],
+            "progress": d["progress"],
+            "stage": d["stage"],
+            "parent_id": d["parent_id"],
+            "error": d["error"],
+            "created_at": d["created_at"],
+            "updated_at": d["updated_at"],
+            "created_by": d["created_by"],
+            "approved_by": d["approved_by"],
+            "approved_at": d["approved_at"],
+            "allowed_actions": allowed_actions(d["state"]),
+            "arrays": {k: f"/api/v1/plans/{d['id']}/arrays/{k}" for k in sorted(arrays)},
+            "program_length": d["program_length_hint"],
+        }
+        text = json.dumps(head, allow_nan=False, separators=(",", ":"))
+        raw = ",".join(
+            f'"{key}":{d[key] if d[key] is not None else default}'
+            for key, default in (("params", "{}"), ("metrics", "{}"), ("checks", "[]"))
+        )
+        return f"{text[:-1]},{raw}}}"
+
     def array(self, name: str) -> np.ndarray:
         if name not in self.arrays:
             raise KeyError(f"plan {self.id} has no array {name!r}; it has {sorted(self.arrays)}")

@@ -234,6 +234,52 @@ class Store:
         rec = PlanRecord.from_mapping(d, loader=self.arrays.load)
         return rec, result_json or "{}", program_json or "null"
 
+    def plan_command(self, plan_id: str, index: int) -> dict[str, Any] | None:
+        """Command ``index`` of a plan's program (``None`` past its end or without
+        one), picked in SQL: the program is not decoded."""
+        if index < 0:
+            self.get_plan_json(plan_id)  # NotFoundError for an unknown plan
+            return None
+        row = self.db.query_one(
+            "SELECT json_extract(program, '$[' || ? || ']') AS cmd FROM plans WHERE id = ?",
+            (int(index), plan_id),
+        )
+        if row is None:
+            raise NotFoundError(f"no plan with id {plan_id!r}")
+        return None if row["cmd"] is None else json.loads(row["cmd"])
+
+    def list_plans_json(
+        self,
+        *,
+        kind: str | None = None,
+        state: str | None = None,
+        parent_id: str | None = None,
+        limit: int = 50,
+        offset: int = 0,
+    ) -> str:
+        """``list_plans(summary=True)`` as the JSON text of its public form."""
+        sql, args = self._plans_query(_PLAN_SUMMARY_COLUMNS, kind, state, parent_id, limit, offset)
+        return "[" + ",".join(PlanRecord.summary_json(r) for r in self.db.query(sql, args)) + "]"
+
+    def _plans_query(
+        self,
+        cols: str,
+        kind: str | None,
+        state: str | None,
+        parent_id: str | None,
+        limit: int,
+        offset: int,
+    ) -> tuple[str, list[Any]]:
+        sql = f"SELECT {cols} FROM plans WHERE 1=1"
+        args: list[Any] = []
+        for col, val in (("kind", kind), ("state", state), ("parent_id", parent_id)):
+            if val is not None:
+                sql += f" AND {col} = ?"
+                args.append(val)
+        sql += " ORDER BY created_at DESC, id DESC LIMIT ? OFFSET ?"
+        args += [limit, offset]
+        return sql, args
+
     def list_plans(
         self,
         *,
@@ -248,14 +294,7 @@ class Store:
         (``program_length`` is kept): a listing then costs no JSON decoding of
         results, which can be megabytes per plan."""
         cols = _PLAN_SUMMARY_COLUMNS if summary else "*"
-        sql = f"SELECT {cols} FROM plans WHERE 1=1"
-        args: list[Any] = []
-        for col, val in (("kind", kind), ("state", state), ("parent_id", parent_id)):
-            if val is not None:
-                sql += f" AND {col} = ?"
-                args.append(val)
-        sql += " ORDER BY created_at DESC, id DESC LIMIT ? OFFSET ?"
-        args += [limit, offset]
+        sql, args = self._plans_query(cols, kind, state, parent_id, limit, offset)
         return [PlanRecord.from_row(r, loader=self.arrays.load) for r in self.db.query(sql, args)]
 
     def transition_plan(

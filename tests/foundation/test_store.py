@@ -185,3 +185,43 @@ def test_newest_execution_of_agrees_with_a_scan_of_every_record(tmp_path: Path) 
             brute = next((e.id for e in every if e.robot == robot and e.state in wanted), None)
             assert store.newest_execution_of(robot, wanted) == brute, (robot, wanted)
     store.close()
+
+
+def test_json_reads_agree_with_decoding_every_row(tmp_path: Path) -> None:
+    """The undecoded JSON paths (listing, plan detail, one program command)
+    give exactly what decoding the rows and building ``public()`` gives."""
+    import json
+
+    store = Store(tmp_path)
+    store.create_plan("demo.route", {"start": "a0"}, "bob")  # queued: no result yet
+    done = _planned(store)
+    p = store.create_plan("blast", {"surface": {"w": 1.5}}, "alice")
+    store.transition_plan(p.id, "start", "planner")
+    program = [{"op": "joints", "q_rad": [0.1 * i, -0.2], "duration_s": 0.5} for i in range(7)]
+    store.store_plan_result(
+        p.id,
+        result={"cost": 2.5, "nested": {"a": [1, None, "x"]}},
+        arrays={},
+        checks=[{"name": "reach", "passed": False, "message": "too far ü"}],
+        metrics={"n": 3.0},
+        program=program,
+    )
+    failed = store.create_plan("demo.route", {"start": "zz"}, "carol").id
+    store.transition_plan(failed, "start", "planner")
+    store.transition_plan(failed, "fail", "planner", error="no such vertex")
+    for kw in ({}, {"kind": "demo.route"}, {"limit": 2, "offset": 1}, {"parent_id": done}):
+        want = [r.public(include_result=False) for r in store.list_plans(summary=True, **kw)]
+        assert json.loads(store.list_plans_json(**kw)) == want
+    assert len(json.loads(store.list_plans_json())) == 4
+    for pid in (done, p.id, failed):
+        rec, result_json, program_json = store.get_plan_json(pid)
+        full = store.get_plan(pid)
+        assert rec.public(include_result=False) == full.public(include_result=False)
+        assert json.loads(result_json) == full.result
+        assert json.loads(program_json) == full.program
+    assert [store.plan_command(p.id, i) for i in range(-1, 9)] == [None, *program, None, None]
+    assert store.plan_command(done, 0) is None  # no program
+    with pytest.raises(NotFoundError):
+        store.plan_command("pl_missing", 0)
+    with pytest.raises(NotFoundError):
+        store.get_plan_json("pl_missing")
