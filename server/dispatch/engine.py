@@ -262,7 +262,7 @@ class DispatchEngine:
         ``kind_robot`` is the robot the plan's kind drives: the web server looks
         it up in the kind registry, so this process never imports the planners.
         """
-        plan = self.store.get_plan(plan_id)
+        plan = self.store.get_plan(plan_id, result=False)
         r = self._robot(robot)
         if plan.state != PlanState.APPROVED:
             raise IllegalTransitionError(
@@ -376,7 +376,7 @@ class DispatchEngine:
             s.resume(clear_robot_faults=clear_faults)
         else:
             # After a restart (or a terminal streamer): a new streamer, same run_id.
-            plan = self.store.get_plan(ex.plan_id)
+            plan = self.store.get_plan(ex.plan_id, result=False)
             program = Program.from_dicts(plan.program or [], robot=ex.robot)
             streamer = self._start_streamer(ex, program, start=ex.acked)
             if clear_faults:
@@ -524,7 +524,7 @@ class DispatchEngine:
                 "fault": ex.fault,
             },
         )
-        plan = self.store.get_plan(ex.plan_id)
+        plan = self.store.get_plan(ex.plan_id, result=False, program=False)
         self.events.publish("plan", {"id": plan.id, "kind": plan.kind, "state": plan.state})
         return ex
 

@@ -333,7 +333,7 @@ class LinkServiceClient:
         )
 
     def dispatch(self, plan_id: str, robot: str, actor: str) -> ExecutionRecord:
-        plan = self.store.get_plan(plan_id)
+        plan = self.store.get_plan(plan_id, result=False, program=False)
         args = {
             "plan_id": plan_id,
             "robot": robot,

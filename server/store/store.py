@@ -208,8 +208,18 @@ class Store:
             self._audit(conn, actor, "plan", pid, "submit", None, PlanState.QUEUED, why)
         return self.get_plan(pid)
 
-    def get_plan(self, plan_id: str) -> PlanRecord:
-        row = self.db.query_one("SELECT * FROM plans WHERE id = ?", (plan_id,))
+    def get_plan(self, plan_id: str, *, result: bool = True, program: bool = True) -> PlanRecord:
+        """One plan; ``result=False``/``program=False`` leave those unread and
+        undecoded (``{}``/``None``): a multi-megabyte ``json.loads`` holds the
+        GIL for its whole length, which the robot-link service cannot afford."""
+        cols = "*"
+        if not (result and program):
+            cols = _PLAN_SUMMARY_COLUMNS
+            if result:
+                cols = cols.replace("NULL AS result", "result")
+            if program:
+                cols = cols.replace("NULL AS program", "program")
+        row = self.db.query_one(f"SELECT {cols} FROM plans WHERE id = ?", (plan_id,))
         if row is None:
             raise NotFoundError(f"no plan with id {plan_id!r}")
         return PlanRecord.from_row(row, loader=self.arrays.load)

@@ -225,3 +225,19 @@ def test_json_reads_agree_with_decoding_every_row(tmp_path: Path) -> None:
         store.plan_command("pl_missing", 0)
     with pytest.raises(NotFoundError):
         store.get_plan_json("pl_missing")
+
+
+def test_get_plan_can_leave_result_and_program_unread(tmp_path: Path) -> None:
+    store = Store(tmp_path)
+    pid = _planned(store)
+    program = [{"op": "stop"}]
+    with store.db.transaction() as conn:
+        conn.execute("UPDATE plans SET program = ? WHERE id = ?", ('[{"op": "stop"}]', pid))
+    full = store.get_plan(pid)
+    assert full.result == {"path": ["a0", "b0"]} and full.program == program
+    lean = store.get_plan(pid, result=False)
+    assert lean.result == {} and lean.program == program
+    bare = store.get_plan(pid, result=False, program=False)
+    assert bare.result == {} and bare.program is None
+    assert bare.public(include_result=False) == full.public(include_result=False)
+    assert store.get_plan(pid, program=False).result == full.result
