@@ -318,6 +318,11 @@ class JobRunner:
         with self._lock:
             return list(self._futures)
 
+    def running_count(self) -> int:
+        """How many plans are queued or planning, without the lock (``submit``
+        holds it across an IPC call): safe on the event loop."""
+        return len(self._futures)
+
     # -------------------------------------------------------------- internals
     def _transition(
         self, plan_id: str, action: str, actor: str, reason: str = "", **kw: Any

@@ -72,6 +72,7 @@ class _LinkCore:
         self._last_rx = 0.0
         self._last_rx_wall: float | None = None
         self._last_tx = 0.0
+        self._tx_in_session = False  # the last frame written went out in a session
         self._hs_started = 0.0
         self._hs_last_hello = 0.0
         self._next_attempt = 0.0

@@ -5,6 +5,7 @@ ACK/NAK handling and bounded go-back-N retransmission.
 
 from __future__ import annotations
 
+import logging
 import time
 
 from robots.adapters.link_core import _LinkCore
@@ -27,6 +28,8 @@ from robots.protocol.messages import (
     encode_message,
     is_command,
 )
+
+log = logging.getLogger("robots.adapters.link")
 
 
 class _CommandStream(_LinkCore):
@@ -81,8 +84,15 @@ class _CommandStream(_LinkCore):
                 return
             try:
                 port.write(wire)
-                self._last_tx = time.monotonic()
+                now = time.monotonic()
+                gap, self._last_tx = now - self._last_tx, now
                 self._stats["frames_tx"] += 1
+                in_session = self._state in CONNECTED_STATES
+                if in_session and self._tx_in_session and gap > 2.5 * self.config.heartbeat_s:
+                    # Evidence for a robot watchdog that fires: was the host silent?
+                    self._stats["tx_gaps_long"] += 1
+                    log.warning("%s: %.3f s without a frame to the robot", self.name, gap)
+                self._tx_in_session = in_session
             except Exception as exc:  # any handler's error means the link is gone
                 # Closing belongs to the I/O thread (it may be inside read()).
                 self._lost_reason = self._lost_reason or f"write failed: {exc}"

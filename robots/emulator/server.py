@@ -271,6 +271,8 @@ class Emulator:
             on_stop=self._write_stop if self._log_file else None,
         )
         self._state_file = StateFile(state_file) if state_file is not None else None
+        self._loop_prev = time.monotonic()
+        self.loop_late_s = 0.0
         self.state_loaded = False  # the robot's state came from ``state_file``
         if self._state_file is not None:
             try:
@@ -467,6 +469,10 @@ class Emulator:
                 events = self._sel.select(timeout)
                 with self._lock:
                     now = time.monotonic()
+                    # How late this wake-up is: a watchdog stop is only evidence
+                    # of a silent host when the loop itself was on time.
+                    self.loop_late_s = max(0.0, now - self._loop_prev - timeout)
+                    self._loop_prev = now
                     for key, _ in events:
                         handler = key.data
                         if isinstance(handler, _Port):
@@ -827,6 +833,13 @@ class Emulator:
             self._log_file.write(json.dumps({"record": "command", **asdict(rec)}))
 
     def _write_stop(self, stop: StopEvent) -> None:
+        if stop.reason == "watchdog":
+            log.warning(
+                "emulator %s: watchdog stop; last host frame %.3f s before it, loop %.3f s late",
+                self.profile.name,
+                stop.t - self.robot.last_host_rx,
+                self.loop_late_s,
+            )
         if self._log_file is not None:
             self._log_file.write(json.dumps({"record": "stop", **asdict(stop)}))
 

@@ -290,6 +290,19 @@ class LinkServiceClient:
     #: How long one answer of :meth:`robot_statuses` serves every caller.
     STATUS_TTL_S = 0.1
 
+    def fresh_statuses(self) -> list[dict[str, Any]] | None:
+        """The shared answer of :meth:`robot_statuses` while it is fresh, else
+        ``None``; never waits (a lock held by a round trip counts as stale)."""
+        if not self._status_lock.acquire(blocking=False):
+            return None
+        try:
+            cached = self._status_cache
+            if cached is None or time.monotonic() - cached[0] >= self.STATUS_TTL_S:
+                return None
+            return [dict(s) for s in cached[1]]
+        finally:
+            self._status_lock.release()
+
     def robot_statuses(self) -> list[dict[str, Any]]:
         """Every robot's status in one round trip (``GET /robots``).
 

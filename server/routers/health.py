@@ -17,8 +17,12 @@ router = APIRouter(tags=["health"])
 
 
 @router.get("/health")
-def health(services: Annotated[Services, Depends(get_services)]) -> dict[str, Any]:
-    """Liveness and what this server can do; needs no token."""
+async def health(services: Annotated[Services, Depends(get_services)]) -> dict[str, Any]:
+    """Liveness and what this server can do; needs no token.
+
+    ``async`` and lock-free: it answers from the event loop without waiting
+    for a worker thread, which a loaded server may have none of to spare.
+    """
     scene = services.scene
     return {
         "status": "ok",
@@ -27,7 +31,7 @@ def health(services: Annotated[Services, Depends(get_services)]) -> dict[str, An
         "kinds": sorted(registry()),
         "kind_errors": import_errors(),
         "scene": {"running": bool(scene and scene.running), "path": "/scene/"},
-        "jobs": {"mode": services.jobs.mode, "running": len(services.jobs.running())},
+        "jobs": {"mode": services.jobs.mode, "running": services.jobs.running_count()},
     }
 
 

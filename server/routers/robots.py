@@ -5,6 +5,7 @@ from __future__ import annotations
 from typing import Annotated, Any
 
 from fastapi import APIRouter, Depends, HTTPException
+from fastapi.concurrency import run_in_threadpool
 from pydantic import BaseModel, Field, field_validator
 
 from server.auth import Admin, Operator, Viewer
@@ -71,9 +72,15 @@ class ResumeRequest(BaseModel):
 
 
 @router.get("/robots")
-def list_robots(services: Svc, _: Viewer) -> list[dict[str, Any]]:
+async def list_robots(services: Svc, _: Viewer) -> list[dict[str, Any]]:
+    """Every robot's live status: one round trip to the link service, not one
+    per robot; a fresh shared answer comes straight from the event loop."""
     eng = engine(services)
-    return eng.robot_statuses()  # one round trip to the link service, not one per robot
+    fresh = getattr(eng, "fresh_statuses", None)
+    statuses = fresh() if fresh is not None else None
+    if statuses is not None:
+        return statuses
+    return await run_in_threadpool(eng.robot_statuses)
 
 
 @router.get("/robots/{name}/state")

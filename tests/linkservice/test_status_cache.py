@@ -46,3 +46,34 @@ def test_the_answer_expires_after_the_ttl() -> None:
     c.robot_statuses()
     c.robot_statuses()
     assert c.calls == ["robot_statuses", "robot_statuses"]
+
+
+def test_fresh_statuses_answer_from_the_cache_only_and_never_wait() -> None:
+    import threading
+
+    c = Counting()
+    c.STATUS_TTL_S = 60.0  # type: ignore[misc]
+    assert c.fresh_statuses() is None  # nothing fetched yet: no round trip either
+    assert c.calls == []
+    c.robot_statuses()
+    got = c.fresh_statuses()
+    assert got == [{"name": "ara", "state": "ready", "n": 1}]
+    assert got is not None
+    got[0]["state"] = "mutated"
+    assert c.fresh_statuses() == [{"name": "ara", "state": "ready", "n": 1}]
+    held, release = threading.Event(), threading.Event()
+
+    def hold() -> None:
+        with c._status_lock:  # a round trip in progress
+            held.set()
+            release.wait(10)
+
+    t = threading.Thread(target=hold)
+    t.start()
+    held.wait(10)
+    assert c.fresh_statuses() is None  # would have to wait: stale instead
+    release.set()
+    t.join()
+    c._on_event("execution", {"id": "ex_1"})  # a pushed change drops the cache
+    assert c.fresh_statuses() is None
+    assert c.calls == ["robot_statuses"]
