@@ -55,8 +55,10 @@ def test_watchdog_stops_motion_when_heartbeats_stop() -> None:
         host.handshake(emu.secret, watchdog_ms=300)
         host.until(lambda m: isinstance(m, State))
         cmd = JointsCmd(run_id=1, index=0, duration_ms=20_000, q_urad=(500_000,) * 6)
-        host.send(cmd, 1)
+        # Taken before the send: the emulator may read the frame (and start its
+        # watchdog) before this thread runs again, never before the send.
         last_frame = time.monotonic()
+        host.send(cmd, 1)
         assert emu.wait_for(lambda e: e.robot.stops, 5)
         stop = emu.stop_events()[0]
         assert (stop.reason, stop.moving, stop.index) == ("watchdog", True, 0)
