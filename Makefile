@@ -36,10 +36,10 @@ lint: install-test
 test: install-test system-test-deps lint
 	$(BIN)/pytest
 
-# The edit loop: unit tests (no slow or browser tests), then one fault-matrix
-# cell per fault (the cheap demo.route kind) and the registry check.
+# The edit loop: unit tests (no slow, browser or integration tests), then one
+# fault-matrix cell per fault (the cheap demo.route kind) and the registry check.
 test-fast: install-test
-	$(BIN)/pytest -q -m "not slow and not browser"
+	$(BIN)/pytest -q -m "not slow and not browser and not integration"
 	$(BIN)/pytest -q tests/api/test_fault_matrix.py -k "demo.route or registered"
 
 bench: install-test

@@ -24,6 +24,28 @@ hypothesis_settings.register_profile("deterministic", derandomize=True, database
 hypothesis_settings.register_profile("explore", derandomize=False)
 hypothesis_settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE", "deterministic"))
 
+#: Tests that start a server, a link service or emulator processes: marked
+#: ``integration``, so ``make test-fast`` (the edit loop) can leave them to
+#: ``make test``.
+INTEGRATION_PATHS = (
+    "tests/api/",
+    "tests/cli/",
+    "tests/emulator/",
+    "tests/linkservice/",
+    "tests/switching/test_api_switch.py",
+    "tests/navigation/test_kind_ara_navigate.py",
+    "tests/test_docker.py",
+)
+_ROOT = Path(__file__).resolve().parents[1]
+
+
+def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
+    for item in items:
+        rel = Path(str(item.path)).resolve().relative_to(_ROOT).as_posix()
+        if rel.startswith(INTEGRATION_PATHS):
+            item.add_marker(pytest.mark.integration)
+
+
 SHARED_DATA = Path(__file__).resolve().parents[2] / "shared" / "data"
 if not SHARED_DATA.is_dir():  # CI clones beside ../shared; a checkout elsewhere may set this
     SHARED_DATA = Path(os.environ.get("STEELPATH_SHARED_DATA", "/work/shared/data"))

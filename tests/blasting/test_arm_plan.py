@@ -25,6 +25,9 @@ from planners.blasting.collision import Obstacles
 from planners.errors import CancelledError, InvalidInputError, StreamLengthError
 from robots import load_robot
 
+# Tens of seconds (planning on the seed scenes): `make test` runs it, not `make test-fast`.
+pytestmark = pytest.mark.slow
+
 ROBOT = load_robot("denso_vm6083").with_base(scenes.robot_base())
 
 

@@ -13,6 +13,9 @@ from hypothesis import strategies as st
 from planners.blasting import plan_blasting, scenes
 from planners.blasting import sequencing as S
 
+# Tens of seconds (planning on the seed scenes): `make test` runs it, not `make test-fast`.
+pytestmark = pytest.mark.slow
+
 points8 = st.integers(0, 100_000).map(lambda s: np.random.default_rng(s).random((8, 2)))
 
 

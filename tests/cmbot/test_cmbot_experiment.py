@@ -12,6 +12,9 @@ from planners.cmbot import ExperimentParams, Section4Trajectory, plan_manipulati
 from planners.cmbot.arm import rotation_error, rpy_to_matrix
 from planners.errors import InvalidInputError
 
+# Tens of seconds (planning on the seed scenes): `make test` runs it, not `make test-fast`.
+pytestmark = pytest.mark.slow
+
 MODEL = robots.load_robot("cmbot")
 
 

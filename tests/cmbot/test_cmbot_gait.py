@@ -14,6 +14,9 @@ from planners.cmbot.guardrail import Guardrail, make_guardrail
 from planners.cmbot.simulate import simulate_climb
 from planners.errors import InfeasibleError, InvalidInputError, UnreachableError
 
+# Tens of seconds (planning on the seed scenes): `make test` runs it, not `make test-fast`.
+pytestmark = pytest.mark.slow
+
 MODEL = robots.load_robot("cmbot")
 L = MODEL.params["climber"]["foot_length_m"]
 

@@ -18,6 +18,9 @@ from tests.switching.test_jump import (  # same checks, collected here with the 
     test_trajectory_respects_limits_and_speeds,
 )
 
+# Tens of seconds (planning on the seed scenes): `make test` runs it, not `make test-fast`.
+pytestmark = pytest.mark.slow
+
 __all__ = [
     "test_clearance_matches_brute_force",
     "test_feet_reach_their_targets",

@@ -17,6 +17,9 @@ from planners.switching.jump import JumpRobot, _time_parameterise, plan_inchworm
 from planners.switching.rrt import interpolate, rrt_connect, shortcut
 from planners.switching.scenes import make_scene
 
+# Tens of seconds (planning on the seed scenes): `make test` runs it, not `make test-fast`.
+pytestmark = pytest.mark.slow
+
 ARA = robots.load_robot("ara")
 ROB = JumpRobot.from_model(ARA)
 
