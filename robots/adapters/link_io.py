@@ -15,6 +15,8 @@ from robots.adapters.link_types import (
     Connected,
     LinkState,
     ReportReceived,
+    _raw_socket,
+    _read_some,
 )
 from robots.protocol.framing import PROTOCOL_MAJOR
 from robots.protocol.messages import (
@@ -59,11 +61,7 @@ class _IoLoop(_Session):
 
     def _service(self, port: Any) -> None:
         try:
-            data = port.read(1)
-            if data:
-                waiting = port.in_waiting
-                if waiting:
-                    data += port.read(waiting)
+            data = _read_some(port, _raw_socket(port), self.config.poll_s)
         except Exception as exc:
             with self._lock:
                 if self._port is port:
