@@ -487,6 +487,21 @@ class Streamer:
                 # before the state report that carries it.
                 self._finish(Outcome.ESTOPPED)
                 return
+            if latched and not latched & ~LINK_FAULTS:
+                # The robot's watchdog (or a link reset) latched, reaching us as
+                # this refusal before the state report carrying it: the same
+                # interruption the report would give, resumable without an
+                # operator's fault clear.
+                self._to_fault(
+                    ExecState.INTERRUPTED,
+                    StreamFault(
+                        FaultKind.LINK_LOST,
+                        f"robot stopped by its watchdog / link reset; it refused {what}: "
+                        f"{event.reason}",
+                        index,
+                    ),
+                )
+                return
             if event.nak.reason == NakReason.RUN_ACTIVE:
                 # Another execution owns the robot: leave it alone.
                 kind = FaultKind.ROBOT_BUSY

@@ -785,8 +785,9 @@ def run_dispatches(
                         error=cur.get("error"),
                         acked=f"{cur.get('acked')}/{cur.get('total')}",
                     )
-                    if cur["state"] not in TERMINAL_EXEC_STATES or cur["state"] == "interrupted":
-                        # An unfinished execution blocks its robot: end it so the rest can run.
+                    if cur["state"] not in ("completed", "aborted"):
+                        # An unfinished execution (interrupted, faulted, still running)
+                        # blocks its robot: end it so the rest can run.
                         with contextlib.suppress(BenchError, httpx.HTTPError):
                             api.post(f"/executions/{ex['id']}/abort")
                 except (BenchError, httpx.HTTPError) as exc:

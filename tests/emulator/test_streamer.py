@@ -193,13 +193,16 @@ def test_faulted_refusal_before_the_report_is_classified_by_its_bits() -> None:
     detail = fault bits) and that refusal can arrive before the state report
     carrying the fault: a drive fault still reads as a robot fault (which
     only an explicit clear resumes), an E-stop bit ends the run as
-    E-stopped, and other bits stay a plain refusal."""
+    E-stopped, and the robot's watchdog or a link reset reads as the link
+    interruption the report would give (resumable without a fault clear)."""
     from robots.protocol.messages import FaultFlag
 
     cases = [
         (int(FaultFlag.DRIVE), ExecState.FAULTED, FaultKind.ROBOT_FAULT),
         (int(FaultFlag.ESTOP), ExecState.ESTOPPED, None),
-        (int(FaultFlag.WATCHDOG), ExecState.FAULTED, FaultKind.REJECTED),
+        (int(FaultFlag.WATCHDOG), ExecState.INTERRUPTED, FaultKind.LINK_LOST),
+        (int(FaultFlag.LINK_RESET), ExecState.INTERRUPTED, FaultKind.LINK_LOST),
+        (int(FaultFlag.WATCHDOG | FaultFlag.DRIVE), ExecState.FAULTED, FaultKind.ROBOT_FAULT),
     ]
     for k, (bits, state, kind) in enumerate(cases):
         prog = moves(40, 0.2)
@@ -212,6 +215,11 @@ def test_faulted_refusal_before_the_report_is_classified_by_its_bits() -> None:
             assert emu.wait_for(lambda e: e.robot.last_done >= 0, 10)
             s._on_link_event(_refusal(link, prog, 40 + k, 3, bits))
             assert s.wait(STOPPED | {ExecState.ESTOPPED}, 10) == state, bits
+            if state == ExecState.INTERRUPTED:
+                # The robot has no latched fault here, so a resume runs the rest.
+                s.resume()
+                assert s.wait(timeout=30) == ExecState.COMPLETED
+                assert check_exactly_once(emu.execution_log(), 40 + k, len(prog)) == []
         if kind is None:
             assert faults == []
         else:
