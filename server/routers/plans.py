@@ -3,13 +3,11 @@
 from __future__ import annotations
 
 import io
-import json
 import logging
 from typing import Annotated, Any
 
 import numpy as np
 from fastapi import APIRouter, Depends, HTTPException, Query, Response, status
-from fastapi.encoders import jsonable_encoder
 from pydantic import BaseModel, Field, ValidationError
 
 from planners.errors import PlannerError
@@ -17,7 +15,7 @@ from server.auth import Operator, Viewer
 from server.kinds import get_kind
 from server.kinds.base import PlanKind, drop_unknown_keys
 from server.lifecycle import PlanState
-from server.routers.responses import AUTH, errors
+from server.routers.responses import AUTH, errors, json_text
 from server.services import Services, get_services
 from server.store import NotFoundError, PlanRecord
 from server.store.database import utcnow
@@ -145,7 +143,7 @@ def get_plan(plan_id: str, services: Svc, _: Viewer) -> Response:
     out["revisions"] = [
         p.id for p in services.store.list_plans(parent_id=plan_id, limit=500, summary=True)
     ]
-    head = json.dumps(jsonable_encoder(out), allow_nan=False, separators=(",", ":"))
+    head = json_text(out)
     body = f'{head[:-1]},"result":{result_json},"program":{program_json}}}'
     return Response(body.encode("utf-8"), media_type="application/json")
 

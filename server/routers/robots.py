@@ -4,13 +4,14 @@ from __future__ import annotations
 
 from typing import Annotated, Any
 
-from fastapi import APIRouter, Depends, HTTPException
+from fastapi import APIRouter, Depends, HTTPException, Response
 from fastapi.concurrency import run_in_threadpool
 from pydantic import BaseModel, Field, field_validator
 
 from server.auth import Admin, Operator, Viewer
 from server.dispatch import DispatchError
 from server.linkservice import LinkServiceClient
+from server.routers.responses import json_response
 from server.services import Services, get_services
 
 router = APIRouter(tags=["robots"])
@@ -131,20 +132,20 @@ def dispatch(plan_id: str, req: DispatchRequest, services: Svc, who: Operator) -
     return ex.public()
 
 
-@router.get("/executions")
+@router.get("/executions", response_model=list[dict[str, Any]])
 def list_executions(
     services: Svc, _: Viewer, plan_id: str | None = None, state: str | None = None
-) -> list[dict[str, Any]]:
-    return [e.public() for e in services.store.list_executions(plan_id, state)]
+) -> Response:
+    return json_response([e.public() for e in services.store.list_executions(plan_id, state)])
 
 
-@router.get("/executions/{execution_id}")
-def get_execution(execution_id: str, services: Svc, _: Viewer) -> dict[str, Any]:
+@router.get("/executions/{execution_id}", response_model=dict[str, Any])
+def get_execution(execution_id: str, services: Svc, _: Viewer) -> Response:
     ex = services.store.get_execution(execution_id)
     out = ex.public()
     out["current_command"] = services.store.plan_command(ex.plan_id, ex.acked)
     out["audit"] = [e.public() for e in services.store.list_audit("execution", execution_id)]
-    return out
+    return json_response(out)
 
 
 @router.post("/executions/{execution_id}/pause")
