@@ -108,6 +108,7 @@ async def _read_client(
     stop: Any,
     seed: int,
     out: list[tuple[float, str, float, int]],
+    errors: list[str],
 ) -> None:
     rng = random.Random(seed)
     # Desynchronise the clients so they do not all poll in the same instant.
@@ -118,8 +119,9 @@ async def _read_client(
         try:
             r = await client.get(path)
             code = r.status_code
-        except httpx.HTTPError:
+        except httpx.HTTPError as exc:
             code = -1
+            errors.append(f"{label} {type(exc).__name__}: {exc}")
         t1 = time.monotonic()
         out.append((t0, label, (t1 - t0) * 1e3, code))
         if interval_s > 0:
@@ -136,6 +138,7 @@ async def _read_main(
     interval_s: float,
     first_seed: int,
     stop: Any,
+    errors: list[str],
 ) -> list[tuple[float, str, float, int]]:
     out: list[tuple[float, str, float, int]] = []
     limits = httpx.Limits(max_connections=clients, max_keepalive_connections=clients)
@@ -146,7 +149,9 @@ async def _read_main(
         limits=limits,
     ) as client:
         tasks = [
-            asyncio.create_task(_read_client(client, mix, interval_s, stop, first_seed + i, out))
+            asyncio.create_task(
+                _read_client(client, mix, interval_s, stop, first_seed + i, out, errors)
+            )
             for i in range(clients)
         ]
         await asyncio.gather(*tasks)
@@ -169,8 +174,11 @@ def read_clients(
     """
     if clients < 1:
         raise ValueError(f"clients must be >= 1, got {clients}")
-    samples = asyncio.run(_read_main(url, token, clients, mix, interval_s, first_seed, stop))
-    _dump(out_path, {"samples": samples})
+    errors: list[str] = []
+    samples = asyncio.run(
+        _read_main(url, token, clients, mix, interval_s, first_seed, stop, errors)
+    )
+    _dump(out_path, {"samples": samples, "errors": errors})
 
 
 # ------------------------------------------------------------------ planning

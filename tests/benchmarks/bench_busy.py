@@ -1079,6 +1079,9 @@ def run(args: argparse.Namespace, quiet_trials: int, tmp: Path, servers: list[Se
         s for name, r in results.items() if name.startswith("reads-") for s in r.get("samples", [])
     ]
     loaded_reads = read_stats(read_samples, t_loaded, t_end)
+    loaded_reads["errors"] = [
+        e for name, r in results.items() if name.startswith("reads-") for e in r.get("errors", [])
+    ]
     api.close()
 
     return report(
@@ -1263,6 +1266,8 @@ def report(
         print(f"  {'met   ' if ok else 'MISSED'}  {name}")
     if loaded_reads["failed"]:
         print(f"          failed reads: {loaded_reads['failed']} (codes {loaded_reads['codes']})")
+        for err in loaded_reads.get("errors", [])[:5]:
+            print(f"            {err}")
     if not load_ok:
         print("  MISSED  the load was not applied as asked (see uploads above)")
     return 0 if all(ok for _, ok in targets) and load_ok else 1
