@@ -132,15 +132,17 @@ def dispatch(plan_id: str, req: DispatchRequest, services: Svc, who: Operator) -
     return ex.public()
 
 
+# async: a polled read of a few rows, cheaper on the event loop than a
+# worker-thread hop (see server/routers/plans.py).
 @router.get("/executions", response_model=list[dict[str, Any]])
-def list_executions(
+async def list_executions(
     services: Svc, _: Viewer, plan_id: str | None = None, state: str | None = None
 ) -> Response:
     return json_response([e.public() for e in services.store.list_executions(plan_id, state)])
 
 
 @router.get("/executions/{execution_id}", response_model=dict[str, Any])
-def get_execution(execution_id: str, services: Svc, _: Viewer) -> Response:
+async def get_execution(execution_id: str, services: Svc, _: Viewer) -> Response:
     ex = services.store.get_execution(execution_id)
     out = ex.public()
     out["current_command"] = services.store.plan_command(ex.plan_id, ex.acked)
