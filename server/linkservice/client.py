@@ -111,6 +111,7 @@ class LinkServiceClient:
         self.restarts = 0
         self._status_lock = threading.Lock()
         self._status_cache: tuple[float, list[dict[str, Any]]] | None = None
+        self._execution_states: dict[Any, Any] = {}  # last state pushed per execution
 
     # -------------------------------------------------------------- lifecycle
     def start(self, timeout: float = 60.0) -> LinkServiceClient:
@@ -234,8 +235,30 @@ class LinkServiceClient:
             p.reply = {"ok": False, "error": {"type": "Unavailable", "message": why}}
             p.done.set()
 
+    def _changes_statuses(self, type_: str, data: dict[str, Any]) -> bool:
+        """Whether a pushed event makes the shared ``GET /robots`` answer stale.
+
+        A state report alone, or an execution's progress (an ack, same state),
+        does not: the 0.1 s TTL already bounds how old those may be shown.
+        Dropping the answer on each of them (tens a second while robots
+        stream) sent every poll to the busy link service, one at a time.
+        A link state, E-stop, takeover or execution state change does.
+        """
+        if type_ == "robot":
+            return set(data) != {"name", "report"}
+        if type_ == "execution":
+            eid, state = data.get("id"), data.get("state")
+            seen = eid in self._execution_states
+            before = self._execution_states.pop(eid, None)
+            self._execution_states[eid] = state
+            while len(self._execution_states) > 256:
+                self._execution_states.pop(next(iter(self._execution_states)))
+            return not seen or state is None or before != state
+        return True
+
     def _on_event(self, type_: str, data: dict[str, Any]) -> None:
-        self._status_cache = None  # something changed: the next GET /robots asks afresh
+        if self._changes_statuses(type_, data):
+            self._status_cache = None  # the next GET /robots asks afresh
         if type_ == "linkservice":
             self._ready.set()
             return

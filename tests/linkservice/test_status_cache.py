@@ -77,3 +77,24 @@ def test_fresh_statuses_answer_from_the_cache_only_and_never_wait() -> None:
     c._on_event("execution", {"id": "ex_1"})  # a pushed change drops the cache
     assert c.fresh_statuses() is None
     assert c.calls == ["robot_statuses"]
+
+
+def test_reports_and_progress_keep_the_answer_state_changes_drop_it() -> None:
+    c = Counting()
+    c.STATUS_TTL_S = 60.0  # type: ignore[misc]
+    c._on_event("execution", {"id": "ex_1", "state": "executing", "acked": 0})
+    c.robot_statuses()
+    for k in range(1, 30):  # acks while it streams, and the robot's reports
+        c._on_event("execution", {"id": "ex_1", "state": "executing", "acked": k})
+        c._on_event("robot", {"name": "ara", "report": {"last_done": k}})
+    assert c.fresh_statuses() is not None
+    assert c.calls == ["robot_statuses"]
+    c._on_event("execution", {"id": "ex_1", "state": "completed", "acked": 30})
+    assert c.fresh_statuses() is None  # an execution's state changed
+    c.robot_statuses()
+    c._on_event("robot", {"name": "ara", "estop_latched": False})
+    assert c.fresh_statuses() is None  # an E-stop / link change
+    c.robot_statuses()
+    c._on_event("execution", {"id": "ex_2", "state": "executing", "acked": 0})
+    assert c.fresh_statuses() is None  # a new execution
+    assert c.calls == ["robot_statuses"] * 3
