@@ -112,6 +112,8 @@ class LinkServiceClient:
         self._status_lock = threading.Lock()
         self._status_cache: tuple[float, list[dict[str, Any]]] | None = None
         self._execution_states: dict[Any, Any] = {}  # last state pushed per execution
+        self._refresh_guard = threading.Lock()
+        self._refreshing = False
 
     # -------------------------------------------------------------- lifecycle
     def start(self, timeout: float = 60.0) -> LinkServiceClient:
@@ -312,6 +314,7 @@ class LinkServiceClient:
 
     #: How long one answer of :meth:`robot_statuses` serves every caller.
     STATUS_TTL_S = 0.1
+    STATUS_STALE_OK_S = 2.0
 
     def fresh_statuses(self) -> list[dict[str, Any]] | None:
         """The shared answer of :meth:`robot_statuses` while it is fresh, else
@@ -325,6 +328,44 @@ class LinkServiceClient:
             return [dict(s) for s in cached[1]]
         finally:
             self._status_lock.release()
+
+    def recent_statuses(self) -> list[dict[str, Any]] | None:
+        """The shared answer if it is younger than :data:`STATUS_STALE_OK_S`, and
+        a refresh in the background when it is past :data:`STATUS_TTL_S`; else
+        ``None``.  Never waits.
+
+        A pushed change (link state, E-stop, an execution's state) drops the
+        answer at once (:meth:`_changes_statuses`), so what this may show late
+        is only report details and progress.  Without it, every poll that found
+        the answer expired queued behind one round trip to a link service busy
+        streaming four robots.
+        """
+        cached = self._status_cache
+        if cached is None:
+            return None
+        age = time.monotonic() - cached[0]
+        if age >= self.STATUS_STALE_OK_S:
+            return None
+        if age >= self.STATUS_TTL_S:
+            self._refresh_in_background()
+        return [dict(s) for s in cached[1]]
+
+    def _refresh_in_background(self) -> None:
+        with self._refresh_guard:
+            if self._refreshing:
+                return
+            self._refreshing = True
+
+        def refresh() -> None:
+            try:
+                self.robot_statuses()
+            except Exception as exc:  # the next caller asks again, and sees the error
+                log.debug("background GET /robots refresh failed: %s", exc)
+            finally:
+                with self._refresh_guard:
+                    self._refreshing = False
+
+        threading.Thread(target=refresh, name="robot status refresh", daemon=True).start()
 
     def robot_statuses(self) -> list[dict[str, Any]]:
         """Every robot's status in one round trip (``GET /robots``).

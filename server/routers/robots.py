@@ -75,10 +75,12 @@ class ResumeRequest(BaseModel):
 @router.get("/robots")
 async def list_robots(services: Svc, _: Viewer) -> list[dict[str, Any]]:
     """Every robot's live status: one round trip to the link service, not one
-    per robot; a fresh shared answer comes straight from the event loop."""
+    per robot; a recent shared answer comes straight from the event loop
+    (at most 2 s old, and dropped at once on a link, E-stop or execution
+    state change), refreshed in the background."""
     eng = engine(services)
-    fresh = getattr(eng, "fresh_statuses", None)
-    statuses = fresh() if fresh is not None else None
+    recent = getattr(eng, "recent_statuses", None)
+    statuses = recent() if recent is not None else None
     if statuses is not None:
         return statuses
     return await run_in_threadpool(eng.robot_statuses)

@@ -98,3 +98,35 @@ def test_reports_and_progress_keep_the_answer_state_changes_drop_it() -> None:
     c._on_event("execution", {"id": "ex_2", "state": "executing", "acked": 0})
     assert c.fresh_statuses() is None  # a new execution
     assert c.calls == ["robot_statuses"] * 3
+
+
+def test_recent_statuses_answer_at_once_and_refresh_once_in_the_background() -> None:
+    import threading
+    import time
+
+    gate = threading.Event()
+
+    class Slow(Counting):
+        def _roundtrip(self, op: str, args: dict[str, Any], timeout: float) -> Any:
+            if self.calls:  # the first fills the cache; later ones wait for the gate
+                gate.wait(10)
+            return super()._roundtrip(op, args, timeout)
+
+    c = Slow()
+    c.STATUS_TTL_S = 0.0  # type: ignore[misc]
+    c.STATUS_STALE_OK_S = 60.0  # type: ignore[misc]
+    assert c.recent_statuses() is None  # nothing yet: the route does the round trip
+    c.robot_statuses()
+    answers = [c.recent_statuses() for _ in range(20)]  # expired, but recent
+    assert all(a == [{"name": "ara", "state": "ready", "n": 1}] for a in answers)
+    gate.set()
+    deadline = time.monotonic() + 10
+    while (len(c.calls) < 2 or c._refreshing) and time.monotonic() < deadline:
+        time.sleep(0.01)
+    assert c.calls == ["robot_statuses"] * 2  # one background refresh for 20 polls
+    assert c.recent_statuses() == [{"name": "ara", "state": "ready", "n": 2}]
+    c._on_event("robot", {"name": "ara", "estop_latched": True})
+    assert c.recent_statuses() is None  # an E-stop change is never shown late
+    c.STATUS_STALE_OK_S = 0.0  # type: ignore[misc]
+    c.robot_statuses()
+    assert c.recent_statuses() is None  # too old to show
