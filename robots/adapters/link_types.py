@@ -185,6 +185,17 @@ def _raw_socket(port: Any) -> socket.socket | None:
     return sock if isinstance(sock, socket.socket) else None
 
 
+def _read_port(port: Any) -> bytes:
+    """What has arrived, through the port's own ``read(1)`` + ``read(in_waiting)``
+    (its timeout bounds the wait): right for serial devices and ``rfc2217://``."""
+    data = bytes(port.read(1))
+    if data:
+        waiting = port.in_waiting
+        if waiting:
+            data += bytes(port.read(waiting))
+    return data
+
+
 def _read_some(port: Any, sock: socket.socket | None, timeout_s: float) -> bytes:
     """What has arrived on ``port`` (waiting at most ``timeout_s`` for a first byte).
 
@@ -196,12 +207,7 @@ def _read_some(port: Any, sock: socket.socket | None, timeout_s: float) -> bytes
     (``tests/benchmarks/bench_link_cpu.py``).
     """
     if sock is None:
-        data = bytes(port.read(1))
-        if data:
-            waiting = port.in_waiting
-            if waiting:
-                data += bytes(port.read(waiting))
-        return data
+        return _read_port(port)
     ready, _, _ = select.select([sock], [], [], timeout_s)
     if not ready:
         return b""

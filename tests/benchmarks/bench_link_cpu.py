@@ -38,18 +38,13 @@ sys.path.insert(0, str(ROOT))
 
 import robots.adapters.link_io as link_io  # noqa: E402
 from robots.adapters import ExecState, RobotLink, Streamer  # noqa: E402
-from robots.adapters.link_types import LinkConfig  # noqa: E402
+from robots.adapters.link_types import LinkConfig, _read_port  # noqa: E402
 from robots.protocol import JointMove, Program  # noqa: E402
 
 
 def pyserial_read(port: Any, sock: Any, timeout_s: float) -> bytes:
-    """The link's former read (the baseline)."""
-    data = bytes(port.read(1))
-    if data:
-        waiting = port.in_waiting
-        if waiting:
-            data += bytes(port.read(waiting))
-    return data
+    """The link's former read on every port (the baseline): the port's own path."""
+    return _read_port(port)
 
 
 def stream_once(url: str, secret: bytes, n: int) -> tuple[float, float, str]:
