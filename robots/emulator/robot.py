@@ -229,6 +229,13 @@ class SimRobot:
     buffer_capacity: int = 16
     time_scale: float = 1.0
     state_period_s: float = 0.1
+    #: Progress (a command queued, started or done) is reported at most this
+    #: often; a halt, an E-stop, a fault, a new session or an operator command
+    #: (pause, resume, abort, clear) at once.  Firmware reports at a bounded rate
+    #: too: at a time scale of 10 a report per change was ~300 frames a second
+    #: for the host to verify and decode, none of them telling it anything the
+    #: next one does not (``last_done`` is cumulative).
+    min_report_gap_s: float = 0.02
     max_watchdog_s: float = 2.0
     faults_injected: FaultConfig = field(default_factory=FaultConfig)
     clock: Callable[[], float] = time.monotonic
@@ -265,7 +272,9 @@ class SimRobot:
         self._wall_t = self.clock()
         self.log: list[ExecutionRecord] = []
         self.stops: list[StopEvent] = []
-        self.changed = False  # a state report should go out now
+        self.changed = False  # a state report is owed
+        self.urgent = False  # … and must go out at once, not at the next report slot
+        self._last_report = -float("inf")
         # Evidence for tests: retransmissions seen, gaps, commands answered ALREADY_DONE.
         self.counters: collections.Counter[str] = collections.Counter()
         self._nak_left = self.faults_injected.nak_times
@@ -553,8 +562,25 @@ class SimRobot:
         self.stops.append(stop)
         if self.on_stop is not None:
             self.on_stop(stop)
-        self.changed = True
+        self.changed = self.urgent = True
         self._rested()
+
+    # --- report pacing -----------------------------------------------------------------
+
+    def report_due(self, now: float) -> bool:
+        """A state report is owed and may go out at ``now`` (see ``min_report_gap_s``)."""
+        return self.changed and (
+            self.urgent or now - self._last_report >= self.min_report_gap_s
+        )
+
+    def report_at(self) -> float | None:
+        """When an owed progress report may go out; ``None`` when none is owed."""
+        return self._last_report + self.min_report_gap_s if self.changed else None
+
+    def reported(self, now: float) -> None:
+        """A state report (:meth:`report`) went out at ``now``."""
+        self.changed = self.urgent = False
+        self._last_report = now
 
     # --- messages ----------------------------------------------------------------------
 
@@ -660,7 +686,7 @@ class SimRobot:
         self.expected_seq = (seq + 1) & 0xFFFF
         self.replies.clear()
         self.watchdog_s = min(max(msg.watchdog_ms / 1000.0, 0.1), self.max_watchdog_s)
-        self.changed = True
+        self.changed = self.urgent = True
         return [self.hello_ack(), self.report()]
 
     def _free(self) -> int:
@@ -695,7 +721,7 @@ class SimRobot:
                 self._rested()
         elif isinstance(msg, CommandMessage):
             return self._accept(msg, seq)
-        self.changed = True
+        self.changed = self.urgent = True
         return self._ack(msg, seq)
 
     def _accept(self, msg: CommandMessage, seq: int) -> Message:

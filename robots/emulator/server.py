@@ -491,6 +491,9 @@ class Emulator:
     def _timeout(self, now: float) -> float:
         period = self.robot.state_period_s
         deadlines = [self._next_state]
+        report_at = self.robot.report_at()
+        if report_at is not None:
+            deadlines.append(report_at)
         robot_deadline = self.robot.next_deadline()
         if robot_deadline is not None:
             deadlines.append(robot_deadline)
@@ -503,8 +506,8 @@ class Emulator:
             _, _, action = heapq.heappop(self._delayed)
             action(now)
         self.robot.advance(now)
-        if self.robot.changed or now >= self._next_state:
-            self.robot.changed = False
+        if self.robot.report_due(now) or now >= self._next_state:
+            self.robot.reported(now)
             self._next_state = now + self.robot.state_period_s
             report = self.robot.report()
             for port in (self._tcp, self._pty):
@@ -677,9 +680,10 @@ class Emulator:
             replies = self.robot.receive_invalid(frame.type, frame.seq, now)
         for reply in replies:
             self._send(port, reply, now)
-        if self.robot.changed:
-            # Report immediately after anything that changed (E-stop, completion…).
-            self.robot.changed = False
+        if self.robot.report_due(now):
+            # Report at once after an E-stop, a halt or an operator command; progress
+            # waits for its slot (SimRobot.min_report_gap_s; _tick sends it then).
+            self.robot.reported(now)
             self._next_state = now + self.robot.state_period_s
             self._send(port, self.robot.report(), now)
 

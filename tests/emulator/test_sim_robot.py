@@ -542,3 +542,36 @@ def test_check_exactly_once_finds_repeated_and_skipped_motion() -> None:
     assert any("motion skipped" in p for p in check_exactly_once(ahead, 1, 1))
     orphan = [_rec_p(0, "done", 1.0, 0.4)]
     assert any("first part is not in the log" in p for p in check_exactly_once(orphan, 1, 1))
+
+
+def test_progress_reports_are_paced_but_a_stop_is_reported_at_once() -> None:
+    """Queued/started/done changes wait for the next report slot
+    (``min_report_gap_s``); an E-stop or an operator command never waits."""
+    robot, clock = make(min_report_gap_s=0.02)
+    hello(robot, watchdog_ms=50_000)
+    robot.reported(clock.t)
+    seq = 1
+    for i in range(3):  # three short commands queued back to back
+        (ack,) = robot.receive(joints(i, ms=5), seq)
+        assert isinstance(ack, Ack)
+        seq += 1
+    assert robot.changed and not robot.report_due(clock.t)
+    assert robot.report_at() == pytest.approx(clock.t + 0.02)
+    clock.t += 0.019
+    robot.advance(clock.t)  # all three done (15 ms of motion) inside the slot
+    assert robot.last_done == 2 and not robot.report_due(clock.t)
+    clock.t += 0.001
+    assert robot.report_due(clock.t)  # one report carries all three completions
+    robot.reported(clock.t)
+    assert not robot.changed and robot.report_at() is None
+    robot.receive(joints(3, ms=1000), seq)
+    seq += 1
+    clock.t += 0.001
+    robot.advance(clock.t)
+    assert robot.busy and not robot.report_due(clock.t)
+    robot.receive(Estop(), 0)
+    assert robot.report_due(clock.t)  # 1 ms after the last report: not held back
+    assert robot.report().mode == Mode.ESTOP
+    robot.reported(clock.t)
+    robot.receive(Pause(), seq)
+    assert robot.report_due(clock.t)
