@@ -11,6 +11,12 @@ the last *completed* one, and reports progress through callbacks:
     (SQLite) is "record before advancing".  The resume point is
     ``last acked + 1``.  If it raises, streaming stops (robot paused) and
     ``on_fault`` reports a ``host`` fault.
+``on_acks(first, last)``
+    instead of ``on_ack``: commands ``first`` … ``last`` (inclusive) have
+    completed, once per state report that advances ``last_done``, with the
+    same ordering and "record before advancing" guarantee.  One report often
+    completes several short commands; one call lets the caller persist them
+    in one transaction (one ``fsync``) instead of one each.
 ``on_state(report)``
     every robot state report (:class:`robots.protocol.messages.State`) while the
     streamer is alive — mirror it into the store / scene.
@@ -127,6 +133,7 @@ class Streamer:
         run_id: int,
         start: int = 0,
         on_ack: Callable[[int], None] | None = None,
+        on_acks: Callable[[int, int], None] | None = None,
         on_state: Callable[[State], None] | None = None,
         on_done: Callable[[Outcome], None] | None = None,
         on_fault: Callable[[StreamFault], None] | None = None,
@@ -143,7 +150,10 @@ class Streamer:
         self.program = program
         self.link = link
         self.run_id = run_id
+        if on_ack is not None and on_acks is not None:
+            raise ValueError("give on_ack or on_acks, not both")
         self._on_ack = on_ack
+        self._on_acks = on_acks
         self._on_state = on_state
         self._on_done = on_done
         self._on_fault = on_fault
@@ -418,20 +428,24 @@ class Streamer:
     def _advance_acks(self, last_done: int) -> None:
         last = min(last_done, len(self.program) - 1)
         while self._acked < last:
-            index = self._acked + 1
-            if self._on_ack is not None:
-                try:
-                    self._on_ack(index)
-                except Exception as exc:
-                    # Not persisted → not advanced: hold the robot, let the operator decide.
-                    self._try_send(self.link.pause)
-                    self._to_fault(
-                        ExecState.FAULTED,
-                        StreamFault(FaultKind.HOST, f"on_ack({index}) failed: {exc!r}", index),
-                    )
-                    return
+            first = self._acked + 1
+            upto = last if self._on_acks is not None else first
+            try:
+                if self._on_acks is not None:
+                    self._on_acks(first, upto)
+                elif self._on_ack is not None:
+                    self._on_ack(first)
+            except Exception as exc:
+                # Not persisted → not advanced: hold the robot, let the operator decide.
+                self._try_send(self.link.pause)
+                what = f"on_acks({first}, {upto})" if self._on_acks else f"on_ack({first})"
+                self._to_fault(
+                    ExecState.FAULTED,
+                    StreamFault(FaultKind.HOST, f"{what} failed: {exc!r}", first),
+                )
+                return
             with self._cond:
-                self._acked = index
+                self._acked = upto
         if self._acked >= len(self.program) - 1 and len(self.program) > 0:
             self._finish(Outcome.COMPLETED)
 

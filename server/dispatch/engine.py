@@ -5,7 +5,7 @@ robot-link service process (:mod:`server.linkservice`), apart from the HTTP
 event loop, the scene and the planning workers.  It keeps one
 :class:`robots.adapters.link.RobotLink` per robot, streams a plan's compiled
 program with a :class:`robots.adapters.streamer.Streamer`, records every
-completion in SQLite *before* the streamer may advance (``on_ack`` runs on
+completion in SQLite *before* the streamer may advance (``on_acks`` runs on
 the streamer's thread, never on a link's I/O thread), and mirrors robot state
 into the store and the event sink from a thread of its own, so a slow SQLite
 write can never delay a heartbeat.
@@ -309,7 +309,7 @@ class DispatchEngine:
             r.link,
             run_id=ex.run_id,
             start=start,
-            on_ack=lambda i: self._on_ack(eid, i),
+            on_acks=lambda first, last: self._on_acks(eid, first, last),
             on_done=lambda outcome: self._on_done(eid, outcome),
             on_fault=lambda fault: self._on_fault(eid, fault),
         )
@@ -426,9 +426,9 @@ class DispatchEngine:
                     self._transition(eid, "abort", "estop", reason)
 
     # ------------------------------------------------------------- callbacks
-    def _on_ack(self, execution_id: str, index: int) -> None:
+    def _on_acks(self, execution_id: str, first: int, last: int) -> None:
         # Runs on the streamer thread; the streamer advances only after this returns.
-        self.store.record_ack(execution_id, index)
+        self.store.record_acks(execution_id, first, last)
         ex = self.store.get_execution(execution_id)
         self.events.publish(
             "execution",

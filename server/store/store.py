@@ -505,6 +505,22 @@ class Store:
                 (int(index) + 1, utcnow(), execution_id),
             )
 
+    def record_acks(self, execution_id: str, first: int, last: int) -> None:
+        """Commands ``first`` … ``last`` finished: :meth:`record_ack` for each, in one
+        transaction (one durable commit)."""
+        if last < first:
+            raise ValueError(f"record_acks({first}, {last}): last < first")
+        now = utcnow()
+        with self.db.transaction() as conn:
+            conn.executemany(
+                "INSERT OR IGNORE INTO execution_acks VALUES (?,?,?)",
+                [(execution_id, i, now) for i in range(int(first), int(last) + 1)],
+            )
+            conn.execute(
+                "UPDATE executions SET acked = MAX(acked, ?), updated_at = ? WHERE id = ?",
+                (int(last) + 1, now, execution_id),
+            )
+
     def list_acks(self, execution_id: str) -> list[int]:
         rows = self.db.query(
             "SELECT idx FROM execution_acks WHERE execution_id = ? ORDER BY idx", (execution_id,)

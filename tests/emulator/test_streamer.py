@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import threading
 
+import pytest
+
 from robots.adapters import ExecState, FaultKind, Outcome, RobotLink, Streamer
 from robots.emulator import Emulator, check_exactly_once
 from robots.protocol import JointMove, Mode, Nozzle, Program
@@ -32,6 +34,30 @@ def test_completes_with_one_ack_per_command_in_order() -> None:
         assert check_exactly_once(emu.execution_log(), 11, len(prog)) == []
         rep = emu.snapshot()
         assert rep.nozzle is False and rep.magnets == 0 and rep.lift_urad == 500_000
+
+
+def test_on_acks_hands_over_contiguous_ranges_once_each() -> None:
+    """Commands shorter than the robot's report slot complete several per report:
+    ``on_acks`` gets them as ranges that tile the program in order, none twice."""
+    prog = moves(60, 0.0)  # zero-length moves: many complete between two reports
+    ranges: list[tuple[int, int]] = []
+    with Emulator("generic", time_scale=20) as emu, RobotLink(emu.url, link_config(emu)) as link:
+        with Streamer(prog, link, run_id=12, on_acks=lambda a, b: ranges.append((a, b))) as s:
+            assert s.wait(timeout=20) == ExecState.COMPLETED
+        assert check_exactly_once(emu.execution_log(), 12, len(prog)) == []
+    covered = [i for a, b in ranges for i in range(a, b + 1)]
+    assert covered == list(range(len(prog)))
+    assert all(a <= b for a, b in ranges)
+    assert len(ranges) < len(prog)  # at least one report carried several completions
+
+
+def test_on_ack_and_on_acks_are_exclusive() -> None:
+    with (
+        Emulator("generic") as emu,
+        RobotLink(emu.url, link_config(emu)) as link,
+        pytest.raises(ValueError, match="not both"),
+    ):
+        Streamer(moves(2), link, run_id=1, on_ack=print, on_acks=lambda a, b: None)
 
 
 def test_window_bounds_what_is_ahead_of_the_persisted_ack() -> None:

@@ -241,3 +241,26 @@ def test_get_plan_can_leave_result_and_program_unread(tmp_path: Path) -> None:
     assert bare.result == {} and bare.program is None
     assert bare.public(include_result=False) == full.public(include_result=False)
     assert store.get_plan(pid, program=False).result == full.result
+
+
+def test_record_acks_is_record_ack_for_a_range_and_survives_a_restart(tmp_path: Path) -> None:
+    store = Store(tmp_path)
+    pid = _planned(store)
+    store.transition_plan(pid, "approve", "carol", approved_by="carol")
+    one = store.create_execution(pid, "ara", 10, "carol")
+    for i in range(0, 6):
+        store.record_ack(one.id, i)
+    store.close()
+    store = Store(tmp_path)
+    pid2 = _planned(store)
+    store.transition_plan(pid2, "approve", "carol", approved_by="carol")
+    ranged = store.create_execution(pid2, "ara", 10, "carol")
+    store.record_acks(ranged.id, 0, 2)
+    store.record_acks(ranged.id, 1, 5)  # overlaps: nothing twice, acked only grows
+    store.record_acks(ranged.id, 3, 3)
+    assert store.list_acks(ranged.id) == store.list_acks(one.id) == list(range(6))
+    assert store.get_execution(ranged.id).acked == store.get_execution(one.id).acked == 6
+    with pytest.raises(ValueError, match="last < first"):
+        store.record_acks(ranged.id, 4, 3)
+    assert store.list_acks(ranged.id) == list(range(6))
+    store.close()
