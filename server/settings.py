@@ -45,6 +45,15 @@ class Settings(BaseSettings):
         le=1000,
         description="embedded emulators run motions this much faster than real time",
     )
+    emulator_nice: int = Field(
+        0,
+        ge=-20,
+        le=19,
+        description="the embedded emulators' OS priority relative to the server's (an os.nice "
+        "increment; below 0 needs root). An emulator stands in for a robot controller with a "
+        "CPU of its own: ahead of the server (< 0) it takes CPU a real robot never would, the "
+        "more so at a time scale of 10, where it handles ten times a real robot's command rate",
+    )
     log_level: str = Field("info", description="uvicorn log level")
     access_log: bool = Field(
         False,

@@ -18,7 +18,6 @@ emulator makes up a random secret it tells nobody, so nobody can control it.
 from __future__ import annotations
 
 import argparse
-import contextlib
 import logging
 import os
 import signal
@@ -28,6 +27,8 @@ import threading
 from robots.background_io import log_through_a_queue
 from robots.emulator.faults import FaultConfig
 from robots.emulator.server import Emulator, parse_listen
+
+log = logging.getLogger(__name__)
 
 
 def build_parser(prog: str = "steelpath emulate") -> argparse.ArgumentParser:
@@ -48,6 +49,13 @@ def build_parser(prog: str = "steelpath emulate") -> argparse.ArgumentParser:
     )
     p.add_argument(
         "--time-scale", type=float, default=1.0, help="simulated seconds per wall second"
+    )
+    p.add_argument(
+        "--nice",
+        type=int,
+        default=0,
+        help="change the process priority by this much (os.nice; below 0 needs root): "
+        "0 shares the CPU with the host fairly, < 0 runs the emulator ahead of it",
     )
     p.add_argument("--state-period", type=float, default=0.1, help="state report period, s")
     p.add_argument("--buffer", type=int, default=16, help="command buffer capacity")
@@ -181,9 +189,15 @@ def _run(args: argparse.Namespace, in_main: bool) -> int:
     logging.basicConfig(level=logging.INFO, format="%(asctime)s %(name)s %(message)s")
     log_through_a_queue()
     # The emulator plays a robot's own controller, which shares no CPU with
-    # the host: ahead of the host's load, as the link service is (root only).
-    with contextlib.suppress(OSError):
-        os.nice(-5)
+    # the host.  Neither priority is faithful on one machine: ahead of the host
+    # (< 0) it takes CPU the web server would have had on real hardware (at a
+    # time scale of 10, ten times a real robot's command rate); level with it,
+    # the host's load can delay the robot.  Level is the default.
+    if args.nice:
+        try:
+            os.nice(args.nice)
+        except OSError:
+            log.warning("cannot change the emulator's priority by %d (needs root)", args.nice)
     try:
         emu.start()
     except OSError as exc:

@@ -105,10 +105,13 @@ def _answers(url: str) -> bool:
 class EmulatorSupervisor:
     """Finds or starts one emulator process per robot under ``<data>/emulators``."""
 
-    def __init__(self, data: Path, robots: list[str], *, time_scale: float = 1.0) -> None:
+    def __init__(
+        self, data: Path, robots: list[str], *, time_scale: float = 1.0, nice: int = 0
+    ) -> None:
         self.dir = Path(data) / "emulators"
         self.robots = list(robots)
         self.time_scale = time_scale
+        self.nice = nice
         self.procs: dict[str, EmulatorProcess] = {}
         self._popen: dict[str, subprocess.Popen[bytes]] = {}
 
@@ -173,6 +176,8 @@ class EmulatorSupervisor:
             "tcp://127.0.0.1:0",
             "--time-scale",
             repr(self.time_scale),
+            "--nice",
+            str(self.nice),
             "--secret-file",
             str(key),
             "--state-file",

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import os
 import signal
 import subprocess
 import sys
@@ -30,6 +31,7 @@ def test_help_and_bad_arguments(capsys: pytest.CaptureFixture[str]) -> None:
         "--nak-index",
         "--fault-at-index",
         "--secret-file",
+        "--nice",
     ):
         assert flag in out
     assert main(["--listen", "udp://x"]) == 2
@@ -54,6 +56,8 @@ def test_runs_until_sigterm_and_serves_tcp_and_pty(tmp_path: Path) -> None:
             str(log),
             "--secret-file",
             str(key),
+            "--nice",
+            "3",
         ],
         stdout=subprocess.PIPE,
         stderr=subprocess.DEVNULL,
@@ -67,6 +71,9 @@ def test_runs_until_sigterm_and_serves_tcp_and_pty(tmp_path: Path) -> None:
         pty_path = lines[2].split()[-1]
         assert url.startswith("socket://127.0.0.1:") and pty_path.startswith("/dev/pts/")
         assert key.stat().st_mode & 0o777 == 0o600
+        # --nice lowers its priority relative to its parent's (field 19 of /proc/PID/stat).
+        stat = Path(f"/proc/{proc.pid}/stat").read_text().rsplit(")", 1)[1].split()
+        assert int(stat[16]) == min(19, os.nice(0) + 3)
         assert key.parent.stat().st_mode & 0o777 == 0o700
         cfg = LinkConfig(secret=load_or_create_secret(key))
         # Without the key file's secret nobody gets a session.

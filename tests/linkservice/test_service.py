@@ -7,6 +7,7 @@ import os
 import signal
 import threading
 import time
+from pathlib import Path
 
 import pytest
 
@@ -43,6 +44,9 @@ def test_link_service_is_a_process_of_its_own(lapi) -> None:
     for name in eng.robot_names():
         emu = lapi.services.emulators[name]
         assert emu.alive() and emu.pid not in (os.getpid(), stats["pid"])
+        # Level with the web server (STEELPATH_EMULATOR_NICE=0), not ahead of it.
+        stat = Path(f"/proc/{emu.pid}/stat").read_text().rsplit(")", 1)[1].split()
+        assert int(stat[16]) == os.nice(0)
 
 
 def test_stalled_event_loop_cannot_delay_the_link_service(lapi) -> None:
