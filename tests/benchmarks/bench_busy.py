@@ -162,6 +162,7 @@ def start_server(tmp: Path, args: argparse.Namespace, servers: list[Server]) -> 
             "STEELPATH_SCENE_PORT": "0",
             "STEELPATH_TOKEN_FILE": str(tmp / "admin.token"),
             "STEELPATH_EMULATOR_TIME_SCALE": repr(args.time_scale),
+            "STEELPATH_EMULATOR_NICE": str(args.emulator_nice),
             "STEELPATH_JOB_WORKERS": str(args.job_workers),
             "STEELPATH_MAX_UPLOAD_MB": repr(max(400.0, args.upload_mb * 1.5)),
             "STEELPATH_LOG_LEVEL": args.log_level,
@@ -898,6 +899,12 @@ def main() -> int:
     ap.add_argument("--poll-interval", type=float, default=0.5, help="s between a client's reads")
     ap.add_argument("--quiet-read-s", type=float, default=10.0, help="quiet read phase length")
     ap.add_argument("--time-scale", type=float, default=10.0, help="emulator time scale")
+    ap.add_argument(
+        "--emulator-nice",
+        type=int,
+        default=0,
+        help="STEELPATH_EMULATOR_NICE: the emulators' priority (0: level with the server)",
+    )
     ap.add_argument("--job-workers", type=int, default=2, help="STEELPATH_JOB_WORKERS")
     ap.add_argument("--log-level", default="info", help="server log level")
     ap.add_argument(
@@ -1061,6 +1068,7 @@ def run(args: argparse.Namespace, quiet_trials: int, tmp: Path, servers: list[Se
         )
         clear_all(api, prep.robots)
         log(f"loaded: {len(prep.dispatch_jobs)} dispatches")
+        t_dispatch = time.monotonic()
         dispatches = run_dispatches(
             srv.url, operator["token"], prep.dispatch_jobs, args.dispatch_timeout
         )
@@ -1079,6 +1087,10 @@ def run(args: argparse.Namespace, quiet_trials: int, tmp: Path, servers: list[Se
         s for name, r in results.items() if name.startswith("reads-") for s in r.get("samples", [])
     ]
     loaded_reads = read_stats(read_samples, t_loaded, t_end)
+    loaded_reads["by_phase"] = {
+        "E-stop trials": read_stats(read_samples, t_loaded, t_dispatch),
+        "dispatches": read_stats(read_samples, t_dispatch, t_end),
+    }
     loaded_reads["errors"] = [
         e for name, r in results.items() if name.startswith("reads-") for e in r.get("errors", [])
     ]
@@ -1128,7 +1140,8 @@ def report(
     print(
         f"bench_busy — loaded: {args.clients} clients (a read each {args.poll_interval} s), "
         f"{args.planning} planning jobs ({args.job_workers} workers), "
-        f"{cloud_bytes / 2**20:.0f} MiB XYZ upload loop; emulator time scale {args.time_scale}"
+        f"{cloud_bytes / 2**20:.0f} MiB XYZ upload loop; emulator time scale {args.time_scale}, "
+        f"nice {args.emulator_nice}"
     )
     print(f"E-stop measured as: {loaded_run.method}")
     if loaded_run.cut_short is not None:
@@ -1162,6 +1175,13 @@ def report(
             f"{name} read p95 by route (ms): "
             + ", ".join(f"{k} {fmt(v)}" for k, v in st["p95_by"].items())
         )
+    print(
+        "loaded read p50/p95 by phase (ms): "
+        + ", ".join(
+            f"{k} {fmt(v['p50'])}/{fmt(v['p95'])} (n={v['n']})"
+            for k, v in loaded_reads.get("by_phase", {}).items()
+        )
+    )
     print(
         f"loaded E-stop trials with the upload in flight: {n_up}/{len(loaded_run.trials)}, "
         f"with {args.planning} plans in flight: {n_pl}/{len(loaded_run.trials)}"
