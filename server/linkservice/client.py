@@ -316,19 +316,6 @@ class LinkServiceClient:
     STATUS_TTL_S = 0.1
     STATUS_STALE_OK_S = 2.0
 
-    def fresh_statuses(self) -> list[dict[str, Any]] | None:
-        """The shared answer of :meth:`robot_statuses` while it is fresh, else
-        ``None``; never waits (a lock held by a round trip counts as stale)."""
-        if not self._status_lock.acquire(blocking=False):
-            return None
-        try:
-            cached = self._status_cache
-            if cached is None or time.monotonic() - cached[0] >= self.STATUS_TTL_S:
-                return None
-            return [dict(s) for s in cached[1]]
-        finally:
-            self._status_lock.release()
-
     def recent_statuses(self) -> list[dict[str, Any]] | None:
         """The shared answer if it is younger than :data:`STATUS_STALE_OK_S`, and
         a refresh in the background when it is past :data:`STATUS_TTL_S`; else

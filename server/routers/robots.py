@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from typing import Annotated, Any
 
-from fastapi import APIRouter, Depends, HTTPException, Response
+from fastapi import APIRouter, Depends, HTTPException, Query, Response
 from fastapi.concurrency import run_in_threadpool
 from pydantic import BaseModel, Field, field_validator
 
@@ -138,9 +138,16 @@ def dispatch(plan_id: str, req: DispatchRequest, services: Svc, who: Operator) -
 # worker-thread hop (see server/routers/plans.py).
 @router.get("/executions", response_model=list[dict[str, Any]])
 async def list_executions(
-    services: Svc, _: Viewer, plan_id: str | None = None, state: str | None = None
+    services: Svc,
+    _: Viewer,
+    plan_id: str | None = None,
+    state: str | None = None,
+    limit: Annotated[int, Query(ge=1, le=500)] = 100,
+    offset: Annotated[int, Query(ge=0, le=10**9)] = 0,
 ) -> Response:
-    return json_response([e.public() for e in services.store.list_executions(plan_id, state)])
+    """Executions, newest first; page with ``limit`` and ``offset``."""
+    rows = services.store.list_executions(plan_id, state, limit=limit, offset=offset)
+    return json_response([e.public() for e in rows])
 
 
 @router.get("/executions/{execution_id}", response_model=dict[str, Any])

@@ -434,8 +434,13 @@ class Store:
         return ExecutionRecord.from_row(row)
 
     def list_executions(
-        self, plan_id: str | None = None, state: str | None = None, limit: int = 100
+        self,
+        plan_id: str | None = None,
+        state: str | None = None,
+        limit: int = 100,
+        offset: int = 0,
     ) -> list[ExecutionRecord]:
+        """Executions, newest first (``limit`` rows after skipping ``offset``)."""
         sql = "SELECT * FROM executions WHERE 1=1"
         args: list[Any] = []
         if plan_id:
@@ -444,8 +449,8 @@ class Store:
         if state:
             sql += " AND state = ?"
             args.append(state)
-        sql += " ORDER BY created_at DESC LIMIT ?"
-        args.append(limit)
+        sql += " ORDER BY created_at DESC LIMIT ? OFFSET ?"
+        args += [limit, offset]
         return [ExecutionRecord.from_row(r) for r in self.db.query(sql, args)]
 
     def newest_execution_of(self, robot: str, states: Iterable[str]) -> str | None:

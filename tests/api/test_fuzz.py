@@ -129,3 +129,25 @@ def test_event_stream_parameters_conform(fuzz_app: tuple[Any, dict[str, str]]) -
             assert r.status_code == 422, (bad, r.text)
         r = client.get("/api/v1/events?once=true&heartbeat_s=1", headers=auth)
         assert r.status_code == 200 and r.text.startswith(": steelpath event stream")
+
+
+def test_every_numeric_query_parameter_is_bounded_both_ways() -> None:
+    """#12 §5: no numeric query parameter reaches SQLite or a loop unbounded
+    (``limit=-1`` once bypassed a cap; ``heartbeat_s=0`` busy-looped)."""
+    spec = APP.openapi()
+    unbounded, seen = [], 0
+    for path, ops in spec["paths"].items():
+        for method, op in ops.items():
+            for prm in op.get("parameters", []):
+                sch = prm.get("schema", {})
+                variants = sch.get("anyOf", [sch])
+                for v in variants:
+                    if v.get("type") not in ("integer", "number"):
+                        continue
+                    seen += 1
+                    lo = "minimum" in v or "exclusiveMinimum" in v
+                    hi = "maximum" in v or "exclusiveMaximum" in v
+                    if not (lo and hi):
+                        unbounded.append(f"{method.upper()} {path} {prm['name']}")
+    assert seen >= 8  # the listings' limit/offset, the audit's, heartbeat_s …
+    assert unbounded == []

@@ -180,6 +180,10 @@ def test_newest_execution_of_agrees_with_a_scan_of_every_record(tmp_path: Path) 
                 ),
             )
     every = store.list_executions(limit=10_000)
+    assert [e.created_at for e in every] == sorted((e.created_at for e in every), reverse=True)
+    pages = [store.list_executions(limit=70, offset=k) for k in range(0, 300, 70)]
+    assert [len(pg) for pg in pages] == [70, 70, 70, 70, 20]
+    assert [e.id for pg in pages for e in pg] == [e.id for e in every]  # pages tile it
     for robot in [*robots, "sbg_climber"]:
         for wanted in ({"pending", "running"}, {"paused", "interrupted", "running"}, set()):
             brute = next((e.id for e in every if e.robot == robot and e.state in wanted), None)

@@ -48,37 +48,6 @@ def test_the_answer_expires_after_the_ttl() -> None:
     assert c.calls == ["robot_statuses", "robot_statuses"]
 
 
-def test_fresh_statuses_answer_from_the_cache_only_and_never_wait() -> None:
-    import threading
-
-    c = Counting()
-    c.STATUS_TTL_S = 60.0  # type: ignore[misc]
-    assert c.fresh_statuses() is None  # nothing fetched yet: no round trip either
-    assert c.calls == []
-    c.robot_statuses()
-    got = c.fresh_statuses()
-    assert got == [{"name": "ara", "state": "ready", "n": 1}]
-    assert got is not None
-    got[0]["state"] = "mutated"
-    assert c.fresh_statuses() == [{"name": "ara", "state": "ready", "n": 1}]
-    held, release = threading.Event(), threading.Event()
-
-    def hold() -> None:
-        with c._status_lock:  # a round trip in progress
-            held.set()
-            release.wait(10)
-
-    t = threading.Thread(target=hold)
-    t.start()
-    held.wait(10)
-    assert c.fresh_statuses() is None  # would have to wait: stale instead
-    release.set()
-    t.join()
-    c._on_event("execution", {"id": "ex_1"})  # a pushed change drops the cache
-    assert c.fresh_statuses() is None
-    assert c.calls == ["robot_statuses"]
-
-
 def test_reports_and_progress_keep_the_answer_state_changes_drop_it() -> None:
     c = Counting()
     c.STATUS_TTL_S = 60.0  # type: ignore[misc]
@@ -87,16 +56,16 @@ def test_reports_and_progress_keep_the_answer_state_changes_drop_it() -> None:
     for k in range(1, 30):  # acks while it streams, and the robot's reports
         c._on_event("execution", {"id": "ex_1", "state": "executing", "acked": k})
         c._on_event("robot", {"name": "ara", "report": {"last_done": k}})
-    assert c.fresh_statuses() is not None
+    assert c._status_cache is not None
     assert c.calls == ["robot_statuses"]
     c._on_event("execution", {"id": "ex_1", "state": "completed", "acked": 30})
-    assert c.fresh_statuses() is None  # an execution's state changed
+    assert c._status_cache is None  # an execution's state changed
     c.robot_statuses()
     c._on_event("robot", {"name": "ara", "estop_latched": False})
-    assert c.fresh_statuses() is None  # an E-stop / link change
+    assert c._status_cache is None  # an E-stop / link change
     c.robot_statuses()
     c._on_event("execution", {"id": "ex_2", "state": "executing", "acked": 0})
-    assert c.fresh_statuses() is None  # a new execution
+    assert c._status_cache is None  # a new execution
     assert c.calls == ["robot_statuses"] * 3
 
 
