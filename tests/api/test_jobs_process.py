@@ -15,6 +15,7 @@ import httpx
 import pytest
 
 from server.kinds import registry
+from tests.support.procstat import proc_stat
 
 
 @pytest.fixture
@@ -82,16 +83,6 @@ def test_unstorable_result_fails_cleanly(papi) -> None:
 
 
 # ------------------------------------------------------- issue #12 §1, §6: workers
-def _proc_stat(pid: int) -> tuple[str, int, int] | None:
-    """(state, ppid, nice) from /proc/PID/stat, or None once the process is gone."""
-    try:
-        raw = Path(f"/proc/{pid}/stat").read_text()
-    except (FileNotFoundError, ProcessLookupError):
-        return None
-    fields = raw[raw.rindex(")") + 2 :].split()  # after "pid (comm) "
-    return fields[0], int(fields[1]), int(fields[16])
-
-
 def _cmdline(pid: int) -> str:
     try:
         return Path(f"/proc/{pid}/cmdline").read_bytes().replace(b"\0", b" ").decode()
@@ -103,15 +94,15 @@ def _children(ppid: int) -> list[int]:
     out = []
     for name in os.listdir("/proc"):
         if name.isdigit():
-            st = _proc_stat(int(name))
-            if st is not None and st[1] == ppid and st[0] != "Z":
+            st = proc_stat(int(name))
+            if st is not None and st.ppid == ppid and st.state != "Z":
                 out.append(int(name))
     return out
 
 
 def _alive(pid: int) -> bool:
-    st = _proc_stat(pid)
-    return st is not None and st[0] != "Z"  # a zombie has exited (its reaper is just slow)
+    st = proc_stat(pid)
+    return st is not None and st.state != "Z"  # a zombie has exited (its reaper is just slow)
 
 
 @pytest.mark.slow  # starts a whole server process (~1 min on a loaded 2-core machine)
@@ -160,10 +151,10 @@ def test_workers_are_niced_and_die_with_a_killed_server(tmp_path) -> None:
             time.sleep(0.2)
         spawned = [p for p in _children(server.pid) if "multiprocessing" in _cmdline(p)]
         base_nice = os.getpriority(os.PRIO_PROCESS, 0)  # the server inherits ours
-        assert _proc_stat(server.pid)[2] == base_nice  # only the workers are niced
+        assert proc_stat(server.pid)[2] == base_nice  # only the workers are niced
         nice = min(base_nice + 10, 19)
-        workers = [p for p in spawned if (_proc_stat(p) or ("", 0, 0))[2] == nice]
-        assert len(workers) == 2, [(p, _proc_stat(p), _cmdline(p)) for p in spawned]
+        workers = [p for p in spawned if (proc_stat(p) or ("", 0, 0))[2] == nice]
+        assert len(workers) == 2, [(p, proc_stat(p), _cmdline(p)) for p in spawned]
         server.kill()  # SIGKILL: no shutdown code runs
         server.wait(10)
         deadline = time.monotonic() + 10

@@ -14,6 +14,7 @@ import pytest
 from robots.adapters import LinkConfig, RobotLink
 from robots.emulator import main
 from robots.protocol import JointMove, generate_secret, load_or_create_secret
+from tests.support.procstat import proc_stat
 
 
 def test_help_and_bad_arguments(capsys: pytest.CaptureFixture[str]) -> None:
@@ -72,8 +73,8 @@ def test_runs_until_sigterm_and_serves_tcp_and_pty(tmp_path: Path) -> None:
         assert url.startswith("socket://127.0.0.1:") and pty_path.startswith("/dev/pts/")
         assert key.stat().st_mode & 0o777 == 0o600
         # --nice lowers its priority relative to its parent's (field 19 of /proc/PID/stat).
-        stat = Path(f"/proc/{proc.pid}/stat").read_text().rsplit(")", 1)[1].split()
-        assert int(stat[16]) == min(19, os.nice(0) + 3)
+        st = proc_stat(proc.pid)
+        assert st is not None and st.nice == min(19, os.nice(0) + 3)
         assert key.parent.stat().st_mode & 0o777 == 0o700
         cfg = LinkConfig(secret=load_or_create_secret(key))
         # Without the key file's secret nobody gets a session.

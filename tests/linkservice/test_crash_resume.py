@@ -30,6 +30,7 @@ import pytest
 from robots.emulator.robot import check_exactly_once
 from server.linkservice.emulators import EmulatorProcess
 from tests.support.live import free_port
+from tests.support.procstat import proc_stat
 from tests.support.waiting import wait_for as _wait
 
 pytestmark = pytest.mark.slow
@@ -305,7 +306,5 @@ def test_the_link_service_dies_with_a_killed_server_and_the_robots_do_not(
 
 
 def _zombie(pid: int) -> bool:
-    try:
-        return Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0] == "Z"
-    except OSError:
-        return True
+    st = proc_stat(pid)
+    return st is None or st.state == "Z"

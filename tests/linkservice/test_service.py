@@ -7,11 +7,11 @@ import os
 import signal
 import threading
 import time
-from pathlib import Path
 
 import pytest
 
 from robots.emulator.robot import check_exactly_once
+from tests.support.procstat import proc_stat
 from tests.support.waiting import wait_for as _wait
 
 ESTOP_MODE = 4  # STATE.mode ESTOP (docs/protocol.md §6)
@@ -45,8 +45,8 @@ def test_link_service_is_a_process_of_its_own(lapi) -> None:
         emu = lapi.services.emulators[name]
         assert emu.alive() and emu.pid not in (os.getpid(), stats["pid"])
         # Level with the web server (STEELPATH_EMULATOR_NICE=0), not ahead of it.
-        stat = Path(f"/proc/{emu.pid}/stat").read_text().rsplit(")", 1)[1].split()
-        assert int(stat[16]) == os.nice(0)
+        st = proc_stat(emu.pid)
+        assert st is not None and st.nice == os.nice(0)
 
 
 def test_stalled_event_loop_cannot_delay_the_link_service(lapi) -> None:
