@@ -348,6 +348,16 @@ class PlanWatch:
             time.sleep(0.5)
 
 
+def all_executions(api: Api, page: int = 500) -> list[dict[str, Any]]:
+    """Every execution, page by page (``GET /executions`` answers at most 500)."""
+    out: list[dict[str, Any]] = []
+    while True:
+        got = api.get("/executions", params={"limit": page, "offset": len(out)})
+        out += got
+        if len(got) < page:
+            return out
+
+
 def robot_state(api: Api, robot: str) -> dict[str, Any]:
     return dict(api.get(f"/robots/{robot}/state"))
 
@@ -739,13 +749,12 @@ def estop_trials(
             60,
             0.02,
         )
-        wait_for(
-            f"E-stopped execution {ex['id']} to end",
-            lambda ex_id=ex["id"]: api.get(f"/executions/{ex_id}")["state"]
-            in TERMINAL_EXEC_STATES,
-            60,
-            0.02,
-        )
+        ex_id = str(ex["id"])
+
+        def ended(ex_id: str = ex_id) -> bool:
+            return api.get(f"/executions/{ex_id}")["state"] in TERMINAL_EXEC_STATES
+
+        wait_for(f"E-stopped execution {ex_id} to end", ended, 60, 0.02)
         api.post(f"/robots/{ESTOP_ROBOT}/clear-estop")
     log(f"{label}: {n} E-stop trials done" + (f", {run.skipped} skipped" if run.skipped else ""))
 
@@ -1077,7 +1086,7 @@ def run(args: argparse.Namespace, quiet_trials: int, tmp: Path, servers: list[Se
     sampler.halt.set()
     sampler.join(5)
     results = {lp.name: lp.result() for lp in procs}
-    ex_state = {e["id"]: e["state"] for e in api.get("/executions")}
+    ex_state = {e["id"]: e["state"] for e in all_executions(api)}
     trial_states: dict[str, int] = {}
     for t in quiet_run.trials + loaded_run.trials:
         st = ex_state.get(t.execution, "missing")
@@ -1170,10 +1179,10 @@ def report(
             prev.append(st)
             cells = [fmt(st[k]) for k in ("p50", "p95", "p99", "max")]
         print(f"{name:38} {cells[0]:>8} {cells[1]:>8} {cells[2]:>8} {cells[3]:>8}")
-    for name, st in (("quiet", quiet_reads), ("loaded", loaded_reads)):
+    for name, reads in (("quiet", quiet_reads), ("loaded", loaded_reads)):
         print(
             f"{name} read p95 by route (ms): "
-            + ", ".join(f"{k} {fmt(v)}" for k, v in st["p95_by"].items())
+            + ", ".join(f"{k} {fmt(v)}" for k, v in reads["p95_by"].items())
         )
     print(
         "loaded read p50/p95 by phase (ms): "
