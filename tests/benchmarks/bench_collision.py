@@ -20,6 +20,10 @@ Sections (ratios are before / after, both measured here, now):
 4. Whole surface with collision avoidance (``plan_blasting`` on Surfaces 1–3
    in the I-beam channel, and Surface 1 with the rod in the blast zone):
    before (the reference kernel patched into ``clearance``) and after.
+5. CMBOT §4 arm experiment (seed 002 Eq. 15–26, with avoidance and the
+   without-avoidance comparison run, simulation gate): before (the former
+   per-pair GJK patched into ``experiment.pair_distances``) and after (the
+   batched closed form), same scene and parameters.
 """
 
 from __future__ import annotations
@@ -38,6 +42,7 @@ from scipy.spatial.transform import Rotation
 sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
 
 import planners.blasting.collision as col
+import planners.cmbot.experiment as cmbot_experiment
 from planners.blasting import (
     CLEAR_HORIZON_M,
     CLEAR_REL_TOL,
@@ -50,6 +55,7 @@ from planners.blasting import (
 from planners.blasting import arm as A
 from planners.blasting.collision import Box, Obstacles, Spheroids
 from planners.cmbot.distance import Cuboid, sphere_box_exact
+from planners.cmbot.manipulation import plan_manipulation
 from robots import load_robot
 from tests.blasting import _reference_collision as ref
 from tests.cmbot._reference_gjk import sphere_box_gjk
@@ -248,19 +254,69 @@ def section_whole(quick: bool) -> None:
         print(f"{'':38s} ratio before/after {times['before'] / times['after']:.2f}×")
 
 
+def _gjk_pair_distances(
+    centers: np.ndarray,
+    radii: np.ndarray,
+    boxes: list[Cuboid],
+    arrays: object,
+    mask: np.ndarray,
+    cutoff: float,
+) -> tuple[list[tuple[int, int, float, np.ndarray]], tuple[float, int, int]]:
+    """``experiment.pair_distances`` as it ran before #13: one GJK per masked pair."""
+    near: list[tuple[int, int, float, np.ndarray]] = []
+    best = (np.inf, -1, -1)
+    for i, j in zip(*np.nonzero(mask), strict=True):
+        d, u = sphere_box_gjk(centers[i], float(radii[i]), boxes[j])
+        if d <= cutoff:
+            near.append((int(i), int(j), float(d), u))
+        if d < best[0]:
+            best = (float(d), int(i), int(j))
+    return near, best
+
+
+def section_cmbot_experiment(quick: bool) -> None:
+    print("\n== 5. CMBOT §4 arm experiment, before (per-pair GJK) / after (closed form) ==")
+    model = load_robot("cmbot")
+    current = cmbot_experiment.pair_distances
+    print(f"{'':7s} {'err mm':>7s} {'clr m':>7s} {'err0 mm':>7s} {'clr0 m':>7s} {'gate':>5s} {'s':>6s}")
+    times = {}
+    for tag, fn in (("before", _gjk_pair_distances), ("after", current)):
+        cmbot_experiment.pair_distances = fn  # track() looks it up at call time
+        try:
+            t, plan = _timed(
+                lambda: plan_manipulation(model, compare=not quick, relocate=False), repeat=1
+            )
+        finally:
+            cmbot_experiment.pair_distances = current
+        times[tag] = t
+        m = plan.metrics  # type: ignore[attr-defined]
+        err0 = m.get("without_avoidance_max_tracking_error_mm", float("nan"))
+        clr0 = m.get("without_avoidance_min_clearance_m", float("nan"))
+        gate = "PASS" if plan.gate.passed else "FAIL"  # type: ignore[attr-defined]
+        print(f"{tag:7s} {m['max_tracking_error_mm']:7.3f} {m['min_clearance_m']:7.4f} "
+              f"{err0:7.3f} {clr0:7.4f} {gate:>5s} {t:6.2f}")  # fmt: skip
+    print(f"{'':7s} ratio before/after {times['before'] / times['after']:.2f}×")
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument(
         "--quick", action="store_true", help="fewer pairs and configurations, Surface 1 only"
     )
     ap.add_argument(
-        "--sections", default="1,2,3,4", help="comma-separated section numbers, in run order"
+        "--sections", default="1,2,3,4,5", help="comma-separated section numbers, in run order"
     )
     args = ap.parse_args()
-    sections = {"1": section_pairs, "2": section_configs, "3": section_cmbot, "4": section_whole}
+    sections = {
+        "1": section_pairs,
+        "2": section_configs,
+        "3": section_cmbot,
+        "4": section_whole,
+        "5": section_cmbot_experiment,
+    }
     for k in args.sections.split(","):
         if k not in sections:
-            ap.error(f"unknown section {k!r}; sections are 1-4")
+            ap.error(f"unknown section {k!r}; sections are 1-5")
         sections[k](args.quick)
 
 
