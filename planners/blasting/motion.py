@@ -14,17 +14,15 @@ straight joint interpolation passes through an obstacle.  Here:
   whose end clearances (minus the margin) sum to more than D is free
   throughout; otherwise it is bisected (batched over all segments) until
   every piece is certified or a configuration within the margin is found.
-* :func:`rrt_connect` — bidirectional RRT (Kuffner & LaValle 2000) in the
-  joint space (J1–J5; J6 is the free roll of the axisymmetric nozzle and
-  never moves), nearest neighbours in the weighted metric above, every edge
-  certified by :func:`edge_free`; then :func:`shortcut` (random pairs,
-  deterministic) and :func:`densify` (≤ ``max_step`` per joint) so the
-  trajectory's time stamps can hold the 30°/s limit (Eq. 3.12–3.13).
-  ``backend="ompl"`` (or module-wide :data:`BACKEND`) solves the same
-  problem with OMPL's RRT-Connect (:func:`planners.motion.plan_motion`):
-  the same clearance as state validity, :func:`edge_free` injected as the
-  motion validator, OMPL's metric scaled by ``w`` (‖w ⊙ Δq‖₂ instead of the
-  weighted L1 above), no goal bias (OMPL roots its goal tree at ``qb``).
+* :func:`rrt_connect` — OMPL's RRT-Connect (Kuffner & LaValle 2000;
+  :func:`planners.motion.plan_motion`) in the joint space (J1–J5; J6 is the
+  free roll of the axisymmetric nozzle and never moves): the clearance as
+  state validity, :func:`edge_free` injected as the motion validator, OMPL's
+  metric scaled by ``w``, OMPL's simplifier; then :func:`shortcut` (random
+  pairs, deterministic, certified) and :func:`densify` (≤ ``max_step`` per
+  joint) so the trajectory's time stamps can hold the 30°/s limit
+  (Eq. 3.12–3.13).  The hand-written RRT-Connect it replaced is kept as the
+  benchmark baseline (``tests/blasting/_reference_rrt.py``).
 """
 
 from __future__ import annotations
@@ -37,14 +35,9 @@ from typing import TYPE_CHECKING
 import numpy as np
 from numpy.typing import ArrayLike
 
-from planners.errors import InvalidInputError
-
 if TYPE_CHECKING:
     from robots.denso_vm6083 import DensoVM6083
 from planners.motion import plan_motion
-
-# The joint planner behind joint_planner="rrt": "legacy" (below) or "ompl".
-BACKEND = "legacy"
 
 ClearFn = Callable[[np.ndarray], np.ndarray]  # (T,6) → (T,) clearance minus margin (m)
 
@@ -165,22 +158,19 @@ def rrt_connect(
     step_m: float = 0.12,
     max_iter: int = 1500,
     active: np.ndarray | None = None,
-    goal_bias: float = 0.1,
-    backend: str | None = None,
 ) -> RRTResult:
-    """RRT-Connect between joint vectors ``qa`` and ``qb``; joints not in
-    ``active`` (default J1–J5) keep qa's value.  Extensions are at most
-    ``step_m`` in the weighted metric (≈ the largest motion of any
-    ellipsoid point); every edge is certified by :func:`edge_free`.
-    ``backend`` (default :data:`BACKEND`): ``"legacy"`` or ``"ompl"``."""
-    backend = BACKEND if backend is None else backend
-    if backend not in ("legacy", "ompl"):
-        raise InvalidInputError(f"backend must be 'legacy' or 'ompl', got {backend!r}")
+    """OMPL's RRT-Connect (Kuffner & LaValle 2000) between joint vectors ``qa``
+    and ``qb``; joints not in ``active`` (default J1–J5) keep qa's value.
+
+    State validity is ``clear_fn > 0``; every edge is certified by
+    :func:`edge_free`, injected as OMPL's motion validator; OMPL's metric is
+    scaled by ``w`` (‖w ⊙ Δq‖₂) and its range is ``step_m`` (≈ the largest
+    motion of any ellipsoid point); ``max_iter`` planner iterations at most;
+    the seed is drawn from ``rng``, so runs are reproducible."""
     qa = np.asarray(qa, dtype=float)
     qb = np.asarray(qb, dtype=float)
     act = np.arange(5) if active is None else np.asarray(active)
     lo, hi = limits[act, 0], limits[act, 1]
-    wa = w[act]
 
     def full(x: np.ndarray) -> np.ndarray:
         q = np.repeat(qa[None], len(x), axis=0)
@@ -191,81 +181,18 @@ def rrt_connect(
         return clear_fn(full(np.atleast_2d(x)))
 
     xa, xb = qa[act], qb[act]
-    ca0, cb0 = cfn(xa)[0], cfn(xb)[0]
-    if ca0 <= 0 or cb0 <= 0:
+    if cfn(xa)[0] <= 0 or cfn(xb)[0] <= 0:
         return RRTResult(None, 0, 0)
-    if backend == "ompl":
-        res = plan_motion(
-            xa, xb[None], lambda x: cfn(x) > 0,
-            lower=np.minimum(lo, np.minimum(xa, xb)), upper=np.maximum(hi, np.maximum(xa, xb)),
-            seed=int(rng.integers(2**31 - 1)),
-            motion_valid=lambda x0, x1: bool(
-                edge_free(full(x0[None]), full(x1[None]), clear_fn, w)[0]
-            ),
-            range_=step_m, max_time_s=600.0, max_iterations=max_iter,
-            weights=np.maximum(wa, 1e-9),
-        )  # fmt: skip
-        path = None if res.path is None else full(res.path)
-        return RRTResult(path, max(res.vertices, 2 if path is not None else 0), res.iterations)
-    if edge_free(full(xa[None]), full(xb[None]), clear_fn, w, ca=[ca0], cb=[cb0])[0]:
-        return RRTResult(np.stack([qa, qb]), 2, 0)
-    trees = [
-        {"x": [xa], "c": [ca0], "parent": [-1]},
-        {"x": [xb], "c": [cb0], "parent": [-1]},
-    ]
-
-    def nearest(t: dict, x: np.ndarray) -> int:
-        X = np.asarray(t["x"])
-        return int(np.argmin(np.abs(X - x) @ wa))
-
-    def steer(x0: np.ndarray, x1: np.ndarray) -> np.ndarray:
-        d = float(np.abs(x1 - x0) @ wa)
-        return x1 if d <= step_m else x0 + (x1 - x0) * (step_m / d)
-
-    def extend(t: dict, x: np.ndarray) -> tuple[str, int]:
-        k = nearest(t, x)
-        xn = steer(np.asarray(t["x"][k]), x)
-        cn = cfn(xn)[0]
-        if cn <= 0:
-            return "trapped", k
-        if not edge_free(full(np.asarray(t["x"][k])[None]), full(xn[None]), clear_fn, w,
-                         ca=[t["c"][k]], cb=[cn])[0]:  # fmt: skip
-            return "trapped", k
-        t["x"].append(xn)
-        t["c"].append(cn)
-        t["parent"].append(k)
-        reached = np.allclose(xn, x, atol=1e-12)
-        return ("reached" if reached else "advanced"), len(t["x"]) - 1
-
-    def trace(t: dict, k: int) -> list[np.ndarray]:
-        out = []
-        while k >= 0:
-            out.append(np.asarray(t["x"][k]))
-            k = t["parent"][k]
-        return out
-
-    it = 0
-    for it in range(1, max_iter + 1):
-        a, b = (0, 1) if it % 2 else (1, 0)
-        goal = trees[b]["x"][0]
-        x_rand = goal if rng.random() < goal_bias else rng.uniform(lo, hi)
-        status, ka = extend(trees[a], x_rand)
-        if status == "trapped":
-            continue
-        x_new = np.asarray(trees[a]["x"][ka])
-        while True:  # connect: greedy extension of the other tree
-            status_b, kb = extend(trees[b], x_new)
-            if status_b != "advanced":
-                break
-        if status_b == "reached":
-            pa = trace(trees[a], ka)[::-1]
-            pb = trace(trees[b], kb)[1:]
-            joined = pa + pb
-            if a == 1:
-                joined = joined[::-1]
-            n = len(trees[0]["x"]) + len(trees[1]["x"])
-            return RRTResult(full(np.asarray(joined)), n, it)
-    return RRTResult(None, len(trees[0]["x"]) + len(trees[1]["x"]), it)
+    res = plan_motion(
+        xa, xb[None], lambda x: cfn(x) > 0,
+        lower=np.minimum(lo, np.minimum(xa, xb)), upper=np.maximum(hi, np.maximum(xa, xb)),
+        seed=int(rng.integers(2**31 - 1)),
+        motion_valid=lambda x0, x1: bool(edge_free(full(x0[None]), full(x1[None]), clear_fn, w)[0]),
+        range_=step_m, max_time_s=600.0, max_iterations=max_iter,
+        weights=np.maximum(w[act], 1e-9),
+    )  # fmt: skip
+    path = None if res.path is None else full(res.path)
+    return RRTResult(path, max(res.vertices, 2 if path is not None else 0), res.iterations)
 
 
 def shortcut(

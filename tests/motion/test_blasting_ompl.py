@@ -1,6 +1,7 @@
-"""planners.blasting.motion.rrt_connect with the OMPL backend: a joint-space
-ball between the two poses blocks the straight move; the path must go round
-it, checked by fine sampling of every segment (independent of edge_free)."""
+"""planners.blasting.motion.rrt_connect (OMPL) and the former hand-written
+RRT-Connect it replaced (the benchmark baseline): a joint-space ball between
+the two poses blocks the straight move; the path must go round it, checked by
+fine sampling of every segment (independent of edge_free)."""
 
 from __future__ import annotations
 
@@ -11,6 +12,7 @@ import pytest
 
 from planners.blasting import motion
 from planners.errors import InvalidInputError
+from tests.blasting._reference_rrt import rrt_connect_legacy
 
 LIMITS = np.tile([-2.0, 2.0], (6, 1))
 W = np.ones(6)  # clearance below is 1-Lipschitz in Σ|Δq| (≥ ‖Δq‖₂): certifiable
@@ -25,9 +27,8 @@ def clear(Q: np.ndarray) -> np.ndarray:
 
 
 def _plan(seed: int, backend: str) -> motion.RRTResult:
-    return motion.rrt_connect(
-        QA, QB, clear, LIMITS, W, rng=np.random.default_rng(seed), backend=backend
-    )
+    fn = motion.rrt_connect if backend == "ompl" else rrt_connect_legacy
+    return fn(QA, QB, clear, LIMITS, W, rng=np.random.default_rng(seed))
 
 
 @pytest.mark.parametrize("backend", ["legacy", "ompl"])
@@ -50,10 +51,9 @@ def test_ompl_backend_is_deterministic():
     assert np.array_equal(a.path, b.path)
 
 
-def test_blocked_goal_and_bad_backend():
+def test_blocked_goal_and_bad_input():
     inside = np.zeros(6)
-    res = motion.rrt_connect(QA, inside, clear, LIMITS, W, rng=np.random.default_rng(0),
-                             backend="ompl")  # fmt: skip
+    res = motion.rrt_connect(QA, inside, clear, LIMITS, W, rng=np.random.default_rng(0))
     assert res.path is None
-    with pytest.raises(InvalidInputError):
-        _plan(0, "moveit")
+    with pytest.raises(InvalidInputError, match="non-finite"):
+        motion.rrt_connect(QA, QB * np.nan, clear, LIMITS, W, rng=np.random.default_rng(0))
