@@ -41,9 +41,9 @@ import shapely
 from shapely.geometry.base import BaseGeometry
 
 from planners.errors import InvalidInputError, MotionPlanningError, UnreachableError
+from planners.motion import plan_motion
 from planners.switching.collision import PointObstacles, SphereCover, self_pairs, sphere_cover
 from planners.switching.decide import check_rigid
-from planners.switching.rrt import plan_path
 
 Progress = Callable[[float, str], None]
 _DEBUG = False
@@ -61,14 +61,13 @@ class JumpParams:
     contact_band_m: float = 0.03  # points this close to a contact plane …
     contact_pad_m: float = 0.04  # … and within the footprint + pad are exempt
     resolution_rad: float = 0.02  # edge collision-check step (≤ 1.2 cm at 0.6 m)
-    step_rad: float = 0.3  # RRT extension step
-    goal_bias: float = 0.1
+    step_rad: float = 0.3  # RRT-Connect range (largest extension)
     max_iterations: int = 1500  # per RRT-Connect attempt
     attempts: int = 4  # RRT-Connect restarts
     ik_seeds: int = 48
     ik_retries: int = 3  # fresh seed batches when a target has no usable IK solution
     max_goals: int = 6  # IK solutions used as goal-tree roots
-    shortcut_iterations: int = 100
+    shortcut_iterations: int = 100  # OMPL vertex-reduction steps
     accel_rad_s2: float = 2.0
     dt_s: float = 0.02
     speed_scale: float = 0.9  # plan at 90 % of the joint speed limits
@@ -84,9 +83,6 @@ class JumpParams:
     # rectangle anchored on an edge where the plane meets another surface
     # (a wall on a floor) puts the foot against that surface.
     inward_shifts_m: tuple[float, ...] = (0.0, 0.03, 0.06)
-    # "legacy": the hand-written RRT-Connect (planners/switching/rrt.py);
-    # "ompl": OMPL's RRT-Connect + simplifier (planners/motion), same checks.
-    motion_backend: str = "legacy"
     seed: int = 0
 
 
@@ -449,6 +445,34 @@ def _time_parameterise(
 # --------------------------------------------------------------------------- planner
 
 
+def plan_path(
+    start: np.ndarray,
+    goals: np.ndarray,
+    valid: Callable[[np.ndarray], np.ndarray],
+    *,
+    lower: np.ndarray,
+    upper: np.ndarray,
+    rng: np.random.Generator,
+    params: JumpParams,
+) -> np.ndarray | None:
+    """One RRT-Connect attempt (Kuffner & LaValle 2000, the planner the seed
+    used through MoveIt/OMPL, §5.2.2) from ``start`` to one of ``goals``
+    through OMPL (:func:`planners.motion.plan_motion`): ``valid`` as state
+    validity, the straight joint segment checked every ``resolution_rad`` as
+    motion validator, range ``step_rad``, ``max_iterations`` iterations, then
+    OMPL's simplifier (``shortcut_iterations`` vertex-reduction steps); the
+    seed is drawn from ``rng``.  ``None`` when the budget runs out."""
+    res = plan_motion(
+        start, goals, valid, lower=lower, upper=upper,
+        seed=int(rng.integers(2**31 - 1)), resolution=params.resolution_rad,
+        range_=params.step_rad,
+        # the iteration budget governs, not the clock
+        max_time_s=600.0, max_iterations=params.max_iterations,
+        simplify_steps=params.shortcut_iterations,
+    )  # fmt: skip
+    return res.path
+
+
 def _plan_free(
     checker: _Checker,
     start: np.ndarray,
@@ -456,23 +480,10 @@ def _plan_free(
     params: JumpParams,
     rng: np.random.Generator,
 ) -> tuple[np.ndarray | None, int]:
-    """RRT-Connect with restarts, then shortcutting. Returns (path, attempts)."""
+    """RRT-Connect with restarts (:func:`plan_path`). Returns (path, attempts)."""
     lo, hi = checker.robot.joint_limits[:, 0], checker.robot.joint_limits[:, 1]
     for attempt in range(1, int(params.attempts) + 1):
-        path = plan_path(
-            start,
-            goals,
-            checker.valid,
-            lower=lo,
-            upper=hi,
-            rng=rng,
-            backend=params.motion_backend,
-            step=params.step_rad,
-            resolution=params.resolution_rad,
-            goal_bias=params.goal_bias,
-            max_iterations=params.max_iterations,
-            shortcut_iterations=params.shortcut_iterations,
-        )
+        path = plan_path(start, goals, checker.valid, lower=lo, upper=hi, rng=rng, params=params)
         if path is not None:
             return path, attempt
     return None, int(params.attempts)

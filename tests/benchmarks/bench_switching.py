@@ -52,12 +52,11 @@ from planners.switching.jump import (
 ARA = robots.load_robot("ara")
 ROB = JumpRobot.from_model(ARA)
 ROB_EXHAUSTIVE = JumpRobot.from_model(ARA, ik_seeds=256)
-# Only the RRT made plain (one attempt, no goal bias); every other
-# robustness measure kept: isolates what the retries buy.
-RRT_ONLY = JumpParams(attempts=1, goal_bias=0.0)
+# Only the RRT made plain (one attempt); every other robustness measure
+# kept: isolates what the retries buy.
+RRT_ONLY = JumpParams(attempts=1)
 BASELINE = JumpParams(
     attempts=1,
-    goal_bias=0.0,
     max_goals=1,
     try_flipped=False,
     inward_shifts_m=(0.0,),

@@ -12,10 +12,17 @@ from hypothesis import strategies as st
 
 import robots
 from planners.errors import UnreachableError
+from planners.motion import interpolate
 from planners.switching import decide_mode
-from planners.switching.jump import JumpRobot, _time_parameterise, plan_inchworm_jump
-from planners.switching.rrt import interpolate, rrt_connect, shortcut
+from planners.switching.jump import (
+    JumpParams,
+    JumpRobot,
+    _time_parameterise,
+    plan_inchworm_jump,
+    plan_path,
+)
 from planners.switching.scenes import make_scene
+from tests.switching._reference_rrt import rrt_connect, shortcut
 
 # Tens of seconds (planning on the seed scenes): `make test` runs it, not `make test-fast`.
 pytestmark = pytest.mark.slow
@@ -129,19 +136,38 @@ def test_unreachable_foothold():
         plan_inchworm_jump(ARA, far, obstacles=np.zeros((0, 3)))
 
 
-def test_rrt_connect_and_shortcut_on_a_wall_with_a_gap():
-    """2-D toy: a wall at x = 0 with a gap at |y| < 0.1; all edges valid."""
+def _wall_with_gap(Q: np.ndarray) -> np.ndarray:
+    """2-D toy: a wall at x = 0 with a gap at |y| < 0.1."""
+    Q = np.atleast_2d(Q)
+    return ~((np.abs(Q[:, 0]) < 0.05) & (np.abs(Q[:, 1]) > 0.1))
 
-    def valid(Q):
-        Q = np.atleast_2d(Q)
-        return ~((np.abs(Q[:, 0]) < 0.05) & (np.abs(Q[:, 1]) > 0.1))
 
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_plan_path_goes_through_the_gap_in_a_wall(seed):
+    """The jump's OMPL planner (and its simplifier): every segment is checked
+    here, finely and independently of OMPL's motion validator."""
+    lo, hi = np.array([-1.0, -1.0]), np.array([1.0, 1.0])
+    a, b = np.array([-0.8, 0.8]), np.array([[0.8, 0.8]])  # the wall stands between
+    params = JumpParams(step_rad=0.2, resolution_rad=0.01)
+    path = plan_path(a, b, _wall_with_gap, lower=lo, upper=hi,
+                     rng=np.random.default_rng(seed), params=params)  # fmt: skip
+    assert path is not None and len(path) >= 3  # the straight segment is blocked
+    assert np.array_equal(path[0], a) and np.array_equal(path[-1], b[0])
+    for p, q in itertools.pairwise(path):
+        assert _wall_with_gap(interpolate(p, q, 0.002)).all()
+    again = plan_path(a, b, _wall_with_gap, lower=lo, upper=hi,
+                      rng=np.random.default_rng(seed), params=params)  # fmt: skip
+    assert again is not None and np.array_equal(path, again)  # deterministic for a seed
+
+
+def test_reference_rrt_connect_and_shortcut_on_a_wall_with_a_gap():
+    """The former hand-written planner, kept as the benchmark baseline."""
     rng = np.random.default_rng(0)
     lo, hi = np.array([-1.0, -1.0]), np.array([1.0, 1.0])
     path = rrt_connect(
         np.array([-0.8, 0.8]),
         np.array([[0.8, -0.8]]),
-        valid,
+        _wall_with_gap,
         lower=lo,
         upper=hi,
         rng=rng,
@@ -151,10 +177,10 @@ def test_rrt_connect_and_shortcut_on_a_wall_with_a_gap():
     assert path is not None
     np.testing.assert_allclose(path[0], [-0.8, 0.8])
     np.testing.assert_allclose(path[-1], [0.8, -0.8])
-    short = shortcut(path, valid, rng=rng, iterations=200, resolution=0.01)
+    short = shortcut(path, _wall_with_gap, rng=rng, iterations=200, resolution=0.01)
     for P in (path, short):
         for a, b in itertools.pairwise(P):
-            assert valid(interpolate(a, b, 0.01)).all()
+            assert _wall_with_gap(interpolate(a, b, 0.01)).all()
     assert (
         np.linalg.norm(np.diff(short, axis=0), axis=1).sum()
         <= np.linalg.norm(np.diff(path, axis=0), axis=1).sum() + 1e-12
