@@ -2,14 +2,17 @@
 
     .venv/bin/python tests/benchmarks/bench_motion.py [N] [scene,scene,...]
     .venv/bin/python tests/benchmarks/bench_motion.py --replay [R] [scene,...] [jump seeds]
+    .venv/bin/python tests/benchmarks/bench_motion.py --blasting
 
 For every scene of :mod:`planners.switching.scenes` whose switching decision
 is an inch-worm jump (the others — mobile, no surface — plan no jump), and
 every noise seed 0..N-1, the full jump (:func:`plan_inchworm_jump`, default
-parameters, ``seed`` = the scene seed) is planned twice, with
-``motion_backend="legacy"`` (planners/switching/rrt.py) and ``"ompl"``
-(planners/motion: OMPL RRT-Connect + simplifier), on the same decision and
-the same ``_Checker.valid``.  Success = a plan comes back; time = wall time of
+parameters, ``seed`` = the scene seed) is planned twice: ``legacy`` (the
+former hand-written RRT-Connect + shortcutting,
+``tests/switching/_reference_rrt.py``, patched in as the jump's
+``plan_path``) and ``ompl`` (the jump as shipped: OMPL RRT-Connect +
+simplifier through planners/motion), on the same decision and the same
+``_Checker.valid``.  Success = a plan comes back; time = wall time of
 the whole jump (IK, RRT, checks); checks = configurations passed to
 ``_Checker.valid``.  Ratios are OMPL / legacy from this run.
 
@@ -20,6 +23,14 @@ joint-space problem the jump hands to ``_plan_free`` (checker, start, IK
 goals, parameters: attempts restarts of ``max_iterations``), then each
 backend solves each recorded problem with R planner seeds.  Success = a path
 within the restarts; time = that ``_plan_free`` call.
+
+``--blasting``: the whole-surface blasting plan with ``joint_planner="rrt"``
+(every move that no via-point polyline certifies goes to RRT-Connect) on
+Surface 1 in the I-beam channel, with the point obstacle, and with the rod
+in the blast zone, and on Surface 2 in the channel: before (the former
+hand-written RRT-Connect, ``tests/blasting/_reference_rrt.py``, patched into
+``planners.blasting.motion.rrt_connect``) and after (OMPL), same run; the
+plan's checks, skipped spots, RRT calls / failures and planning time.
 """
 
 from __future__ import annotations
@@ -38,6 +49,7 @@ from planners.switching import jump as _jump
 from planners.switching.decide import decide_mode
 from planners.switching.jump import JumpParams, plan_inchworm_jump
 from planners.switching.scenes import SCENES, make_scene
+from tests.switching._reference_rrt import plan_path_legacy
 
 ARA = robots.load_robot("ara")
 FOOT = (float(ARA.params["foot"]["length_m"]), float(ARA.params["foot"]["width_m"]))
@@ -52,17 +64,35 @@ def _counting_valid(self, Q):  # count configurations checked, same checker
 
 
 _jump._Checker.valid = _counting_valid
+_OMPL_PLAN_PATH = _jump.plan_path
+
+
+def _legacy_plan_path(start, goals, valid, *, lower, upper, rng, params):
+    return plan_path_legacy(
+        start, goals, valid, lower=lower, upper=upper, rng=rng, step=params.step_rad,
+        resolution=params.resolution_rad, max_iterations=params.max_iterations,
+        shortcut_iterations=params.shortcut_iterations,
+    )  # fmt: skip
+
+
+PLAN_PATH = {"legacy": _legacy_plan_path, "ompl": _OMPL_PLAN_PATH}
+
+
+def use_backend(backend: str) -> None:
+    """The jump's ``plan_path`` (looked up at call time by ``_plan_free``)."""
+    _jump.plan_path = PLAN_PATH[backend]
 
 
 def run(d, seed: int, backend: str) -> tuple[bool, float, int, str]:
     c = d.chosen
     surface = (c.frame.origin, c.frame.x_axis, c.frame.y_axis, c.area.hull)
     _COUNT[0] = 0
+    use_backend(backend)
     t0 = time.perf_counter()
     try:
         plan_inchworm_jump(
             ARA, d.foothold_candidates, obstacles=d.points, surface=surface,
-            params=JumpParams(seed=seed, motion_backend=backend),
+            params=JumpParams(seed=seed),
         )  # fmt: skip
         ok, why = True, ""
     except PlannerError as exc:
@@ -99,7 +129,8 @@ def replay(r: int, names: list[str], jump_seeds: list[int]) -> None:
                 continue
             for s in range(r):
                 for b in BACKENDS:
-                    p = JumpParams(**{**params.__dict__, "motion_backend": b})
+                    use_backend(b)
+                    p = params
                     _COUNT[0] = 0
                     t0 = time.perf_counter()
                     path, _ = orig(checker, start, goals, p, np.random.default_rng(s))
@@ -125,7 +156,48 @@ def replay(r: int, names: list[str], jump_seeds: list[int]) -> None:
     print("\n".join(table))
 
 
+def blasting() -> None:
+    import planners.blasting.motion as bm
+    from planners.blasting import plan_blasting, scenes
+    from tests.blasting._reference_rrt import rrt_connect_legacy
+
+    robot = robots.load_robot("denso_vm6083").with_base(scenes.robot_base())
+    obst = scenes.bridge_obstacles()
+    cases = [
+        (1, "I-beam channel", obst),
+        (1, "channel + point obstacle", (*obst, scenes.obstacle_points())),
+        (1, "channel + rod in blast zone", (*obst, scenes.obstacle_points(xy=(0.40, 0.62), z_low=1.30))),
+        (2, "I-beam channel", obst),
+    ]  # fmt: skip
+    after = bm.rrt_connect
+    print(f"{'case':38s} {'':6s} {'N':>4s} {'skip':>4s} {'clr mm':>7s} {'rrt':>4s} {'fail':>4s} "
+          f"{'checks failed':24s} {'plan s':>7s}")  # fmt: skip
+    for k, label, ob in cases:
+        times = {}
+        for tag, fn in (("before", rrt_connect_legacy), ("after", after)):
+            bm.rrt_connect = fn  # trajectory.py looks it up at call time
+            try:
+                t0 = time.perf_counter()
+                with np.errstate(all="ignore"):
+                    p = plan_blasting(
+                        scenes.bridge_surface(k), disc_radius_m=scenes.DISC_RADIUS_M,
+                        robot=robot, obstacles=ob, joint_planner="rrt",
+                    )  # fmt: skip
+                times[tag] = time.perf_counter() - t0
+            finally:
+                bm.rrt_connect = after
+            failed = ",".join(c["name"] for c in p.checks() if not c["passed"]) or "none"
+            st = p.motion
+            print(f"Surface {k} {label:28s} {tag:6s} {len(p.centers):4d} {len(p.skipped):4d} "
+                  f"{p.min_clearance_m * 1000:7.1f} {st['rrt_calls']:4d} {st['rrt_failures']:4d} "
+                  f"{failed:24s} {times[tag]:7.2f}", flush=True)  # fmt: skip
+        print(f"{'':38s} ratio after/before {times['after'] / times['before']:.2f}×")
+
+
 def main() -> None:
+    if len(sys.argv) > 1 and sys.argv[1] == "--blasting":
+        blasting()
+        return
     if len(sys.argv) > 1 and sys.argv[1] == "--replay":
         r = int(sys.argv[2]) if len(sys.argv) > 2 else 20
         names = sys.argv[3].split(",") if len(sys.argv) > 3 else list(SCENES)
