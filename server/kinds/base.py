@@ -18,6 +18,7 @@ from typing import Any, Protocol
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
+import planners.result as planners_result
 from server.planview import PlanView
 
 __all__ = [
@@ -85,30 +86,20 @@ class Check(BaseModel):
     message: str = ""
 
 
+def _stored(c: planners_result.Check) -> Check:
+    return Check(name=c.name, passed=c.passed, value=c.value, limit=c.limit, message=c.message)
+
+
 def check_le(name: str, value: float, limit: float, what: str, unit: str = "") -> Check:
-    """``value <= limit`` as a :class:`Check` with a readable message."""
-    ok = bool(np.isfinite(value) and value <= limit)
-    rel = "≤" if ok else ">"
-    return Check(
-        name=name,
-        passed=ok,
-        value=float(value),
-        limit=float(limit),
-        message=f"{what} {value:.6g}{unit} {rel} {limit:.6g}{unit}",
-    )
+    """``value <= limit`` as a :class:`Check` with a readable message
+    (:func:`planners.result.check_le`)."""
+    return _stored(planners_result.check_le(name, value, limit, what, unit))
 
 
 def check_ge(name: str, value: float, limit: float, what: str, unit: str = "") -> Check:
-    """``value >= limit`` as a :class:`Check` with a readable message."""
-    ok = bool(np.isfinite(value) and value >= limit)
-    rel = "≥" if ok else "<"
-    return Check(
-        name=name,
-        passed=ok,
-        value=float(value),
-        limit=float(limit),
-        message=f"{what} {value:.6g}{unit} {rel} {limit:.6g}{unit}",
-    )
+    """``value >= limit`` as a :class:`Check` with a readable message
+    (:func:`planners.result.check_ge`)."""
+    return _stored(planners_result.check_ge(name, value, limit, what, unit))
 
 
 @dataclass
@@ -124,6 +115,17 @@ class KindOutput:
     arrays: dict[str, np.ndarray] = field(default_factory=dict)
     checks: list[Check] = field(default_factory=list)
     metrics: dict[str, float] = field(default_factory=dict)
+
+    @classmethod
+    def from_result(cls, r: planners_result.PlanResult) -> KindOutput:
+        """The stored form of a planner's :class:`planners.result.PlanResult`,
+        passed through unchanged (the one result contract, issue #13 §2)."""
+        return cls(
+            result=r.summary,
+            arrays=r.arrays,
+            checks=[_stored(c) for c in r.checks],
+            metrics={k: float(v) for k, v in r.metrics.items()},
+        )
 
 
 class JobContext(Protocol):

@@ -23,8 +23,8 @@ from planners.blasting.nozzle import check_stream_length
 from planners.blasting.sample_clouds import under_deck_cloud
 from planners.blasting.surface_pick import PickedSurface, nozzle_tip, outline_world, pick_surface
 from planners.errors import InvalidInputError, NoPlaneError
+from planners.summary import plot, thin
 from server.kinds.base import Check, JobContext, KindOutput, PlanKind, PlanView, StrictParams
-from server.kinds.common import plot, thin
 
 ROBOT = "denso_vm6083"
 

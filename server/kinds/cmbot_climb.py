@@ -22,8 +22,8 @@ from pydantic import Field, model_validator
 from planners.cmbot import SEED_CLIMB_GOAL_X, SEED_CLIMB_START_X, GaitParams, plan_climb
 from planners.cmbot.gait import chain_limits, plan_footholds
 from planners.cmbot.guardrail import SEED_POSTS, SEED_SEGMENTS, Guardrail, GuardrailParams
+from planners.summary import json_safe, plot, thin
 from server.kinds.base import Check, JobContext, KindOutput, PlanKind, PlanView, StrictParams
-from server.kinds.common import json_safe, plot, thin
 
 ROBOT = "cmbot"
 #: samples of a console plot (the CMBOT runs are long and fine-stepped)

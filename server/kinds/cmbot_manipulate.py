@@ -29,6 +29,7 @@ from planners.cmbot import (
 )
 from planners.cmbot.scene import work_stance
 from planners.errors import InvalidInputError
+from planners.summary import json_safe, plot, thin
 from server.kinds.base import Check, JobContext, KindOutput, PlanKind, PlanView, StrictParams
 from server.kinds.cmbot_climb import (
     PLOT_SAMPLES,
@@ -37,7 +38,6 @@ from server.kinds.cmbot_climb import (
     gate_checks,
     guardrail_result,
 )
-from server.kinds.common import json_safe, plot, thin
 
 ROBOT = "cmbot"
 

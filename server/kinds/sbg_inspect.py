@@ -27,8 +27,8 @@ from planners.sbg import (
 )
 from planners.sbg.inspection_report import plan_inspection_report
 from planners.sbg.robot import ClimberParams
+from planners.summary import json_safe, plot, thin
 from server.kinds.base import Check, JobContext, KindOutput, PlanKind, PlanView, StrictParams
-from server.kinds.common import json_safe, plot, thin
 
 DEG = math.pi / 180.0
 _DEFAULT_GIRDER = sample_girders()["seed_lab"]

@@ -1,4 +1,4 @@
-"""server.kinds.common: the helpers every kind shares, against hand cases."""
+"""planners.summary: the helpers that shape a stored summary, against hand cases."""
 
 from __future__ import annotations
 
@@ -7,7 +7,7 @@ import math
 
 import numpy as np
 
-from server.kinds.common import finite_or_none, json_safe, plot, thin
+from planners.summary import finite_or_none, json_safe, plot, thin
 
 
 def test_thin_keeps_the_ends_and_at_most_k() -> None:

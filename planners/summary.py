@@ -1,7 +1,7 @@
-"""Helpers every kind uses to turn a planner's result into the stored form
-(issue #13 §2, "shared kind helpers live once"): thinning a long series for
-a console plot, the plot dict itself, and a JSON-safe copy of a result
-(non-finite floats become ``null``).
+"""Helpers that turn a planner's result into the stored summary of a
+:class:`planners.result.PlanResult` (issue #13 §2, "shared helpers live
+once"): thinning a long series for a console plot, the plot dict itself,
+and a JSON-safe copy of a result (non-finite floats become ``null``).
 """
 
 from __future__ import annotations
