@@ -41,11 +41,34 @@ from planners.errors import InvalidInputError
 
 PIBC_METHODS = ("angular", "thesis")
 
+#: Most elements of one (items × per-item) temporary: the point-in-polygon,
+#: nearest-centre and footprint arrays are products of two unbounded counts
+#: (points × polygon edges, points × clusters, poses × footprint points), so
+#: they are built in chunks of at most this many (8 MiB per float64 array).
+CHUNK_ELEMENTS = 1 << 20
 
-def point_in_polygon(points: np.ndarray, polygon: np.ndarray) -> np.ndarray:
-    """Even–odd ray casting (exact reference): (Q,) bool, vectorised over points × edges."""
+
+def chunk_slices(n: int, per_item: int, budget: int = CHUNK_ELEMENTS) -> list[slice]:
+    """Slices tiling ``range(n)`` so that each chunk × ``per_item`` stays
+    within ``budget`` elements (at least one item a chunk)."""
+    step = max(1, budget // max(1, per_item))
+    return [slice(i, min(i + step, n)) for i in range(0, n, step)]
+
+
+def point_in_polygon(
+    points: np.ndarray, polygon: np.ndarray, *, budget: int = CHUNK_ELEMENTS
+) -> np.ndarray:
+    """Even–odd ray casting (exact reference): (Q,) bool, vectorised over
+    points × edges in chunks of at most ``budget`` point–edge pairs."""
     p = np.asarray(points, dtype=float).reshape(-1, 2)
-    a = np.asarray(polygon, dtype=float)
+    a = np.asarray(polygon, dtype=float).reshape(-1, 2)
+    out = np.zeros(len(p), dtype=bool)
+    for sl in chunk_slices(len(p), len(a), budget):
+        out[sl] = _crossings_odd(p[sl], a)
+    return out
+
+
+def _crossings_odd(p: np.ndarray, a: np.ndarray) -> np.ndarray:
     b = np.roll(a, -1, axis=0)
     x, y = p[:, 0:1], p[:, 1:2]
     cond = (a[None, :, 1] > y) != (b[None, :, 1] > y)
@@ -124,7 +147,7 @@ class BoundarySet:
         out.centres = self.centres[list(ids)] if len(ids) else np.zeros((0, 2))
         return out
 
-    def _inside_angular(self, s: _Star, p: np.ndarray) -> np.ndarray:
+    def _inside_angular(self, s: _Star, p: np.ndarray, budget: int) -> np.ndarray:
         k = len(s.pts)
         if k < 3:
             return np.zeros(len(p), dtype=bool)
@@ -132,7 +155,7 @@ class BoundarySet:
             # Not star-shaped about its centre (a bar's s-monotone ring, a bent
             # GMM blob): no single ray crossing to compare with; use the exact
             # crossing count instead.
-            return point_in_polygon(p, s.pts)
+            return point_in_polygon(p, s.pts, budget=budget)
         d = p - s.centre
         phi = np.arctan2(d[:, 1], d[:, 0])
         # Bracketing vertices (cyclic): ang[i-1] <= phi < ang[i].
@@ -162,15 +185,33 @@ class BoundarySet:
         return np.any(ds[:, None] < dn, axis=1)  # Alg. 6 l. 12–13
 
     def contains(
-        self, points: np.ndarray, *, method: str = "angular", n_centres: int = 3, m_closest: int = 3
+        self,
+        points: np.ndarray,
+        *,
+        method: str = "angular",
+        n_centres: int = 3,
+        m_closest: int = 3,
+        budget: int = CHUNK_ELEMENTS,
     ) -> np.ndarray:
-        """(Q,) bool: inside any of the ``n_centres`` nearest boundaries (Alg. 6 l. 5–17)."""
+        """(Q,) bool: inside any of the ``n_centres`` nearest boundaries (Alg. 6
+        l. 5–17), in chunks of points whose point × cluster (and point × edge)
+        temporaries stay within ``budget`` elements."""
         if method not in PIBC_METHODS:
             raise InvalidInputError(f"PIBC method must be one of {PIBC_METHODS}, got {method!r}")
         p = np.asarray(points, dtype=float).reshape(-1, 2)
         out = np.zeros(len(p), dtype=bool)
         if len(self.stars) == 0 or len(p) == 0:
             return out
+        # d2 holds 2 floats per (point, cluster) pair; the per-cluster tests hold
+        # at most n_centres candidates per point.
+        for sl in chunk_slices(len(p), 2 * max(len(self.stars), n_centres), budget):
+            out[sl] = self._contains_chunk(p[sl], method, n_centres, m_closest, budget)
+        return out
+
+    def _contains_chunk(
+        self, p: np.ndarray, method: str, n_centres: int, m_closest: int, budget: int
+    ) -> np.ndarray:
+        out = np.zeros(len(p), dtype=bool)
         n = min(int(n_centres), len(self.stars))
         if n < len(self.stars):
             d2 = ((p[:, None, :] - self.centres[None]) ** 2).sum(axis=2)  # Alg. 6 l. 6
@@ -191,7 +232,7 @@ class BoundarySet:
             if len(sel) == 0:
                 continue
             if method == "angular":
-                out[sel] |= self._inside_angular(s, p[sel])
+                out[sel] |= self._inside_angular(s, p[sel], budget)
             else:
                 out[sel] |= self._inside_thesis(s, p[sel], m_closest)
         return out
@@ -238,12 +279,19 @@ def poses_valid(
     n_centres: int = 3,
     m_closest: int = 3,
 ) -> np.ndarray:
-    """(P,) bool: every footprint point of each pose lies on steel (Alg. 6 l. 18–22)."""
-    pts = project_footprint(poses, footprint)
-    inside = boundaries.contains(
-        pts.reshape(-1, 2), method=method, n_centres=n_centres, m_closest=m_closest
-    )
-    return np.asarray(inside.reshape(pts.shape[:2]).all(axis=1))  # an array for (P, F) input
+    """(P,) bool: every footprint point of each pose lies on steel (Alg. 6 l.
+    18–22), in chunks of poses whose projected footprints stay within
+    ``CHUNK_ELEMENTS`` points."""
+    poses = np.asarray(poses, dtype=float).reshape(-1, 3)
+    fp = np.asarray(footprint, dtype=float).reshape(-1, 2)
+    out = np.zeros(len(poses), dtype=bool)
+    for sl in chunk_slices(len(poses), len(fp)):
+        pts = project_footprint(poses[sl], fp)
+        inside = boundaries.contains(
+            pts.reshape(-1, 2), method=method, n_centres=n_centres, m_closest=m_closest
+        )
+        out[sl] = inside.reshape(pts.shape[:2]).all(axis=1)
+    return out
 
 
 def footprint_corners(

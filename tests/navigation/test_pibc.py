@@ -112,3 +112,55 @@ def test_poses_valid_on_a_bar() -> None:
     assert poses_valid(poses, foot, bset).tolist() == [True, False, False, False]
     with pytest.raises(InvalidInputError, match="PIBC method"):
         bset.contains(np.zeros((1, 2)), method="nope")
+
+
+@settings(max_examples=40, deadline=None)
+@given(st.integers(0, 2**31 - 1), st.integers(1, 64), st.sampled_from(["angular", "thesis"]))
+def test_chunked_tests_equal_one_pass(seed: int, budget: int, method: str) -> None:
+    """Chunking bounds the temporaries and changes no answer: tiny budgets
+    (one point a chunk and up) give the one-pass result exactly."""
+    rng = np.random.default_rng(seed)
+    stars = [_random_star(rng, int(rng.integers(3, 20))) for _ in range(6)]
+    # one ring that is not star-shaped about its centre goes through ray casting
+    zig = np.array([[0, 0], [2, 0], [2, 1], [1, 0.2], [0, 1]], float) + rng.uniform(-1, 1, 2)
+    stars.append((zig[0] + [0.1, 0.05], zig))
+    bset = BoundarySet([c for c, _ in stars], [p for _, p in stars])
+    pts = rng.uniform(-2.2, 2.2, size=(300, 2))
+    big = 1 << 30
+    for n in (1, 3, len(bset)):
+        one = bset.contains(pts, method=method, n_centres=n, budget=big)
+        assert np.array_equal(bset.contains(pts, method=method, n_centres=n, budget=budget), one)
+    poly = stars[0][1]
+    assert np.array_equal(
+        point_in_polygon(pts, poly, budget=budget), point_in_polygon(pts, poly, budget=big)
+    )
+
+
+def test_large_calls_keep_temporaries_bounded() -> None:
+    """The issue's case: 450k points against a 56-vertex polygon made ~192 MB
+    of temporaries in one call; chunked, the peak traced allocation of the
+    exact test and of a footprint sweep stays under 100 MB."""
+    import tracemalloc
+
+    rng = np.random.default_rng(3)
+    centre, poly = _random_star(rng, 56)
+    pts = rng.uniform(-2, 2, size=(450_000, 2))
+    ring = np.array([[0, 0], [2, 0], [2, 1], [1, 0.2], [0, 1]], float)  # not star-shaped
+    bset = BoundarySet([centre, ring[0] + [0.1, 0.05]], [poly, ring])
+    poses = np.column_stack([rng.uniform(-1, 1, (20_000, 2)), rng.uniform(-np.pi, np.pi, 20_000)])
+    fp = footprint_points(0.08, 0.025, spacing_m=0.005)
+    tracemalloc.start()
+    try:
+        inside = point_in_polygon(pts, poly)
+        contained = bset.contains(pts, n_centres=1)
+        valid = poses_valid(poses, fp, bset)
+        _, peak = tracemalloc.get_traced_memory()
+    finally:
+        tracemalloc.stop()
+    input_mb = pts.nbytes / 2**20  # 6.9 MB of input the calls may copy once
+    assert peak / 2**20 < 100 + input_mb, f"peak {peak / 2**20:.0f} MB"
+    # the answers are the exact ones (shapely as the independent test)
+    ref = shapely.contains_xy(shapely.Polygon(poly), pts[:, 0], pts[:, 1])
+    keep = _away_from_edges(pts[:5000], poly)
+    assert np.array_equal(inside[:5000][keep], ref[:5000][keep])
+    assert contained.sum() > 0 and valid.shape == (20_000,)
