@@ -13,13 +13,17 @@ towards Autonomous Inspection of Steel Box Girder*, Machines 2022, 10, 256):
 - :mod:`~planners.sbg.simulator`: closed-loop kinematic simulator with noise.
 - :mod:`~planners.sbg.experiments`: Fig. 12, Fig. 14, §4.3 and the Lx sweep.
 
-Entry point: :func:`plan_inspection` (:mod:`~planners.sbg.pipeline`); this package
-only re-exports.
+Entry point: :func:`plan_inspection` (:mod:`~planners.sbg.pipeline`); the
+``sbg.inspect`` kind's is
+:func:`planners.sbg.inspection_report.plan_inspection_result` (the plan, the
+Fig. 12 comparison and the Lx sweep as a :class:`planners.result.PlanResult`).
+``Check`` is :class:`planners.result.Check`.  This package only re-exports.
 """
 
+from planners.result import Check
 from planners.sbg.girder import Girder, sample_girders
 from planners.sbg.path import InspectionPath, PathSegment, plan_path
-from planners.sbg.pipeline import Check, InspectionPlan, Limits, SegmentCommand, plan_inspection
+from planners.sbg.pipeline import InspectionPlan, Limits, SegmentCommand, plan_inspection
 from planners.sbg.robot import CameraParams, ClimberParams
 from planners.sbg.simulator import MODE_NAMES, ControllerConfig, NoiseModel, SimResult, simulate
 

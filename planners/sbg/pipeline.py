@@ -16,12 +16,13 @@ from typing import Any
 import numpy as np
 
 from planners.errors import InvalidInputError
+from planners.result import Check, check_ge, check_le
 from planners.sbg.girder import Girder, sample_girders
 from planners.sbg.path import CORNER_DOWN, CORNER_UP, TURN, InspectionPath, plan_path
 from planners.sbg.robot import ClimberParams
 from planners.sbg.simulator import ControllerConfig, NoiseModel, SimResult, simulate
 
-__all__ = ["Check", "InspectionPlan", "Limits", "SegmentCommand", "plan_inspection"]
+__all__ = ["InspectionPlan", "Limits", "SegmentCommand", "plan_inspection"]
 
 DEG = math.pi / 180.0
 
@@ -46,18 +47,6 @@ class Limits:
     camera_margin_m: float = 0.0
     rib_clearance_m: float = 0.0
     pitch_accel_deg_s2: float = 20.0
-
-
-@dataclass(frozen=True)
-class Check:
-    """One check of the plan (name, passed, measured value, limit, message);
-    the same fields as the server's ``Check``."""
-
-    name: str
-    passed: bool
-    value: float
-    limit: float
-    message: str
 
 
 @dataclass(frozen=True)
@@ -135,34 +124,6 @@ def _commands(path: InspectionPath, sim: SimResult) -> list[SegmentCommand]:
     return out
 
 
-def _check_le(
-    name: str, value: float, limit: float, what: str, unit: str, scale: float = 1.0
-) -> Check:
-    v, lim = value * scale, limit * scale
-    ok = bool(math.isfinite(v) and v <= lim)
-    return Check(
-        name,
-        ok,
-        float(v),
-        float(lim),
-        f"{what} {v:.4g} {unit} {'≤' if ok else '>'} {lim:.4g} {unit}",
-    )
-
-
-def _check_ge(
-    name: str, value: float, limit: float, what: str, unit: str, scale: float = 1.0
-) -> Check:
-    v, lim = value * scale, limit * scale
-    ok = bool(math.isfinite(v) and v >= lim)
-    return Check(
-        name,
-        ok,
-        float(v),
-        float(lim),
-        f"{what} {v:.4g} {unit} {'≥' if ok else '<'} {lim:.4g} {unit}",
-    )
-
-
 def _evaluate(
     path: InspectionPath, sim: SimResult, limits: Limits
 ) -> tuple[list[Check], dict[str, float]]:
@@ -183,52 +144,52 @@ def _evaluate(
             float(n_lanes),
             f"{covered} of {n_lanes} lanes driven from crossbeam to crossbeam",
         ),
-        _check_ge(
+        check_ge(
             "camera_margin",
             margin,
             limits.camera_margin_m,
             "worst weld margin in the camera view",
-            "mm",
-            1e3,
+            " mm",
+            scale=1e3,
         ),
-        _check_ge(
+        check_ge(
             "rib_clearance",
             clearance,
             limits.rib_clearance_m,
             "smallest wheel-to-rib clearance",
-            "mm",
-            1e3,
+            " mm",
+            scale=1e3,
         ),
-        _check_le(
+        check_le(
             "corner_pitch_smooth",
             pitch_acc,
             limits.pitch_accel_deg_s2,
             "largest pitch acceleration while crossing a corner",
-            "deg/s²",
+            " deg/s²",
         ),
-        _check_le(
+        check_le(
             "final_centreline_offset",
             fd,
             limits.final_d_m,
             "largest final |d| at a lane end",
-            "mm",
-            1e3,
+            " mm",
+            scale=1e3,
         ),
-        _check_le(
+        check_le(
             "final_yaw_deviation",
             fa,
             limits.final_delta_rad,
             "largest final |δ| at a lane end",
-            "deg",
-            1 / DEG,
+            " deg",
+            scale=1 / DEG,
         ),
-        _check_le(
+        check_le(
             "uturn_roof_yaw",
             yaw,
             limits.uturn_yaw_rad,
             "largest |yaw| on reaching the roof after a U-turn",
-            "deg",
-            1 / DEG,
+            " deg",
+            scale=1 / DEG,
         ),
     ]
     A = sim.arrays

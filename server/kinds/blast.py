@@ -6,25 +6,23 @@ polygon on a plane (``polygon``), or a plane picked from a stored cloud
 (``cloud_id`` + ``plane_index``: sequential RANSAC planes, largest first; the
 cloud's other points become obstacle points).  The defaults plan the seed's
 Surface 1 on the roof of the I-beam channel with 0.04 m discs (§4.2.1,
-§4.2.5).  The planner is :func:`planners.blasting.plan_blasting`.
+§4.2.5).  The planner is :func:`planners.blasting.blast_plan.plan_blast_result`
+(around :func:`planners.blasting.plan_blasting`).
 """
 
 from __future__ import annotations
 
-import math
-import time
 from typing import Any, Literal
 
 import numpy as np
 from pydantic import Field, field_validator
 
-from planners.blasting import Box, Surface, plan_blasting, scenes
+from planners.blasting import Box, Surface, scenes
+from planners.blasting.blast_plan import BlastLimits, BlastOptions, PlanePick, plan_blast_result
 from planners.blasting.nozzle import check_stream_length
 from planners.blasting.sample_clouds import under_deck_cloud
-from planners.blasting.surface_pick import PickedSurface, nozzle_tip, outline_world, pick_surface
 from planners.errors import InvalidInputError, NoPlaneError
-from planners.summary import plot, thin
-from server.kinds.base import Check, JobContext, KindOutput, PlanKind, PlanView, StrictParams
+from server.kinds.base import JobContext, KindOutput, PlanKind, PlanView, StrictParams
 
 ROBOT = "denso_vm6083"
 
@@ -136,164 +134,44 @@ def validate(p: BlastParams) -> None:
         Box.from_bounds(b.lo_m, b.hi_m)
 
 
-def _surface(
-    p: BlastParams, ctx: JobContext
-) -> tuple[Surface, PickedSurface | None, np.ndarray | None]:
-    """The surface to blast and, for a cloud, what was picked from it and the cloud."""
+def _surface(p: BlastParams, ctx: JobContext) -> Surface | PlanePick:
+    """The surface to blast, or the cloud (loaded here) and which plane of it."""
     if p.polygon is not None:
-        return p.polygon.build(), None, None
+        return p.polygon.build()
     if p.cloud_id is None:
-        return scenes.bridge_surface(int(p.seed_surface or 1)), None, None
+        return scenes.bridge_surface(int(p.seed_surface or 1))
     cloud = np.asarray(ctx.load_cloud(p.cloud_id), dtype=float)
-    try:
-        picked = pick_surface(
-            cloud,
-            plane_index=p.plane_index,
-            threshold_m=p.plane_threshold_m,
-            toward=np.asarray(p.robot_base_m, dtype=float),
-            obstacles_from_rest=p.cloud_obstacles,
-        )
-    except NoPlaneError as exc:
-        raise NoPlaneError(f"{exc} (cloud {p.cloud_id})") from exc
-    return picked.surface, picked, cloud
+    return PlanePick(cloud, p.plane_index, p.plane_threshold_m, p.cloud_obstacles)
 
 
 def run(p: BlastParams, ctx: JobContext) -> KindOutput:
     from robots import load_robot
-
-    t0 = time.perf_counter()
-    ctx.progress(0.02, "surface")
-    surface, picked, cloud = _surface(p, ctx)
-    cloud_obst = None if picked is None else picked.obstacle_points
-    base = np.eye(4)
-    base[:3, 3] = p.robot_base_m
     from robots.denso_vm6083 import DensoVM6083
 
     arm = load_robot(ROBOT)
     # ROBOT names the DENSO arm; its loader returns DensoVM6083 (with_base is its own)
     assert isinstance(arm, DensoVM6083)
-    robot = arm.with_base(base)
-    boxes = [
-        Box.from_bounds(b.lo_m, b.hi_m, b.name)
-        for b in (_channel() if p.obstacles is None else p.obstacles)
-    ]
-    obstacles: list[Any] = list(boxes)
-    if cloud_obst is not None and len(cloud_obst):
-        obstacles.append(cloud_obst)
-
-    def prog(f: float, stage: str) -> None:
-        ctx.progress(0.05 + 0.9 * f, stage)
-
-    plan = plan_blasting(
-        surface, nozzle=p.nozzle, stream_length_mm=p.stream_length_mm, sequencer=p.sequencer,
-        robot=robot, obstacles=obstacles, seed=p.seed, disc_radius_m=p.disc_radius_m,
-        editing=p.editing, fill_stream_mm=p.fill_stream_mm, progress=prog,
+    obstacles = _channel() if p.obstacles is None else p.obstacles
+    options = BlastOptions(
+        nozzle=p.nozzle, stream_length_mm=p.stream_length_mm, disc_radius_m=p.disc_radius_m,
+        fill_stream_mm=p.fill_stream_mm, editing=p.editing, sequencer=p.sequencer, seed=p.seed,
     )  # fmt: skip
-    ctx.progress(0.97, "storing")
-    motion = plan.robot_motion()
-    # plan_blasting was given a robot, so it attached the trajectory
-    assert motion is not None
-    q, t, clr = motion.joint_trajectory, motion.times, motion.clearance
-    tip, axis = nozzle_tip(robot.frames(q)[:, -1])
-    k = thin(len(t))
-    plots = [
-        plot(
-            "Fig. 4.22 style: ellipsoid clearance to the obstacles",
-            t[k], {"clearance_mm": clr[k] * 1000.0}, x_label="s", y_label="mm",
-        ),
-        plot(
-            "Fig. 4.16 style: joint angles (speed-limited)",
-            t[k], {f"J{j + 1}": np.degrees(q[k, j]).round(3) for j in range(6)},
-            x_label="s", y_label="deg",
-        ),
-    ]  # fmt: skip
-    outline, holes = outline_world(surface)
-    # Surface.__post_init__ always resolves x_axis (None only as an argument)
-    assert surface.x_axis is not None
-    result: dict[str, Any] = {
-        "surface": {
-            "origin": surface.origin.tolist(),
-            "normal": surface.normal.tolist(),
-            "x_axis": surface.x_axis.tolist(),
-            "y_axis": surface.y_axis.tolist(),
-            "outline_world": outline.tolist(),
-            "holes_world": [h.tolist() for h in holes],
-            "area_m2": surface.area,
-        },
-        "robot_base": base.tolist(),
-        "boxes": [
-            {"name": b.name, "center": b.center.tolist(), "half": b.half.tolist()} for b in boxes
-        ],
-        "disc_radius_m": plan.radius,
-        "params_used": {k2: v for k2, v in plan.params.items() if k2 != "tilt_direction_2d"},
-        "skipped": plan.skipped.tolist(),
-        "timings_s": plan.timings_s,
-        "plots": plots,
-    }
-    if picked is not None:
-        result["planes"] = [
-            {
-                "index": pl.index,
-                "points": pl.points,
-                "normal": pl.normal.tolist(),
-                "centroid": pl.centroid.tolist(),
-            }
-            for pl in picked.planes
-        ]
-        result["plane_index"] = p.plane_index
-    checks = [
-        Check(**c)
-        for c in plan.checks(
-            coverage_min=p.coverage_min_pct / 100.0,
-            overspray_max=p.overspray_max_pct / 100.0,
-            residual_max_mm=p.ik_residual_max_mm,
-        )
-    ]
-    arrays: dict[str, np.ndarray] = {
-        "disc_centers": plan.centers,
-        "disc_radii": plan.radii,
-        "disc_classes": plan.classes.astype(np.int8),
-        "disc_stream_mm": plan.stream_mm,
-        "disc_tilt_deg": plan.tilt_deg,
-        "order": plan.order.astype(np.int32),
-        "q": q,
-        "times": t,
-        "clearance": clr,
-        "segment": motion.segment.astype(np.int8),
-        "waypoint_spot": motion.waypoint_spot.astype(np.int32),
-        "nozzle_tip": tip,
-        "nozzle_axis": axis,
-    }
-    if cloud_obst is not None and len(cloud_obst):
-        arrays["obstacle_points"] = cloud_obst
-    if picked is not None and cloud is not None:
-        sel = thin(len(cloud), 60_000)
-        arrays["cloud_points"] = cloud[sel]
-        arrays["cloud_label"] = picked.cloud_label[sel]
-    metrics = {
-        "discs": float(len(plan.centers)),
-        "distance_m": plan.distance_m,
-        "turns": float(plan.turns),
-        "objective_eq34": plan.objective,
-        "distance_per_lower_bound": plan.ratio_to_lower_bound,
-        "distance_per_mst": plan.distance_m / plan.mst_m if plan.mst_m > 0 else 1.0,
-        "coverage_pct": plan.coverage * 100.0,
-        "overspray_pct": plan.overspray * 100.0,
-        "disc_radius_mm": plan.radius * 1000.0,
-        "tilt_deg": float(plan.params["tilt_deg"]),
-        "skipped_discs": float(len(plan.skipped)),
-        "waypoints": float(len(t)),
-        "trajectory_duration_s": float(t[-1]),
-        "max_joint_speed_deg_s": math.degrees(plan.max_joint_speed_rad_s),
-        "max_ik_residual_mm": float(np.max(motion.ik_residual_mm))
-        if len(motion.ik_residual_mm)
-        else 0.0,
-        "planning_time_s": time.perf_counter() - t0,
-        **{f"stage_{k2}": float(v) for k2, v in plan.timings_s.items() if k2 != "total_s"},
-    }
-    if math.isfinite(plan.min_clearance_m):
-        metrics["min_clearance_mm"] = plan.min_clearance_m * 1000.0
-    return KindOutput(result=result, arrays=arrays, checks=checks, metrics=metrics)
+    limits = BlastLimits(
+        coverage_min=p.coverage_min_pct / 100.0,
+        overspray_max=p.overspray_max_pct / 100.0,
+        ik_residual_max_mm=p.ik_residual_max_mm,
+    )
+    try:
+        r = plan_blast_result(
+            _surface(p, ctx), arm, robot_base_m=p.robot_base_m,
+            boxes=[Box.from_bounds(b.lo_m, b.hi_m, b.name) for b in obstacles],
+            options=options, limits=limits, progress=ctx.progress,
+        )  # fmt: skip
+    except NoPlaneError as exc:
+        if p.cloud_id is None:
+            raise
+        raise NoPlaneError(f"{exc} (cloud {p.cloud_id})") from exc
+    return KindOutput.from_result(r)
 
 
 def compile_program(plan: PlanView) -> list[dict[str, Any]]:

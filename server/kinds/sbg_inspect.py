@@ -11,7 +11,7 @@ plan the seed's experiment on a 3-lane mock-up girder.  See docs/sbg.md.
 from __future__ import annotations
 
 import math
-from dataclasses import asdict, fields
+from dataclasses import fields
 from typing import Any, Literal
 
 import numpy as np
@@ -25,10 +25,9 @@ from planners.sbg import (
     plan_path,
     sample_girders,
 )
-from planners.sbg.inspection_report import plan_inspection_report
+from planners.sbg.inspection_report import plan_inspection_result
 from planners.sbg.robot import ClimberParams
-from planners.summary import json_safe, plot, thin
-from server.kinds.base import Check, JobContext, KindOutput, PlanKind, PlanView, StrictParams
+from server.kinds.base import JobContext, KindOutput, PlanKind, PlanView, StrictParams
 
 DEG = math.pi / 180.0
 _DEFAULT_GIRDER = sample_girders()["seed_lab"]
@@ -259,8 +258,6 @@ def validate(p: SbgInspectParams) -> None:
 
 
 def run(p: SbgInspectParams, ctx: JobContext) -> KindOutput:
-    girder, robot = p.girder.build(), p.robot.build()
-    noise, cfg = _noise(p), _config(p)
     limits = Limits(
         final_d_m=p.final_d_limit_mm * 1e-3,
         final_delta_rad=p.final_delta_limit_deg * DEG,
@@ -268,151 +265,13 @@ def run(p: SbgInspectParams, ctx: JobContext) -> KindOutput:
         camera_margin_m=p.camera_margin_limit_mm * 1e-3,
         pitch_accel_deg_s2=p.pitch_accel_limit_deg_s2,
     )
-    report = plan_inspection_report(
-        girder,
-        robot,
-        start_lane=p.start_lane,
-        direction=p.direction,
-        start_end=p.start_end,
-        noise=noise,
-        config=cfg,
-        seed=p.seed,
-        limits=limits,
-        sweep_lx_m=[v * 1e-3 for v in p.sweep_lx_mm],
-        sweep_seeds=p.sweep_seeds,
+    r = plan_inspection_result(
+        p.girder.build(), p.robot.build(), start_lane=p.start_lane, direction=p.direction,
+        start_end=p.start_end, noise=_noise(p), config=_config(p), seed=p.seed, limits=limits,
+        sweep_lx_m=[v * 1e-3 for v in p.sweep_lx_mm], sweep_seeds=p.sweep_seeds,
         progress=ctx.progress,
-    )
-    plan = report.plan
-    sim, path = plan.sim, plan.path
-    A = sim.arrays
-    plots: list[dict[str, Any]] = []
-    # Fig. 14 style: d and δ over time on the first lane.
-    seg0 = next(ln.segment for ln in sim.lanes)
-    i0 = np.flatnonzero((A["segment"] == seg0) & np.isfinite(A["d_m"]))
-    if i0.size:
-        k = i0[thin(i0.size)]
-        plots.append(
-            plot(
-                f"Fig. 14 style: lane {sim.lanes[0].lane} tracking error",
-                A["t_s"][k] - A["t_s"][i0[0]],
-                {"d_mm": A["d_m"][k] * 1e3, "delta_deg": np.degrees(A["delta_rad"][k])},
-                x_label="s",
-                y_label="d (mm), δ (deg)",
-            )
-        )
-    # Fig. 12 style: pitch over the first crossing, and the as-printed law beside it.
-    if sim.crossing_pitch and report.printed_pitch is not None:
-        th, printed = sim.crossing_pitch[0], report.printed_pitch
-        n = max(len(th), len(printed))
-        t = np.arange(n) * sim.dt_s
-
-        def pad(a: np.ndarray) -> np.ndarray:
-            return np.r_[a, np.full(n - len(a), a[-1])]
-
-        k = thin(n)
-        plots.append(
-            plot(
-                "Fig. 12 style: pitch while crossing a corner",
-                t[k],
-                {
-                    f"{cfg.corner_profile} (this plan)": np.degrees(pad(th))[k],
-                    "Eq. 4 as printed": np.degrees(pad(printed))[k],
-                },
-                x_label="s",
-                y_label="deg",
-            )
-        )
-    # Camera margin over the lanes.
-    im = np.flatnonzero(np.isfinite(A["margin_m"]))
-    if im.size:
-        k = im[thin(im.size)]
-        plots.append(
-            plot(
-                "weld margin in the camera view (lanes)",
-                A["t_s"][k],
-                {"margin_mm": A["margin_m"][k] * 1e3},
-                x_label="s",
-                y_label="mm",
-            )
-        )
-    sweep_rows: list[dict[str, Any]] = []
-    best = None
-    if report.sweep is not None:
-        sw = report.sweep
-        values = sorted({float(v) for v in p.sweep_lx_mm})  # the rows' order (mm as given)
-        best = sw.best_preview_m
-        for r in sw.rows:
-            sweep_rows.append(
-                {
-                    "preview_mm": r.preview_m * 1e3,
-                    "finished_fraction": r.finished_fraction,
-                    "settle_time_mean_s": r.settle_time_mean_s,
-                    "final_d_mean_mm": r.final_d_mean_m * 1e3,
-                    "final_delta_mean_deg": math.degrees(r.final_delta_mean_rad),
-                }
-            )
-        plots.append(
-            plot(
-                f"Lx sweep (Fig. 14 set-up, {p.sweep_seeds} seeds): time until |d| stays < 1 mm",
-                values,
-                {"settle_time_s": [r["settle_time_mean_s"] for r in sweep_rows]},
-                x_label="Lx mm",
-                y_label="s (missing: never)",
-            )
-        )
-    ctx.progress(0.99, "storing")
-    segs = [
-        {
-            "kind": s.kind,
-            "lane": s.lane,
-            "to_lane": s.to_lane,
-            "wall": s.wall,
-            "length_m": s.length_m,
-            "turn_deg": math.degrees(s.turn_rad),
-            "start": s.start.tolist(),
-            "end": s.end.tolist(),
-        }
-        for s in path.segments
-    ]
-    seg_index = np.concatenate([np.full(len(s.points), i) for i, s in enumerate(path.segments)])
-    result = {
-        "girder": asdict(girder),
-        "robot": {k: v for k, v in asdict(robot).items() if k != "camera"},
-        "lane_order": path.lane_order,
-        "lane_dirs": {str(k): v for k, v in path.lane_dirs.items()},
-        "segments": segs,
-        "total_length_m": path.total_length_m,
-        "lanes": [asdict(ln) for ln in sim.lanes],
-        "corners": [asdict(c) for c in sim.corners],
-        "uturns": [asdict(u) for u in sim.uturns],
-        "commands": [asdict(c) for c in plan.commands],
-        "noise": asdict(noise),
-        "plots": plots,
-        "lx_sweep": {"rows": sweep_rows, "best_preview_mm": None if best is None else best * 1e3},
-    }
-    arrays = {
-        "path_xyz": np.concatenate([s.points for s in path.segments]),
-        "path_segment": seg_index.astype(np.int32),
-        "traj_t": A["t_s"],
-        "traj_pos": A["pos"],
-        "traj_quat": A["quat"],
-        "traj_segment": A["segment"].astype(np.int32),
-        "traj_mode": A["mode"].astype(np.int8),
-        "traj_pitch": A["pitch_rad"],
-        "traj_d": A["d_m"],
-        "traj_delta": A["delta_rad"],
-        "traj_wheels": np.stack([A["v_left"], A["v_right"], A["v_front"], A["v_rear"]], axis=1),
-        "traj_arm": A["arm_rad"],
-        "traj_margin": A["margin_m"],
-    }
-    checks = [
-        Check(name=c.name, passed=c.passed, value=c.value, limit=c.limit, message=c.message)
-        for c in plan.checks
-    ]
-    metrics = {k: float(v) for k, v in plan.metrics.items() if math.isfinite(v)}
-    if best is not None:
-        metrics["lx_sweep_best_mm"] = best * 1e3
-    return KindOutput(result=json_safe(result), arrays=arrays, checks=checks, metrics=metrics)
+    )  # fmt: skip
+    return KindOutput.from_result(r)
 
 
 def compile_program(plan: PlanView) -> list[dict[str, Any]]:
