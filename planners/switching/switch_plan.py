@@ -1,7 +1,8 @@
-"""The ``ara.switch`` kind's one entry point (issue #13 §2): the switching
-decision (seed 000 Eq. 3.1–3.4, Alg. 1–2) and, for "inchworm", the
-inch-worm jump (§3.2) with its checks recomputed from the trajectory
-(:mod:`planners.switching.jump_checks`)."""
+"""The switching decision (seed 000 Eq. 3.1–3.4, Alg. 1–2) and, for
+"inchworm", the inch-worm jump (§3.2) with its checks recomputed from the
+trajectory (:mod:`planners.switching.jump_checks`).  The ``ara.switch``
+kind's entry point, :func:`planners.switching.switch_result.plan_switch_result`,
+shapes this outcome into the stored :class:`planners.result.PlanResult`."""
 
 from __future__ import annotations
 
@@ -49,7 +50,7 @@ def plan_switch(
     inside_tol_m: float = 0.01,
     progress: Callable[[float, str], None] | None = None,
 ) -> SwitchOutcome:
-    """The ``ara.switch`` entry point: the switching function S = S_pa ∧ S_am ∧
+    """The switching function S = S_pa ∧ S_am ∧
     S_hc (Eq. 3.1, :func:`planners.switching.decide.decide_mode`), then, when
     it says "inchworm" and ``jump`` is given, the inch-worm jump (§3.2,
     :func:`planners.switching.jump.plan_inchworm_jump`) onto the chosen

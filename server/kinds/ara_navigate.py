@@ -18,33 +18,17 @@ overhang.  Explicit ``footprint_*_m`` values override both.
 
 from __future__ import annotations
 
-import time
 from typing import Any, Literal, TypedDict
 
 import numpy as np
 from pydantic import Field
 
 from planners.errors import InvalidInputError
-from planners.navigation import NavigationParams, NavigationResult, plan_navigation
-from planners.navigation.footprint_checks import (
-    Footprint,
-    alg6_spacing_m,
-    bars_covered,
-    poses_on_steel,
-    to_plane,
-)
-from planners.navigation.pipeline import vertex_id
+from planners.navigation import NavigationParams
+from planners.navigation.footprint_checks import Footprint, alg6_spacing_m, poses_on_steel, to_plane
+from planners.navigation.navigate_plan import plan_navigation_result
 from planners.navigation.synthetic import SAMPLES, SHAPES
-from server.kinds.base import (
-    Check,
-    JobContext,
-    KindOutput,
-    PlanKind,
-    PlanView,
-    StrictParams,
-    check_ge,
-)
-from server.kinds.programs import wheel_steps
+from server.kinds.base import JobContext, KindOutput, PlanKind, PlanView, StrictParams
 
 
 class AraNavigateParams(StrictParams):
@@ -137,86 +121,7 @@ def _footprint(p: AraNavigateParams) -> _Footprint:
     }
 
 
-def _checks(res: NavigationResult, p: AraNavigateParams) -> tuple[list[Check], dict[str, float]]:
-    g, route = res.graph, res.route
-    bars = [c.id for c in res.clusters if c.kind == "bar"]
-    covered = bars_covered(bars, [g.edges[u, v]["clusters"][0] for u, v, _ in route.edges])
-    checks = [
-        check_ge("bars_covered", covered, len(bars), "bars on the route", ""),
-    ]
-    # the exact footprint test (planners.navigation.footprint_checks), not
-    # Alg. 6's sampled points used while planning
-    params = res.params
-    footprint = Footprint(
-        params.footprint_length_m,
-        params.footprint_width_m,
-        params.footprint_center_x_m,
-        params.footprint_center_y_m,
-    )
-    poses = [e.poses for e in res.edge_paths if len(e.poses)]
-    report = poses_on_steel(poses, [c.boundary for c in res.clusters], footprint)
-    frac, first, n_poses = report.fraction, report.first_off, report.n_poses
-    checks.append(
-        Check(
-            name="poses_on_steel",
-            passed=frac >= 1.0,
-            value=frac,
-            limit=1.0,
-            message=f"{frac:.2%} of {n_poses} driven poses (and the area swept between them) "
-            "keep the footprint on steel"
-            + (
-                ""
-                if first is None
-                else f"; first off at x={first[0]:.3f} m, y={first[1]:.3f} m, "
-                f"yaw={np.degrees(first[2]):.0f}°"
-            ),
-        )
-    )
-    if poses and p.plan_paths:
-        slide = sum(int(wheel_steps(x).sideways.sum()) for x in poses)
-        checks.append(
-            Check(
-                name="wheel_motion",
-                passed=slide == 0,
-                value=float(slide),
-                limit=0.0,
-                message=(
-                    "every step is a turn in place or a straight drive along the heading"
-                    if slide == 0
-                    else f"{slide} steps slide sideways or turn while driving: the "
-                    f"'{p.motion_model}' paths cannot be driven by the ARA's differential wheels"
-                ),
-            )
-        )
-    if p.plan_paths:
-        n_ok = sum(e.ok for e in res.edge_paths)
-        first_bad = next((e.message for e in res.edge_paths if not e.ok), "")
-        checks.append(
-            Check(
-                name="paths_found",
-                passed=n_ok == len(res.edge_paths),
-                value=float(n_ok),
-                limit=float(len(res.edge_paths)),
-                message=f"{n_ok}/{len(res.edge_paths)} route edges have an on-steel path"
-                + (f"; first failure: {first_bad}" if first_bad else ""),
-            )
-        )
-    want = (p.start if p.start is not None else res.start, p.end if p.end is not None else res.end)
-    got = (route.vertices[0], route.vertices[-1])
-    checks.append(
-        Check(
-            name="route_endpoints",
-            passed=got == want,
-            value=f"{got[0]}→{got[1]}",
-            limit=f"{want[0]}→{want[1]}",
-            message=f"route runs from vertex {got[0]} to vertex {got[1]}",
-        )
-    )
-    return checks, {"bars_covered": float(covered), "poses_on_steel_fraction": frac}
-
-
 def run(p: AraNavigateParams, ctx: JobContext) -> KindOutput:
-    t0 = time.perf_counter()
     validate(p)
     ctx.progress(0.0, "loading cloud")
     points = ctx.load_cloud(p.cloud_id) if p.cloud_id else SAMPLES[p.sample](p.sample_seed)
@@ -230,121 +135,10 @@ def run(p: AraNavigateParams, ctx: JobContext) -> KindOutput:
         seed=p.seed,
         **_footprint(p),
     )
-    res = plan_navigation(points, start=p.start, end=p.end, params=params, progress=ctx.progress)
-    checks, extra = _checks(res, p)
-    g, route, frame = res.graph, res.route, res.frame
-    nodes = sorted(g.nodes)
-    paths = [e for e in res.edge_paths if len(e.poses)]
-    path_xyz = (
-        np.vstack([res.frame.lift(e.poses[:, :2]) for e in paths]) if paths else np.zeros((0, 3))
+    r = plan_navigation_result(
+        points, start=p.start, end=p.end, params=params, progress=ctx.progress
     )
-    path_yaw = np.concatenate([e.poses[:, 2] for e in paths]) if paths else np.zeros(0)
-    path_poses = np.vstack([e.poses for e in paths]) if paths else np.zeros((0, 3))
-    path_edge = (
-        np.concatenate(
-            [np.full(len(e.poses), k) for k, e in enumerate(res.edge_paths) if len(e.poses)]
-        )
-        if paths
-        else np.zeros(0)
-    )
-    result: dict[str, Any] = {
-        "start": res.start,
-        "end": res.end,
-        "frame": {
-            "origin": frame.origin.tolist(),
-            "e1": frame.e1.tolist(),
-            "e2": frame.e2.tolist(),
-            "normal": frame.normal.tolist(),
-        },
-        "footprint": {
-            k.removeprefix("footprint_"): v
-            for k, v in _footprint(p).items()
-            if k != "footprint_spacing_m"
-        },
-        "start_pose": (
-            [float(x) for x in res.edge_paths[0].poses[0]]
-            if res.edge_paths and len(res.edge_paths[0].poses)
-            else None
-        ),
-        "motion_model": p.motion_model,
-        "clusters": [
-            {
-                "id": c.id,
-                "kind": c.kind,
-                "n_points": c.n_points,
-                "centre": frame.lift(c.centre)[0].tolist(),
-                "length_m": c.length_m,
-                "width_m": c.width_m,
-                "boundary": np.round(frame.lift(c.boundary), 5).tolist(),
-            }
-            for c in res.clusters
-        ],
-        "graph": {
-            "nodes": [
-                {
-                    "id": int(v),
-                    "pos": list(g.nodes[v]["pos"]),
-                    "kind": g.nodes[v]["kind"],
-                    "degree": g.degree(v),
-                }
-                for v in nodes
-            ],
-            "edges": [
-                {
-                    "u": int(u),
-                    "v": int(v),
-                    "weight_m": d["weight"],
-                    "clusters": list(d["clusters"]),
-                    "kind": d["kind"],
-                }
-                for u, v, d in g.edges(data=True)
-            ],
-        },
-        "route": {
-            "vertices": [vertex_id(v) for v in route.vertices],
-            "edges": [[vertex_id(u), vertex_id(v)] for u, v, _ in route.edges],
-            "length_m": route.length,
-            "lower_bound_m": route.lower_bound,
-            "deadhead_m": route.deadhead,
-            "method": route.method,
-        },
-        "paths": [
-            {"u": e.u, "v": e.v, "ok": e.ok, "poses": len(e.poses), "message": e.message}
-            for e in res.edge_paths
-        ],
-        "segmentation": {k: v for k, v in res.segmentation_info.items() if not isinstance(v, list)},
-    }
-    kinds = [c.kind for c in res.clusters]
-    metrics = {
-        "route_length_m": route.length,
-        "route_lower_bound_m": route.lower_bound,
-        "deadhead_m": route.deadhead,
-        "cluster_count": float(len(res.clusters)),
-        "bar_count": float(kinds.count("bar")),
-        "cross_count": float(kinds.count("cross")),
-        "graph_vertices": float(g.number_of_nodes()),
-        "graph_edges": float(g.number_of_edges()),
-        "points_input": float(res.counts.get("input", len(points))),
-        "points_processed": float(len(res.points)),
-        "paths_ok": float(sum(e.ok for e in res.edge_paths)),
-        "route_edges": float(len(route.edges)),
-        **extra,
-        **{k.removesuffix("_s") + "_time_s": v for k, v in res.timings_s.items()},
-        "planning_time_s": time.perf_counter() - t0,
-    }
-    return KindOutput(
-        result=result,
-        arrays={
-            "points": res.points.astype(np.float32),
-            "labels": res.labels.astype(np.int32),
-            "path_xyz": path_xyz.astype(np.float64),
-            "path_yaw": path_yaw.astype(np.float64),
-            "path_edge": path_edge.astype(np.int32),
-            "path_poses": path_poses.astype(np.float64),
-        },
-        checks=checks,
-        metrics=metrics,
-    )
+    return KindOutput.from_result(r)
 
 
 #: Wheel-command constants (chosen: slow inspection speed, servo-class turn rate).

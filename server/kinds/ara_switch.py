@@ -11,7 +11,6 @@ clearance along the path.  Defaults plan Fig. 5.4 (two perpendicular slabs).
 
 from __future__ import annotations
 
-import time
 from typing import Any
 
 import numpy as np
@@ -21,17 +20,8 @@ from planners.errors import InvalidInputError
 from planners.switching import SwitchingParams
 from planners.switching.jump import JumpParams
 from planners.switching.scenes import SCENES, make_scene
-from planners.switching.switch_plan import plan_switch
-from server.kinds.base import (
-    Check,
-    JobContext,
-    KindOutput,
-    PlanKind,
-    PlanView,
-    StrictParams,
-    check_ge,
-    check_le,
-)
+from planners.switching.switch_result import plan_switch_result
+from server.kinds.base import JobContext, KindOutput, PlanKind, PlanView, StrictParams
 
 SAMPLE_PREFIX = "switch_"
 
@@ -79,12 +69,7 @@ def _robot():
     return load_robot("ara")
 
 
-def _mat(T: np.ndarray | None) -> list[list[float]] | None:
-    return None if T is None else np.round(np.asarray(T, float), 6).tolist()
-
-
 def run(p: AraSwitchParams, ctx: JobContext) -> KindOutput:
-    t0 = time.perf_counter()
     validate(p)
     ara = _robot()
     ctx.progress(0.0, "loading cloud")
@@ -106,188 +91,19 @@ def run(p: AraSwitchParams, ctx: JobContext) -> KindOutput:
         reach_m=p.reach_m,
         seed=p.seed,
     )
-    out = plan_switch(
+    jump = JumpParams(clearance_margin_m=p.clearance_margin_m, attempts=p.attempts, seed=p.seed)
+    r = plan_switch_result(
         ara,
         points,
         camera_to_base=T,
         base_height=p.base_height_m,
         foot=foot,
         params=sp,
-        jump=JumpParams(clearance_margin_m=p.clearance_margin_m, attempts=p.attempts, seed=p.seed)
-        if p.plan_jump
-        else None,
+        jump=jump if p.plan_jump else None,
         progress=ctx.progress,
     )
-    d = out.decision
-    labels = np.full(len(d.points), -1, dtype=np.int32)
-    for c in d.candidates:
-        labels[c.points_index] = c.index
-    rects = [r for c in d.candidates for r in c.rectangles]
-    rect_plane = [c.index for c in d.candidates for _ in c.rectangles]
-    boundaries = [c.frame.to_world(c.area.boundary2d) for c in d.candidates]
-    result: dict[str, Any] = {
-        "decision": d.summary(),
-        "camera_to_base": _mat(T),
-        "foot_m": list(foot),
-        "planes": [
-            {
-                "index": c.index,
-                "n_points": c.n_points,
-                "normal": np.round(c.normal, 5).tolist(),
-                "centroid_base": np.round(c.centroid, 5).tolist(),
-                "centroid_camera": np.round(c.centroid_camera, 5).tolist(),
-                "area_m2": c.area_m2,
-                "rms_m": c.rms_m,
-                "plane_available": True,
-                "area_available": c.area_available,
-                "height_available": c.height_available,
-                "height_error_m": c.height_error_m,
-                "normal_angle_deg": c.normal_angle_deg,
-                "reachable": c.reachable,
-                "reach_distance_m": c.reach_distance_m,
-                "rectangles": [
-                    {
-                        "index": r.index,
-                        "passed": r.passed,
-                        "exact_passed": r.exact_passed,
-                        "exact_margin_m": r.exact_margin_m
-                        if np.isfinite(r.exact_margin_m)
-                        else None,
-                        "reason": r.reason,
-                        "corners": np.round(r.corners, 5).tolist(),
-                    }
-                    for r in c.rectangles
-                ],
-            }
-            for c in d.candidates
-        ],
-        "foothold": _mat(d.foothold),
-        "jump": None,
-    }
-    metrics: dict[str, float] = {
-        "planes_found": float(len(d.candidates)),
-        "rectangles_passed": float(d.rectangles_passed),
-        "rectangles_total": float(d.rectangles_total),
-        "points_input": float(d.n_points_in),
-        "points_processed": float(len(d.points)),
-        "decision_time_s": float(d.timings_s.get("total", 0.0)),
-    }
-    if d.height_error_m is not None:
-        # decide sets height_m and height_error_m together (both None without a plane)
-        assert d.height_m is not None
-        metrics["height_error_m"] = float(d.height_error_m)
-        metrics["plane_height_m"] = float(d.height_m)
-    if d.alg2_exact_agreement is not None:
-        metrics["alg2_exact_agreement"] = float(d.alg2_exact_agreement)
-    checks = [
-        Check(
-            name="safe_surface",
-            passed=d.mode != "none",
-            value=d.mode,
-            limit="mobile|inchworm",
-            message=d.message,
-        )
-    ]
-    arrays: dict[str, np.ndarray] = {
-        "points": d.points.astype(np.float32),
-        "plane_labels": labels,
-        "boundary": (np.vstack(boundaries) if boundaries else np.zeros((0, 3))).astype(np.float32),
-        "boundary_plane": np.concatenate(
-            [np.full(len(b), k) for k, b in enumerate(boundaries)] or [np.zeros(0)]
-        ).astype(np.int32),
-        "rect_corners": (np.array([r.corners for r in rects]) if rects else np.zeros((0, 4, 3))),
-        "rect_passed": np.array([r.passed for r in rects], dtype=bool),
-        "rect_plane": np.array(rect_plane, dtype=np.int32),
-    }
-    if out.jump_error is not None:
-        checks.append(
-            Check(
-                name="jump_planned", passed=False, value=False, limit=True, message=out.jump_error
-            )
-        )
-    plan = out.jump
-    if plan is not None:
-        m = plan.metrics(ara)
-        Q = plan.joint_trajectory
-        # checks recomputed from the returned trajectory (planners.switching.jump_checks)
-        ratio, viol, foot1_inside = out.speed_ratio, out.joint_limit_excess_rad, out.foot1_inside
-        checks += [
-            Check(
-                name="jump_planned",
-                passed=True,
-                value=True,
-                limit=True,
-                message="all phases planned",
-            ),
-            check_le("joint_limits", viol, 0.0, "largest joint-limit excess", " rad"),
-            check_le("joint_speeds", ratio, 1.0, "largest joint speed / limit", ""),
-            check_ge(
-                "clearance",
-                float(plan.clearance.min()),
-                p.clearance_margin_m,
-                "smallest clearance along the jump",
-                " m",
-            ),
-            check_ge(
-                "self_clearance",
-                float(plan.self_clearance.min()),
-                0.0,
-                "smallest self clearance",
-                " m",
-            ),
-            Check(
-                name="foothold_inside_surface",
-                passed=foot1_inside,
-                value=foot1_inside,
-                limit=True,
-                message="foot 1's footprint lies inside the target plane's concave hull"
-                if foot1_inside
-                else "foot 1's footprint leaves the target plane's concave hull",
-            ),
-        ]
-        metrics.update(
-            {
-                "jump_duration_s": m["duration_s"],
-                "jump_min_clearance_m": m["min_clearance_m"],
-                "jump_min_self_clearance_m": m["min_self_clearance_m"],
-                "jump_max_speed_ratio": m["max_speed_ratio"],
-                "jump_planning_time_s": m["planning_time_s"],
-                "jump_rrt_attempts": m["attempts_used"],
-                "foot2_on_seen_surface": float(plan.foot2_target_inside),
-            }
-        )
-        result["jump"] = {
-            "foot1_target": _mat(plan.foot1_target),
-            "foot2_target": _mat(plan.foot2_target),
-            "foot2_on_seen_surface": plan.foot2_target_inside,
-            "phases": [
-                {
-                    "name": ph.name,
-                    "description": ph.description,
-                    "anchor": ph.anchor,
-                    "magnets": ph.magnets,
-                    "start": ph.start,
-                    "stop": ph.stop,
-                    "t_start_s": ph.t_start_s,
-                    "t_end_s": ph.t_end_s,
-                }
-                for ph in plan.phases
-            ],
-            "magnet_commands": plan.magnet_commands,
-            "joint_names": list(ara.joint_names),
-            "timings_s": plan.timings_s,
-        }
-        arrays.update(
-            {
-                "joint_trajectory": Q.astype(np.float64),
-                "times": plan.times.astype(np.float64),
-                "anchor": plan.anchor.astype(np.int32),
-                "clearance": plan.clearance.astype(np.float64),
-            }
-        )
-    metrics["planning_time_s"] = time.perf_counter() - t0
     ctx.progress(1.0, "done")
-    return KindOutput(result=result, arrays=arrays, checks=checks, metrics=metrics)
+    return KindOutput.from_result(r)
 
 
 def _sample(name: str):

@@ -9,10 +9,10 @@ from __future__ import annotations
 
 import itertools
 from collections.abc import Sequence
-from dataclasses import dataclass
 
 import numpy as np
 
+from planners.navigation.wheel_steps import wheel_steps
 from robots.protocol.commands import Command, JointMove, LiftArm, Stop, WheelSpeeds
 
 
@@ -71,47 +71,6 @@ def differential_drive(
     flush()
     cmds.append(Stop())
     return cmds
-
-
-@dataclass(frozen=True)
-class WheelSteps:
-    """Consecutive pose pairs (x, y, yaw) split the way a differential drive
-    sees them: ``dist`` moved, ``dyaw`` turned (wrapped), ``along`` /
-    ``lateral`` the move along / across the start heading; ``turn`` (turn in
-    place), ``drive`` (straight along the shared heading) and ``sideways``
-    (neither: what the wheels cannot do)."""
-
-    dist: np.ndarray
-    dyaw: np.ndarray
-    along: np.ndarray
-    lateral: np.ndarray
-    turn: np.ndarray
-    drive: np.ndarray
-
-    @property
-    def sideways(self) -> np.ndarray:
-        return ~self.turn & ~self.drive
-
-
-def wheel_steps(
-    poses: np.ndarray,
-    *,
-    position_tol_m: float = 1e-6,
-    lateral_tol_m: float = 1e-5,
-    yaw_tol_rad: float = 1e-6,
-) -> WheelSteps:
-    """Classify each step of ``poses`` (K,3) as a turn in place, a straight
-    drive, or a sideways move (:class:`WheelSteps`)."""
-    q = np.asarray(poses, dtype=float).reshape(-1, 3)
-    d = np.diff(q, axis=0)
-    dist = np.hypot(d[:, 0], d[:, 1])
-    dyaw = (d[:, 2] + np.pi) % (2 * np.pi) - np.pi
-    c, s = np.cos(q[:-1, 2]), np.sin(q[:-1, 2])
-    along = d[:, 0] * c + d[:, 1] * s
-    lateral = np.abs(d[:, 0] * s - d[:, 1] * c)
-    turn = dist <= position_tol_m
-    drive = ~turn & (np.abs(dyaw) <= yaw_tol_rad) & (lateral <= lateral_tol_m)
-    return WheelSteps(dist, dyaw, along, lateral, turn, drive)
 
 
 def differential_drive_poses(
@@ -204,7 +163,9 @@ def replay_wheels(
             continue
         vl, vr = float(c.speeds_m_s[0]), float(c.speeds_m_s[1])
         v, w = (vl + vr) / 2.0, (vr - vl) / track_m
-        n = max(1, int(np.ceil(max(abs(v) * c.duration_s / step_m, abs(w) * c.duration_s / step_rad))))
+        n = max(
+            1, int(np.ceil(max(abs(v) * c.duration_s / step_m, abs(w) * c.duration_s / step_rad)))
+        )
         t = np.linspace(0.0, c.duration_s, n + 1)[1:]
         a = th + w * t
         if abs(w) > 1e-12:
