@@ -113,6 +113,18 @@ class NavigationParams:
             )
         for f in fields(self):
             v = getattr(self, f.name)
+            if f.name.startswith("passthrough_"):
+                # a window (lo, hi) on that axis, or None: no window on it
+                if v is not None and not (
+                    isinstance(v, tuple)
+                    and len(v) == 2
+                    and all(isinstance(x, int | float) and np.isfinite(x) for x in v)
+                    and v[0] < v[1]
+                ):
+                    raise InvalidInputError(
+                        f"{f.name} must be None or (low, high) metres with low < high, got {v!r}"
+                    )
+                continue
             if (
                 f.name.endswith("_m")
                 and not isinstance(v, tuple)

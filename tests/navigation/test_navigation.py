@@ -157,3 +157,20 @@ def test_thesis_segmentation_through_the_entry_point() -> None:
     assert {c.kind for c in res.clusters} <= {"bar", "cross"}
     res2 = plan_navigation(pts, params=dataclasses.replace(res.params))
     assert np.array_equal(res.labels, res2.labels)
+
+
+def test_passthrough_window_may_be_none() -> None:
+    """``passthrough_*_m`` is typed ``tuple | None`` (issue #14: None was refused
+    as "must be a positive number"); None means no window on that axis, so a
+    cloud shifted far outside the default window plans as the original does."""
+    pts = structure("l", 0).points
+    shifted = pts + [0.0, 18.0, 0.0]  # y ≈ 18 m, as the pc2beam crop sits
+    with pytest.raises(EmptyInputError, match="pass-through"):
+        plan_navigation(shifted, params=NavigationParams(plan_paths=False))
+    base = plan_navigation(pts, params=NavigationParams(plan_paths=False))
+    res = plan_navigation(shifted, params=NavigationParams(plan_paths=False, passthrough_y_m=None))
+    assert res.graph.number_of_nodes() == base.graph.number_of_nodes()
+    assert res.graph.number_of_edges() == base.graph.number_of_edges()
+    for bad in ((1.0, -1.0), (0.0, float("nan")), (0.0,), "wide"):
+        with pytest.raises(InvalidInputError, match="passthrough_x_m"):
+            NavigationParams(passthrough_x_m=bad).validated()  # type: ignore[arg-type]
