@@ -14,32 +14,16 @@ the whole motion passes (the seed's remedy).  See docs/cmbot.md.
 
 from __future__ import annotations
 
-import math
 from typing import Any, Literal
 
 import numpy as np
 from pydantic import Field
 
-from planners.cmbot import (
-    SEED_WORK_REAR_X,
-    AvoidanceParams,
-    ExperimentParams,
-    Section4Trajectory,
-    plan_manipulation,
-)
-from planners.cmbot.scene import work_stance
+from planners.cmbot import SEED_WORK_REAR_X, AvoidanceParams, ExperimentParams, Section4Trajectory
+from planners.cmbot.manipulate_plan import plan_manipulation_result
 from planners.errors import InvalidInputError
-from planners.summary import json_safe, plot, thin
-from server.kinds.base import Check, JobContext, KindOutput, PlanKind, PlanView, StrictParams
-from server.kinds.cmbot_climb import (
-    PLOT_SAMPLES,
-    GuardrailSpec,
-    boxes_result,
-    gate_checks,
-    guardrail_result,
-)
-
-ROBOT = "cmbot"
+from server.kinds.base import JobContext, KindOutput, PlanKind, PlanView, StrictParams
+from server.kinds.cmbot_params import ROBOT, GuardrailSpec
 
 
 class CmbotManipulateParams(StrictParams):
@@ -74,9 +58,7 @@ class CmbotManipulateParams(StrictParams):
 
 def _params(p: CmbotManipulateParams) -> ExperimentParams:
     return ExperimentParams(
-        trajectory=Section4Trajectory(
-            start_mm_deg=p.start_mm_deg, angular_unit=p.angular_unit
-        ),
+        trajectory=Section4Trajectory(start_mm_deg=p.start_mm_deg, angular_unit=p.angular_unit),
         avoidance=AvoidanceParams(d_s=p.d_s_m, v_max=p.v_max_m_s),
         min_clearance_m=p.min_clearance_m,
         dt_s=p.dt_s,
@@ -101,11 +83,9 @@ def validate(p: CmbotManipulateParams) -> None:
 def run(p: CmbotManipulateParams, ctx: JobContext) -> KindOutput:
     from robots import load_robot
 
-    model = load_robot(ROBOT)
-    g = p.guardrail.build()
-    plan = plan_manipulation(
-        model,
-        guardrail=g,
+    r = plan_manipulation_result(
+        load_robot(ROBOT),
+        guardrail=p.guardrail.build(),
         rear_foot_x=p.rear_foot_x_m,
         params=_params(p),
         avoidance=p.avoidance,
@@ -115,83 +95,7 @@ def run(p: CmbotManipulateParams, ctx: JobContext) -> KindOutput:
         shift_step_m=p.shift_step_m,
         progress=ctx.progress,
     )
-    run_ = plan.run
-    ctx.progress(0.97, "storing")
-    k = thin(len(run_.times), PLOT_SAMPLES)
-    label = "with avoidance" if p.avoidance else "without avoidance"
-    series = {label: run_.clearance[k]}
-    if plan.comparison is not None:
-        other = "without avoidance" if p.avoidance else "with avoidance"
-        series[other] = plan.comparison.clearance[k]
-    series["required clearance"] = np.full(len(k), p.min_clearance_m)
-    series["Eq. 15 d_s"] = np.full(len(k), p.d_s_m)
-    t = run_.times[k]
-    plots = [
-        plot(
-            "minimum clearance of the arm's spheres to the cuboids",
-            t, series, x_label="s", y_label="m",
-        ),
-        plot("tool tracking error", t, {label: run_.pos_error[k] * 1e3}, x_label="s", y_label="mm"),
-        plot(
-            "arm joints J6–J12",
-            t, {f"J{j + 6}": np.degrees(run_.q[k, j]) for j in range(7)},
-            x_label="s", y_label="deg",
-        ),
-    ]  # fmt: skip
-    checks = gate_checks(plan.gate)
-    prop = plan.proposal
-    proposal: dict[str, Any] | None = None
-    if prop is not None:
-        proposal = {
-            "rear_foot_x_m": prop.rear_foot_x,
-            "shift_m": prop.shift_m,
-            "tried": [{"rear_foot_x_m": x, "outcome": s} for x, s in prop.tried],
-        }
-        msg = (
-            f"the motion passes every check with the rear sole at {prop.rear_foot_x:.3f} m "
-            f"(shift {prop.shift_m:+.3f} m): re-plan there"
-            if prop.rear_foot_x is not None
-            else f"no base position within ±{p.max_shift_m} m passes every check"
-        )
-        checks.append(
-            Check(
-                name="base_position", passed=False, value=prop.rear_foot_x, limit=None, message=msg
-            )
-        )
-    result = {
-        "guardrail": guardrail_result(g),
-        "rear_foot_x_m": plan.rear_foot_x,
-        "T_world_base": plan.scene.T_world_base.tolist(),
-        "q_climb": work_stance(model).tolist(),
-        "boxes_base_frame": boxes_result(plan.scene.boxes),
-        "q_start_deg": np.degrees(plan.q_start).tolist(),
-        "proposal": proposal,
-        "violations": [vars(v) for v in plan.gate.violations],
-        "comparison_violations": [vars(v) for v in plan.comparison_gate.violations]
-        if plan.comparison_gate
-        else [],
-        "gate": {
-            "dt_s": plan.gate.dt_s,
-            "samples": plan.gate.samples,
-            "summary": plan.gate.summary(),
-        },
-        "comparison_gate": plan.comparison_gate.summary() if plan.comparison_gate else None,
-        "plots": plots,
-        "joint_names": [f"J{i}" for i in range(6, 13)],
-    }
-    arrays = {
-        "times": run_.times,
-        "q": run_.q,
-        "tool_pos": run_.tool_pos,
-        "desired_pos": run_.desired_pos,
-        "clearance": run_.clearance,
-        "pos_error": run_.pos_error,
-    }
-    if plan.comparison is not None:
-        arrays["q_compare"] = plan.comparison.q
-        arrays["clearance_compare"] = plan.comparison.clearance
-    metrics = {k2: float(v) for k2, v in plan.metrics.items() if math.isfinite(v)}
-    return KindOutput(result=json_safe(result), arrays=arrays, checks=checks, metrics=metrics)
+    return KindOutput.from_result(r)
 
 
 def compile_program(plan: PlanView) -> list[dict[str, Any]]:

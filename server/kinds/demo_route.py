@@ -9,7 +9,6 @@ edge weights are the Euclidean lengths; the route is Dijkstra's shortest path
 
 from __future__ import annotations
 
-import time
 from typing import Any
 
 import numpy as np
@@ -18,18 +17,10 @@ from pydantic import Field, model_validator
 from planners.postman.shortest_route import (
     build_graph,
     check_endpoints,
-    shortest_route,
+    plan_demo_route,
     unit_grid_edges,
 )
-from server.kinds.base import (
-    Check,
-    JobContext,
-    KindOutput,
-    PlanKind,
-    PlanView,
-    StrictParams,
-    check_le,
-)
+from server.kinds.base import JobContext, KindOutput, PlanKind, PlanView, StrictParams
 
 
 def _default_nodes() -> dict[str, list[float]]:
@@ -73,43 +64,16 @@ def validate(p: DemoRouteParams) -> None:
 
 
 def run(p: DemoRouteParams, ctx: JobContext) -> KindOutput:
-    t0 = time.perf_counter()
-    ctx.progress(0.05, "graph")
-    validate(p)
-    ctx.progress(0.2, "shortest path")
-    route = shortest_route(p.nodes, p.edges, p.start, p.end)
-    path, xyz, length = route.path, route.xyz, route.length_m
-    n = len(route.segment_m)
-    for i in range(n):
-        if p.step_delay_s:
-            time.sleep(p.step_delay_s)
-        ctx.progress(0.2 + 0.75 * (i + 1) / max(n, 1), f"step {i + 1}/{n}")
-    checks = [
-        Check(
-            name="route_found",
-            passed=bool(path[0] == p.start and path[-1] == p.end),
-            value=f"{path[0]}→{path[-1]}",
-            limit=f"{p.start}→{p.end}",
-            message=f"route runs from {path[0]} to {path[-1]}",
-        ),
-        check_le("route_length", length, p.max_length_m, "route length", " m"),
-    ]
-    result: dict[str, Any] = {
-        "nodes": p.nodes,
-        "edges": [list(e) for e in p.edges],
-        "path": path,
-    }
-    return KindOutput(
-        result=result,
-        arrays={"path_xyz": xyz},
-        checks=checks,
-        metrics={
-            "route_length_m": length,
-            "route_vertices": float(len(path)),
-            "graph_edges": float(route.graph_edges),
-            "planning_time_s": time.perf_counter() - t0,
-        },
+    r = plan_demo_route(
+        p.nodes,
+        p.edges,
+        p.start,
+        p.end,
+        max_length_m=p.max_length_m,
+        step_delay_s=p.step_delay_s,
+        progress=ctx.progress,
     )
+    return KindOutput.from_result(r)
 
 
 #: Differential-drive constants used to turn the route into wheel commands
