@@ -9,7 +9,12 @@ Prints, all measured in this run:
    same instance with exactly 200 and 400 odd vertices: times, ratio, agreement;
 3. every CARP instance in ``../shared/data/carp`` and the postman CSVs: the exact optimum,
    agreement with the baseline, the seed's Algorithm 5 (``method="thesis"``) and how often
-   and by how much the exact route is shorter.
+   and by how much the exact route is shorter;
+4. issue #18: ``plan_route`` on 200,000-edge truss graphs over several seeds, before (the
+   former single-call solver ``tests/vocpp/_reference_tjoin.py`` patched in) and after,
+   interleaved in the same run, with stage times; then the T-join alone at several
+   power-of-two grids ``2^-p`` on the same instance (does the weight scale drive the
+   decode time?).  ``--200k-only`` runs just this section; ``--seeds 1,2,3`` picks seeds.
 """
 
 from __future__ import annotations
@@ -22,13 +27,18 @@ import time
 from collections import defaultdict
 from collections.abc import Callable
 from pathlib import Path
+from unittest import mock
 
 ROOT = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(ROOT))
 
 import networkx as nx  # noqa: E402
+import numpy as np  # noqa: E402
 
+from planners.postman.graph_arrays import edge_arrays, simple_edges  # noqa: E402
+from planners.postman.tjoin import _pymatching_tjoin, min_t_join  # noqa: E402
 from planners.vocpp import Route, plan_route  # noqa: E402
+from tests.vocpp import _reference_tjoin  # noqa: E402
 from tests.vocpp.checks import assert_valid_route  # noqa: E402
 from tests.vocpp.generators import truss_graph, with_odd_count  # noqa: E402
 from tests.vocpp.instances import (  # noqa: E402
@@ -232,10 +242,86 @@ def section_instances() -> None:
             )
 
 
+def _staged(g: nx.Graph, s, t) -> tuple[Route, float, dict[str, float]]:
+    marks: list[tuple[str, float]] = []
+    t0 = time.perf_counter()
+    route = plan_route(g, s, t, progress=lambda f, st: marks.append((st, time.perf_counter())))
+    total = time.perf_counter() - t0
+    stages, prev = {}, t0
+    for st, tm in marks:
+        stages[st] = tm - prev
+        prev = tm
+    return route, total, stages
+
+
+def section_200k(seeds: list[int], grids: tuple[int, ...] = (16, 12, 8)) -> None:
+    print("\n== 4. 200,000-edge truss graphs over seeds (issue #18), before/after same run ==")
+    print(
+        "seed route | edges | |T| | before total (T-join) s | after total (T-join) s | ratio | "
+        "lengths equal | gap after | scaling"
+    )
+    rows = []
+    for seed, (s, t) in itertools.product(seeds, [((0, 0), (199, 351)), ((0, 0), (0, 0))]):
+        if s != t:  # open first, then closed on the same graph
+            g = truss_graph(200, 352, seed=seed)
+        kind = "closed" if s == t else "open"
+        with mock.patch("planners.vocpp.min_t_join", _reference_tjoin.min_t_join):
+            rb, tb, sb = _staged(g, s, t)
+        ra, ta, sa = _staged(g, s, t)
+        assert_valid_route(g, ra, s, t)
+        tj_b, tj_a = sb["repeated edges chosen"], sa["repeated edges chosen"]
+        same = rb.length == ra.length
+        rows.append((seed, tb, ta, tj_b, tj_a))
+        print(
+            f"{seed} {kind} | {g.number_of_edges()} | {len(terminals(g, s, t))} | {tb:.2f} ({tj_b:.2f}) | "
+            f"{ta:.2f} ({tj_a:.2f}) | {tb / ta:.2f}x | {same} | {ra.optimality_gap:.1e} | "
+            f"{ra.weight_scaling}",
+            flush=True,
+        )
+        print("    after stages (s): " + ", ".join(f"{k} {v:.2f}" for k, v in sa.items()))
+        if s != t:
+            continue  # the grid experiment on the closed routes only (the slow ones)
+        # The T-join alone at coarser grids: same instance, integer weights floor(w * 2**p).
+        ea = edge_arrays(g, "weight")
+        simple = simple_edges(ea)
+        su, sv, sw = ea.u[simple], ea.v[simple], ea.w[simple]
+        term = (ea.degrees() % 2).astype(bool)
+        term[ea.index[s]] ^= True
+        term[ea.index[t]] ^= True
+        tj, dt = timed(
+            lambda su=su, sv=sv, sw=sw, term=term, n=ea.n: min_t_join(n, su, sv, sw, term)
+        )
+        parts = [f"min_t_join {dt:.2f} s ({tj.scaling}, gap {tj.gap_bound:.1e})"]
+        for p in grids:
+            W = np.floor(np.ldexp(sw, p)).astype(np.int64)
+            J, dt = timed(
+                lambda W=W, su=su, sv=sv, term=term, n=ea.n: _pymatching_tjoin(n, su, sv, W, term)
+            )
+            gap = math.fsum((sw[J] - np.ldexp(W[J].astype(float), -p)).tolist())
+            excess = math.fsum(sw[J].tolist()) - math.fsum(sw[tj.edges].tolist())
+            parts.append(
+                f"2^-{p}: {dt:.2f} s (gap bound {gap:.2g}, w(J) - w(J_exact) {excess:+.2g})"
+            )
+        print("    T-join alone: " + "; ".join(parts), flush=True)
+    tb_all = [r[1] for r in rows]
+    ta_all = [r[2] for r in rows]
+    print(
+        f"summary over {len(rows)} routes ({len(seeds)} seeds, open + closed): before total median {statistics.median(tb_all):.2f} s, "
+        f"max {max(tb_all):.2f} s; after median {statistics.median(ta_all):.2f} s, max "
+        f"{max(ta_all):.2f} s; routes under 5 s after: {sum(x < 5 for x in ta_all)}/{len(rows)}"
+    )
+
+
 def main() -> None:
-    section_50k()
-    section_baseline()
-    section_instances()
+    args = sys.argv[1:]
+    seeds = [1, 2, 3, 4, 5, 6, 7]
+    if "--seeds" in args:
+        seeds = [int(x) for x in args[args.index("--seeds") + 1].split(",")]
+    if "--200k-only" not in args:
+        section_50k()
+        section_baseline()
+        section_instances()
+    section_200k(seeds)
 
 
 if __name__ == "__main__":
