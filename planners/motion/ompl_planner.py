@@ -156,7 +156,6 @@ def plan_motion(
     try_direct: bool = True,
     weights: np.ndarray | None = None,
     periodic: Sequence[int] = (),
-    partial_shortcut_steps: int = 0,
 ) -> MotionResult:
     """A collision-free joint path from ``start`` (d,) to one of ``goals`` (G, d).
 
@@ -169,10 +168,7 @@ def plan_motion(
     ``try_direct`` the straight segment to each goal is tried first.  The
     search stops after ``max_time_s`` or ``max_iterations`` planner
     iterations, whichever comes first; ``simplify_steps`` bounds OMPL's
-    vertex reduction; ``partial_shortcut_steps`` > 0 adds OMPL's partial
-    shortcutting (Geraerts & Overmars 2007: one dimension at a time, e.g. a
-    yaw wobble on a straight drive) that many steps, then another vertex
-    reduction.  Raises :class:`InvalidInputError` on malformed input;
+    vertex reduction.  Raises :class:`InvalidInputError` on malformed input;
     an unsolvable or over-budget problem returns ``path=None``."""
     lo = _as_configs(lower, None, "lower")[0]
     d = lo.size
@@ -296,9 +292,6 @@ def plan_motion(
     if simplify:
         ps = og.PathSimplifier(si)
         ps.reduceVertices(path, int(simplify_steps))
-        if partial_shortcut_steps > 0:
-            ps.partialShortcutPath(path, int(partial_shortcut_steps))
-            ps.reduceVertices(path, int(simplify_steps))
         ps.collapseCloseVertices(path)
     P = np.array([to_q(s) for s in path.getStates()])
     # Exact ends: OMPL copies states, but undo the scaling round-off.

@@ -147,9 +147,8 @@ class EdgePlanner:
     dimension (``periodic``): RRT-Connect, range ``step_m``, at most
     ``max_iterations`` iterations, the metric ``‖Δxy‖ + r·|Δyaw|`` (``r`` =
     ``yaw_radius_m``, the footprint's half length, so a turn costs what its
-    ends sweep), then OMPL's simplifier (``shortcut_rounds`` steps each of
-    vertex reduction and of partial shortcutting — which straightens a yaw
-    wobble along a drive — then collapsing close vertices).  ``valid`` is the batch
+    ends sweep), then OMPL's simplifier (``shortcut_rounds`` vertex
+    reductions, then collapsing close vertices).  ``valid`` is the batch
     state validity (Alg. 6 on the footprint), ``motion_valid(a, b)`` the
     straight (x, y, yaw) motion — by default :meth:`motion_ok`: poses every
     ``resolution_m`` in the metric √(dx² + dy² + (r·dyaw)²), yaw the short
@@ -216,7 +215,7 @@ class EdgePlanner:
             seed=seed, motion_valid=self.motion_valid, range_=self.step,
             # the iteration budget governs, not the clock
             max_time_s=600.0, max_iterations=self.max_iter,
-            simplify_steps=self.shortcut_rounds, partial_shortcut_steps=self.shortcut_rounds,
+            simplify_steps=self.shortcut_rounds,
             weights=np.array([1.0, 1.0, self.r]), periodic=(2,),
         )  # fmt: skip
         return res.path, res.iterations

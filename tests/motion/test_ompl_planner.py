@@ -186,17 +186,3 @@ def test_interpolate_periodic_steps_the_short_way(a, b, res):
 def test_bad_periodic_raises():
     with pytest.raises(InvalidInputError, match="periodic"):
         plan_motion(START, GOAL[None], wall_valid, lower=[0, 0], upper=[1, 1], seed=0, periodic=[2])
-
-
-def test_partial_shortcut_is_opt_in_free_and_never_longer():
-    base = _plan(5)
-    again = plan_motion(
-        START, GOAL[None], wall_valid, lower=[0, 0], upper=[1, 1], seed=5,
-        resolution=0.004, range_=0.2, partial_shortcut_steps=0,
-    )  # fmt: skip
-    assert np.array_equal(base.path, again.path)  # default: unchanged
-    part = _plan(5, partial_shortcut_steps=200)
-    assert part.success and _independently_free(part.path)
-    assert np.array_equal(part.path[0], START) and np.array_equal(part.path[-1], GOAL)
-    L = [float(np.linalg.norm(np.diff(r.path, axis=0), axis=1).sum()) for r in (base, part)]
-    assert L[1] <= L[0] + 1e-9
