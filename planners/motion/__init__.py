@@ -8,6 +8,7 @@ from planners.motion.ompl_planner import (
     interpolate,
     plan_motion,
     segment_validator,
+    wrap_angle,
 )
 
 __all__ = [
@@ -18,4 +19,5 @@ __all__ = [
     "interpolate",
     "plan_motion",
     "segment_validator",
+    "wrap_angle",
 ]

@@ -24,12 +24,20 @@ process with the same seed and inputs return the same path.
 Optional ``weights`` plan in scaled coordinates ``y = w ⊙ q`` so OMPL's
 Euclidean metric (nearest neighbours, ``range``) is the weighted one
 ``‖w ⊙ Δq‖₂``; validity is always evaluated on ``q``.
+
+Optional ``periodic`` dimensions are angles on the circle (a mobile base's
+yaw, a continuous joint): each is an OMPL ``SO2StateSpace`` (values in
+[-π, π), interpolation and distance the short way round) in a compound
+space after the real-vector part, weighted by its ``weights`` entry, so the
+metric is ``‖w ⊙ Δq_lin‖₂ + Σ w_i |wrap(Δθ_i)|`` (OMPL's compound distance
+is the weighted sum of its parts).  Without them the space is the plain
+real-vector one, exactly as before.
 """
 
 from __future__ import annotations
 
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -76,19 +84,38 @@ class MotionResult:
         return self.path is not None
 
 
-def interpolate(a: np.ndarray, b: np.ndarray, resolution: float) -> np.ndarray:
-    """Configurations from ``a`` (excluded) to ``b`` (included), max joint step ≤ resolution."""
-    n = max(1, int(np.ceil(np.max(np.abs(b - a)) / resolution)))
+def wrap_angle(a: np.ndarray | float) -> np.ndarray:
+    """Angle(s) wrapped into [-π, π) (OMPL's SO2 range)."""
+    return (np.asarray(a, dtype=float) + np.pi) % (2 * np.pi) - np.pi
+
+
+def interpolate(
+    a: np.ndarray, b: np.ndarray, resolution: float, periodic: Sequence[int] = ()
+) -> np.ndarray:
+    """Configurations from ``a`` (excluded) to ``b`` (included), max joint step
+    ≤ resolution; ``periodic`` dimensions move the short way round and come
+    out wrapped into [-π, π)."""
+    if not len(periodic):
+        n = max(1, int(np.ceil(np.max(np.abs(b - a)) / resolution)))
+        s = np.arange(1, n + 1)[:, None] / n
+        return a + s * (b - a)
+    per = list(periodic)
+    d = np.asarray(b, dtype=float) - a
+    d[per] = wrap_angle(d[per])
+    n = max(1, int(np.ceil(np.max(np.abs(d)) / resolution)))
     s = np.arange(1, n + 1)[:, None] / n
-    return a + s * (b - a)
+    out = a + s * d
+    out[:, per] = wrap_angle(out[:, per])
+    return out
 
 
-def segment_validator(valid: Valid, resolution: float) -> MotionValid:
+def segment_validator(valid: Valid, resolution: float, periodic: Sequence[int] = ()) -> MotionValid:
     """A motion validator checking the straight segment every ``resolution``
-    rad (both ends included), coarse pass first."""
+    rad (both ends included), coarse pass first; ``periodic`` dimensions the
+    short way round (:func:`interpolate`)."""
 
     def check(a: np.ndarray, b: np.ndarray) -> bool:
-        cand = interpolate(a, b, resolution)
+        cand = interpolate(a, b, resolution, periodic)
         if not np.all(valid(cand[3::4])):
             return False
         return bool(np.all(valid(cand)))
@@ -128,11 +155,16 @@ def plan_motion(
     simplify_steps: int = 100,
     try_direct: bool = True,
     weights: np.ndarray | None = None,
+    periodic: Sequence[int] = (),
 ) -> MotionResult:
     """A collision-free joint path from ``start`` (d,) to one of ``goals`` (G, d).
 
     ``valid`` decides configurations; ``motion_valid(a, b)`` straight
-    segments (default :func:`segment_validator` at ``resolution``).  With
+    segments (default :func:`segment_validator` at ``resolution``).
+    ``periodic`` names the dimensions that are angles (OMPL SO2, see the
+    module docstring): their ``lower``/``upper`` entries are ignored, start
+    and goals may hold any angle (the path's ends are exactly them), the
+    inner states lie in [-π, π).  With
     ``try_direct`` the straight segment to each goal is tried first.  The
     search stops after ``max_time_s`` or ``max_iterations`` planner
     iterations, whichever comes first; ``simplify_steps`` bounds OMPL's
@@ -146,10 +178,12 @@ def plan_motion(
         raise InvalidInputError(f"start must be one configuration, got {len(q0)}")
     q0 = q0[0]
     G = _as_configs(goals, d, "goals")
-    if not np.all(hi > lo):
+    lin = np.ones(d, dtype=bool)
+    lin[[int(i) for i in periodic if 0 <= int(i) < d]] = False
+    if not np.all(hi[lin] > lo[lin]):
         raise InvalidInputError("upper must exceed lower in every joint")
     for name, Q in (("start", q0[None]), ("goals", G)):
-        if np.any(lo - 1e-9 > Q) or np.any(hi + 1e-9 < Q):
+        if np.any(lo[lin] - 1e-9 > Q[:, lin]) or np.any(hi[lin] + 1e-9 < Q[:, lin]):
             raise InvalidInputError(f"{name} outside the joint bounds [lower, upper]")
     if planner not in PLANNERS:
         raise InvalidInputError(f"planner must be one of {', '.join(PLANNERS)}, got {planner!r}")
@@ -162,6 +196,11 @@ def plan_motion(
     w = np.ones(d) if weights is None else _as_configs(weights, d, "weights")[0]
     if not np.all(w > 0):
         raise InvalidInputError("weights must be positive")
+    per = sorted({int(i) for i in periodic})
+    if any(i < 0 or i >= d for i in per) or len(per) != len(periodic):
+        raise InvalidInputError(
+            f"periodic must list distinct dimensions in 0..{d - 1}, got {list(periodic)}"
+        )
 
     t0 = time.perf_counter()
     checks = 0
@@ -171,7 +210,7 @@ def plan_motion(
         checks += len(Q)
         return np.asarray(valid(Q), dtype=bool)
 
-    seg = motion_valid or segment_validator(counted, resolution)
+    seg = motion_valid or segment_validator(counted, resolution, per)
 
     def done(
         path: np.ndarray | None, status: str, its: int, gi: int = -1, nv: int = 0
@@ -191,15 +230,8 @@ def plan_motion(
                 return done(np.vstack([q0, g]), "exact", 0, int(goal_ids[k]))
 
     # --- OMPL problem in scaled coordinates y = w ⊙ q
-    space = ob.RealVectorStateSpace(d)
-    bounds = ob.RealVectorBounds(d)
-    bounds.low = (lo * w).tolist()
-    bounds.high = (hi * w).tolist()
-    space.setBounds(bounds)
+    space, to_q, set_q = _state_space(lo, hi, w, per)
     si = ob.SpaceInformation(space)
-
-    def to_q(s: ob.State) -> np.ndarray:
-        return np.asarray(s[0:d], dtype=float) / w
 
     si.setStateValidityChecker(lambda s: bool(counted(to_q(s)[None])[0]))
 
@@ -215,7 +247,7 @@ def plan_motion(
 
     def state(q: np.ndarray) -> ob.State:
         s = si.allocState()
-        s[0:d] = (q * w).tolist()
+        set_q(s, q)
         return s
 
     # Re-seed OMPL's global seed generator so the planner's and simplifier's
@@ -263,6 +295,64 @@ def plan_motion(
         ps.collapseCloseVertices(path)
     P = np.array([to_q(s) for s in path.getStates()])
     # Exact ends: OMPL copies states, but undo the scaling round-off.
-    gi = int(np.argmin(np.abs(G - P[-1]).max(axis=1)))
+    diff = G - P[-1]
+    diff[:, per] = wrap_angle(diff[:, per])
+    gi = int(np.argmin(np.abs(diff).max(axis=1)))
     P[0], P[-1] = q0, G[gi]
     return done(P, "exact", its, int(goal_ids[gi]), nv)
+
+
+def _state_space(
+    lo: np.ndarray, hi: np.ndarray, w: np.ndarray, per: list[int]
+) -> tuple[ob.StateSpace, Callable[[ob.State], np.ndarray], Callable[[ob.State, np.ndarray], None]]:
+    """OMPL's state space for bounds ``lo``/``hi`` in scaled coordinates
+    ``w ⊙ q``, and the conversions state → q and q → state.
+
+    No ``per``: a ``RealVectorStateSpace``.  Else a ``CompoundStateSpace``:
+    the real-vector part (the other dimensions, if any, weight 1) then one
+    ``SO2StateSpace`` per periodic dimension, weighted by its ``w``."""
+    d = len(lo)
+
+    def bounded(idx: list[int]) -> ob.RealVectorStateSpace:
+        space = ob.RealVectorStateSpace(len(idx))
+        bounds = ob.RealVectorBounds(len(idx))
+        bounds.low = (lo[idx] * w[idx]).tolist()
+        bounds.high = (hi[idx] * w[idx]).tolist()
+        space.setBounds(bounds)
+        return space
+
+    if not per:
+        space = bounded(list(range(d)))
+
+        def to_q(s: ob.State) -> np.ndarray:
+            return np.asarray(s[0:d], dtype=float) / w
+
+        def set_q(s: ob.State, q: np.ndarray) -> None:
+            s[0:d] = (q * w).tolist()
+
+        return space, to_q, set_q
+
+    lin = [i for i in range(d) if i not in per]
+    compound = ob.CompoundStateSpace()
+    if lin:
+        compound.addSubspace(bounded(lin), 1.0)
+    for i in per:
+        compound.addSubspace(ob.SO2StateSpace(), float(w[i]))
+    k0 = 1 if lin else 0  # index of the first SO2 component
+    n_lin = len(lin)
+
+    def to_q_c(s: ob.State) -> np.ndarray:
+        q = np.empty(d)
+        if lin:
+            q[lin] = np.asarray(s[0][0:n_lin], dtype=float) / w[lin]
+        for k, i in enumerate(per):
+            q[i] = s[k0 + k].value
+        return q
+
+    def set_q_c(s: ob.State, q: np.ndarray) -> None:
+        if lin:
+            s[0][0:n_lin] = (q[lin] * w[lin]).tolist()
+        for k, i in enumerate(per):
+            s[k0 + k].value = float(wrap_angle(q[i]))
+
+    return compound, to_q_c, set_q_c

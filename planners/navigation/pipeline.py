@@ -10,7 +10,8 @@ Entry point :func:`plan_navigation` (DESIGN §5), re-exported by the package.  S
 4. :mod:`.graph` — structure graph (Alg. 4, fixed to follow every bar);
 5. :func:`planners.vocpp.plan_route` — the route (Alg. 5, exact by default);
 6. :mod:`.pibc` + :mod:`.rrt` — per-edge RRT-Connect in (x, y, yaw) whose
-   samples are valid when every footprint point is on steel (Alg. 6).
+   samples are valid when every footprint point is on steel (Alg. 6):
+   differential drive (hand-written) or holonomic (OMPL).
 
 Synthetic structures with ground truth for tests and samples live in
 :mod:`.synthetic` (``SAMPLES``, ``STRUCTURES``).
@@ -203,10 +204,10 @@ def _edge_paths(
                 if p.motion_model == "differential"
                 else EdgePlanner(valid, **common)
             )
-            sampler = corridor_sampler(
-                a, b, rng, lateral_sigma_m=0.03, margin_m=0.5 * p.footprint_length_m
-            )
             if isinstance(planner, DiffDrivePlanner):
+                sampler = corridor_sampler(
+                    a, b, rng, lateral_sigma_m=0.03, margin_m=0.5 * p.footprint_length_m
+                )
                 # Turns happen at the vertex the edge leaves (the route
                 # changes bars there): search turning points around it.
                 path, iters = planner.plan(
@@ -216,9 +217,11 @@ def _edge_paths(
                     turn_centre=a,
                     turn_radius_m=0.5 * p.footprint_length_m + 0.02,
                 )
-            else:
-                path, iters = planner.plan(start, goal, sampler)
-            dense = None if path is None else planner.densify(planner.shortcut(path, rng))
+                path = None if path is None else planner.shortcut(path, rng)
+            else:  # OMPL, sampling the box whose clusters ``valid`` checks
+                seed = int(rng.integers(2**31 - 1))
+                path, iters = planner.plan(start, goal, lower=lo, upper=hi, seed=seed)
+            dense = None if path is None else planner.densify(path)
             if dense is None or not np.all(valid(dense)):
                 what = (
                     "differential-drive path (turns in place, straight drives)"

@@ -2,13 +2,22 @@
 
 The seed plans "the motion path for one edge each time" with an RRT whose
 free configurations are those whose projected footprint points all lie inside
-a steel boundary (Alg. 6).  Here: RRT-Connect (two trees, greedy connect) on
-(x, y, yaw) with the metric ``sqrt(dx² + dy² + (r·dyaw)²)`` (r = the
-footprint's half length, so a turn costs what its corners sweep), motions
-checked at a fixed resolution with one vectorised PIBC call per motion,
-followed by random shortcut smoothing.  Samples are drawn half along the
-edge's corridor (bars are narrow: uniform samples would almost all be off the
-steel) and half uniformly around it.  Deterministic for a given ``seed``.
+a steel boundary (Alg. 6).  Both planners here take the validity checkers of
+:mod:`planners.motion`: a batch state-validity callable ``valid(Q)`` over
+(N, 3) poses and a motion validator ``motion_valid(a, b) -> bool``.
+
+* :class:`EdgePlanner` (``motion_model="holonomic"``, the seed's planner):
+  straight motions in (x, y, yaw), so it is OMPL's RRT-Connect and path
+  simplifier through :func:`planners.motion.plan_motion`, the yaw an SO2
+  dimension.
+* :class:`DiffDrivePlanner` (the default): turns in place and straight drives
+  only — rotate–translate–rotate steering, which OMPL's geometric planners
+  do not have (its Reeds–Shepp space needs a positive turning radius), so its
+  RRT-Connect (:func:`rrt_connect`, samples from :func:`corridor_sampler`)
+  and random shortcutting stay here; its motion validator checks one
+  primitive (:func:`primitive_validator`).
+
+Deterministic for a given ``seed``.
 """
 
 from __future__ import annotations
@@ -20,13 +29,23 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from planners.errors import InvalidInputError
+from planners.motion import MotionValid, Valid, plan_motion
+from planners.motion import wrap_angle as wrap
 
-ValidFn = Callable[[np.ndarray], np.ndarray]
-
-
-def wrap(a: np.ndarray | float) -> np.ndarray:
-    """Angle(s) wrapped into [-π, π)."""
-    return (np.asarray(a) + np.pi) % (2 * np.pi) - np.pi
+__all__ = [
+    "DiffDrivePlanner",
+    "EdgePath",
+    "EdgePlanner",
+    "corridor_sampler",
+    "primitive_poses",
+    "primitive_validator",
+    "rrt_connect",
+    "rt_waypoints",
+    "rtr_cost",
+    "rtr_waypoints",
+    "settle_pose",
+    "wrap",
+]
 
 
 @dataclass
@@ -53,6 +72,8 @@ class EdgePath:
 
 
 class _Tree:
+    """An RRT tree of poses: node array grown by doubling, parent indices."""
+
     def __init__(self, root: np.ndarray, cap: int):
         self.q = np.zeros((cap, 3))
         self.parent = np.full(cap, -1, dtype=np.int64)
@@ -76,30 +97,38 @@ class _Tree:
         return np.array(out)
 
 
-def _rrt_connect(
-    planner: EdgePlanner | DiffDrivePlanner,
+Extend = Callable[[_Tree, np.ndarray], tuple[str, int]]  # (tree, target) → (status, node)
+
+
+def rrt_connect(
     start: np.ndarray,
     goal: np.ndarray,
     sampler: Callable[[], np.ndarray],
+    valid: Valid,
+    extend: Extend,
+    max_iterations: int,
 ) -> tuple[np.ndarray | None, int]:
-    """RRT-Connect (Kuffner & LaValle 2000) with ``planner``'s ``valid``,
-    ``_extend``, ``_connect`` and ``max_iter``: poses start → goal or
-    ``None``, and the iterations used."""
+    """RRT-Connect (Kuffner & LaValle 2000) with the steering ``extend``
+    (grow a tree from its nearest node towards a target: ``"reached"``,
+    ``"advanced"`` or ``"trapped"``, and the node reached); connecting is
+    repeated extension.  Targets are the samples of ``sampler`` that pass
+    ``valid``, checked 256 at a time: on a narrow bar most raw samples are
+    off the steel, and extending towards them mostly fails.  Returns the
+    poses start → goal or ``None``, and the iterations used."""
     ta, tb = _Tree(start, 256), _Tree(goal, 256)
     a_is_start = True
     buffer: list[np.ndarray] = []
-    for it in range(1, planner.max_iter + 1):
-        # Grow towards free samples only: on a narrow bar most raw samples
-        # are off the steel, and extending towards them mostly fails.  The
-        # samples are checked 256 at a time (one vectorised PIBC call).
+    for it in range(1, max_iterations + 1):
         if not buffer:
             batch = np.array([sampler() for _ in range(256)])
-            ok = planner.valid(batch)
+            ok = valid(batch)
             buffer = list(batch[ok][::-1]) if ok.any() else list(batch[:32][::-1])
         q = buffer.pop()
-        status, ja = planner._extend(ta, q)
+        status, ja = extend(ta, q)
         if status != "trapped":
-            status_b, jb = planner._connect(tb, ta.q[ja])
+            status_b, jb = "advanced", -1
+            while status_b == "advanced":
+                status_b, jb = extend(tb, ta.q[ja])
             if status_b == "reached":
                 pa, pb = ta.path_to_root(ja)[::-1], tb.path_to_root(jb)
                 path = np.vstack([pa, pb[1:]])
@@ -108,21 +137,34 @@ def _rrt_connect(
                 return path, it
         ta, tb = tb, ta
         a_is_start = not a_is_start
-    return None, planner.max_iter
+    return None, max_iterations
 
 
 class EdgePlanner:
-    """RRT-Connect + shortcut smoothing for one pose pair."""
+    """The seed's holonomic planner (§2.3 RRT in (x, y, yaw)) through OMPL.
+
+    :func:`planners.motion.plan_motion` with the yaw as an OMPL SO2
+    dimension (``periodic``): RRT-Connect, range ``step_m``, at most
+    ``max_iterations`` iterations, the metric ``‖Δxy‖ + r·|Δyaw|`` (``r`` =
+    ``yaw_radius_m``, the footprint's half length, so a turn costs what its
+    ends sweep), then OMPL's simplifier (``shortcut_rounds`` vertex
+    reductions, then collapsing close vertices).  ``valid`` is the batch
+    state validity (Alg. 6 on the footprint), ``motion_valid(a, b)`` the
+    straight (x, y, yaw) motion — by default :meth:`motion_ok`: poses every
+    ``resolution_m`` in the metric √(dx² + dy² + (r·dyaw)²), yaw the short
+    way round, all in one validity call.  Same seed → same path.
+    """
 
     def __init__(
         self,
-        valid: ValidFn,
+        valid: Valid,
         *,
         yaw_radius_m: float,
         step_m: float = 0.08,
         resolution_m: float = 0.01,
         max_iterations: int = 1500,
         shortcut_rounds: int = 60,
+        motion_valid: MotionValid | None = None,
     ):
         self.valid = valid
         self.r = float(max(yaw_radius_m, 1e-3))
@@ -130,8 +172,10 @@ class EdgePlanner:
         self.res = float(resolution_m)
         self.max_iter = int(max_iterations)
         self.shortcut_rounds = int(shortcut_rounds)
+        self.motion_valid: MotionValid = motion_valid or self.motion_ok
 
     def dist(self, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+        """√(dx² + dy² + (r·dyaw)²), yaw the short way (the densifying metric)."""
         d = b - a
         return np.sqrt(d[..., 0] ** 2 + d[..., 1] ** 2 + (self.r * wrap(d[..., 2])) ** 2)
 
@@ -151,53 +195,33 @@ class EdgePlanner:
     def motion_ok(self, a: np.ndarray, b: np.ndarray) -> bool:
         return bool(np.all(self.valid(self.interpolate(a, b, include_start=False))))
 
-    def _steer(self, a: np.ndarray, b: np.ndarray) -> np.ndarray:
-        d = float(self.dist(a, b))
-        if d <= self.step:
-            return b.copy()
-        f = self.step / d
-        delta = b - a
-        out = a + f * np.array([delta[0], delta[1], float(wrap(delta[2]))])
-        out[2] = float(wrap(out[2]))
-        return out
-
-    def _extend(self, tree: _Tree, target: np.ndarray) -> tuple[str, int]:
-        dists = self.dist(tree.q[: tree.n], target)
-        i = int(np.argmin(dists))
-        new = self._steer(tree.q[i], target)
-        if not self.motion_ok(tree.q[i], new):
-            return "trapped", i
-        j = tree.add(new, i)
-        return ("reached" if float(self.dist(new, target)) < 1e-9 else "advanced"), j
-
-    def _connect(self, tree: _Tree, target: np.ndarray) -> tuple[str, int]:
-        status, j = "advanced", -1
-        while status == "advanced":
-            status, j = self._extend(tree, target)
-        return status, j
-
     def plan(
-        self, start: np.ndarray, goal: np.ndarray, sampler: Callable[[], np.ndarray]
+        self,
+        start: np.ndarray,
+        goal: np.ndarray,
+        *,
+        lower: np.ndarray,
+        upper: np.ndarray,
+        seed: int,
     ) -> tuple[np.ndarray | None, int]:
-        """Poses from ``start`` to ``goal`` (both must be valid) or ``None``; iterations used."""
-        if self.motion_ok(start, goal):
-            return np.array([start, goal]), 0
-        return _rrt_connect(self, start, goal, sampler)
-
-    def shortcut(self, path: np.ndarray, rng: np.random.Generator) -> np.ndarray:
-        """Random shortcutting: replace a sub-path by a straight motion when valid."""
-        path = path.copy()
-        for _ in range(self.shortcut_rounds):
-            if len(path) <= 2:
-                break
-            i, j = sorted(rng.choice(len(path), size=2, replace=False))
-            if j - i < 2:
-                continue
-            if self.motion_ok(path[i], path[j]):
-                path = np.vstack([path[: i + 1], path[j:]])
-        return path
+        """Poses from ``start`` to ``goal`` (both valid), simplified, or
+        ``None``; iterations used.  ``lower``/``upper`` (2,) bound the
+        positions sampled (widened to hold both ends); the direct motion is
+        tried first."""
+        lo = np.minimum(np.asarray(lower, dtype=float), np.minimum(start[:2], goal[:2]))
+        hi = np.maximum(np.asarray(upper, dtype=float), np.maximum(start[:2], goal[:2]))
+        res = plan_motion(
+            start, goal[None], self.valid, lower=np.r_[lo, -np.pi], upper=np.r_[hi, np.pi],
+            seed=seed, motion_valid=self.motion_valid, range_=self.step,
+            # the iteration budget governs, not the clock
+            max_time_s=600.0, max_iterations=self.max_iter,
+            simplify_steps=self.shortcut_rounds,
+            weights=np.array([1.0, 1.0, self.r]), periodic=(2,),
+        )  # fmt: skip
+        return res.path, res.iterations
 
     def densify(self, path: np.ndarray) -> np.ndarray:
+        """The poses along ``path`` every ``resolution_m`` (the metric of :meth:`dist`)."""
         out = [path[:1]]
         for a, b in itertools.pairwise(path):
             out.append(self.interpolate(a, b, include_start=False))
@@ -242,7 +266,7 @@ def settle_pose(
     point: np.ndarray,
     toward: np.ndarray,
     yaw_hint: float,
-    valid: ValidFn,
+    valid: Valid,
     *,
     step_m: float = 0.01,
     yaw_offsets_deg: tuple[float, ...] = (0.0, 180.0, 15.0, -15.0, 165.0, -165.0, 30.0, -30.0),
@@ -357,9 +381,7 @@ def primitive_poses(
     if dist <= 1e-9:
         n = max(1, int(np.ceil(abs(dyaw) / turn_resolution_rad)))
         t = np.linspace(0.0, 1.0, n + 1)[1:]
-        return np.column_stack(
-            [np.full(n, a[0]), np.full(n, a[1]), wrap(a[2] + t * dyaw)]
-        )
+        return np.column_stack([np.full(n, a[0]), np.full(n, a[1]), wrap(a[2] + t * dyaw)])
     if abs(dyaw) > 1e-9 or abs(d[0] * np.sin(a[2]) - d[1] * np.cos(a[2])) > 1e-7:
         raise InvalidInputError(
             f"pose ({a[0]:.4f}, {a[1]:.4f}, {np.degrees(a[2]):.1f}°) → "
@@ -370,6 +392,24 @@ def primitive_poses(
     t = np.linspace(0.0, 1.0, n + 1)[1:, None]
     xy = a[:2] + t * d
     return np.column_stack([xy, np.full(n, a[2])])
+
+
+def primitive_validator(
+    valid: Valid, *, resolution_m: float, turn_resolution_rad: float
+) -> MotionValid:
+    """The motion validator of one differential-drive primitive a → b: every
+    pose of :func:`primitive_poses` (``a`` excluded) passes ``valid``; every
+    4th pose first, so a blocked primitive is rejected cheaply."""
+
+    def check(a: np.ndarray, b: np.ndarray) -> bool:
+        poses = primitive_poses(
+            a, b, resolution_m=resolution_m, turn_resolution_rad=turn_resolution_rad
+        )
+        if len(poses) > 4 and not np.all(valid(poses[3::4])):
+            return False
+        return bool(np.all(valid(poses)))
+
+    return check
 
 
 class DiffDrivePlanner:
@@ -386,15 +426,21 @@ class DiffDrivePlanner:
 
     Nearest neighbours use the rotate–translate–rotate cost
     (:func:`rtr_cost`, turning weighted by ``yaw_radius_m`` so a turn costs
-    what the footprint's far end sweeps); motions are checked at
-    ``resolution_m`` along straights and ``turn_resolution_rad`` in turns
-    with one vectorised validity (PIBC) call each; then random shortcuts by
+    what the footprint's far end sweeps); then random shortcuts by
     rotate–translate–rotate motions.  Deterministic for a given generator.
+
+    Validity has the shape of :mod:`planners.motion`: ``valid`` decides (N, 3)
+    poses in one batch (samples, the candidate turns of :meth:`turn_point`);
+    ``motion_valid(a, b)`` one primitive a → b — by default
+    :func:`primitive_validator`: poses every ``resolution_m`` along a
+    straight and every ``turn_resolution_rad`` in a turn, coarse pass first.
+    OMPL has no equivalent of this steering, so the search is kept here
+    (:func:`rrt_connect`).
     """
 
     def __init__(
         self,
-        valid: ValidFn,
+        valid: Valid,
         *,
         yaw_radius_m: float,
         step_m: float = 0.08,
@@ -403,6 +449,7 @@ class DiffDrivePlanner:
         max_iterations: int = 1500,
         shortcut_rounds: int = 60,
         allow_reverse: bool = True,
+        motion_valid: MotionValid | None = None,
     ):
         self.valid = valid
         self.r = float(max(yaw_radius_m, 1e-3))
@@ -412,6 +459,10 @@ class DiffDrivePlanner:
         self.max_iter = int(max_iterations)
         self.shortcut_rounds = int(shortcut_rounds)
         self.allow_reverse = bool(allow_reverse)
+        self.motion_valid: MotionValid = motion_valid or primitive_validator(
+            valid, resolution_m=self.res, turn_resolution_rad=self.turn_res
+        )
+        self._batch_ways = motion_valid is None
 
     # -- motions
     def dist(self, a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -426,10 +477,14 @@ class DiffDrivePlanner:
         )
 
     def way_ok(self, way: list[np.ndarray]) -> bool:
-        """Every sampled pose of the primitives along ``way`` is valid."""
-        if len(way) < 2:
-            return True
-        return bool(np.all(self.valid(self._samples(way))))
+        """Every primitive along ``way`` passes the motion validator.  With the
+        default validator (:func:`primitive_validator`) the poses of all its
+        primitives go to ``valid`` in one call instead — the same answer,
+        one PIBC call where a direct rotate–translate–rotate way would make
+        up to six."""
+        if self._batch_ways:
+            return len(way) < 2 or bool(np.all(self.valid(self._samples(way))))
+        return all(self.motion_valid(p, q) for p, q in itertools.pairwise(way))
 
     def connect_poses(self, a: np.ndarray, b: np.ndarray) -> list[np.ndarray] | None:
         """The cheapest valid rotate–translate–rotate way-points a → b, or None."""
@@ -469,12 +524,6 @@ class DiffDrivePlanner:
         for q in way[1:]:
             j = tree.add(q, j)
         return ("reached" if reached else "advanced"), j
-
-    def _connect(self, tree: _Tree, target: np.ndarray) -> tuple[str, int]:
-        status, j = "advanced", -1
-        while status == "advanced":
-            status, j = self._extend(tree, target)
-        return status, j
 
     def turn_point(
         self,
@@ -526,7 +575,8 @@ class DiffDrivePlanner:
                 cands.append(np.column_stack([cost, np.arange(len(pts)), h_in, h_out]))
         c = np.vstack(cands)
         c = c[np.argsort(c[:, 0], kind="stable")]
-        # Pre-check the turn at p alone (the hard part), all candidates at once.
+        # Pre-check the turn at p alone (the hard part), all candidates in one
+        # state-validity call; the motion validator decides the whole way below.
         turns = [
             primitive_poses(
                 np.array([*pts[int(i)], hi]),
@@ -576,7 +626,7 @@ class DiffDrivePlanner:
             way = self.turn_point(start, goal, turn_centre, radius_m=turn_radius_m)
             if way is not None:
                 return np.array(way), 0
-        return _rrt_connect(self, start, goal, sampler)
+        return rrt_connect(start, goal, sampler, self.valid, self._extend, self.max_iter)
 
     def shortcut(self, path: np.ndarray, rng: np.random.Generator) -> np.ndarray:
         """Random shortcuts: replace way-points i..j by a valid, cheaper

@@ -42,6 +42,7 @@ Both return per-point labels (−1 = noise) and a kind per cluster.
 
 from __future__ import annotations
 
+import itertools
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -261,27 +262,47 @@ def _axis_angles(chords: np.ndarray) -> np.ndarray:
     return (np.pi * (k + np.clip(off, -0.5, 0.5)) / n_dirs) % np.pi
 
 
-def segment_default(
-    uv: np.ndarray,
-    *,
-    grid_m: float = 0.01,
-    n_directions: int = 24,
-    long_factor: float = 2.5,
-    gap_bridge: int = 2,
-    piece_angle_deg: float = 12.0,
-    line_angle_deg: float = 6.0,
-    min_piece_m: float = 0.08,
-    hole_fill_m2: float = 0.01,
-    min_component_m2: float = 0.002,
-    min_bar_length_m: float = 0.15,
-) -> Segmentation:
-    """Deterministic strip-based segmentation (see module docstring, "default")."""
-    uv = np.asarray(uv, dtype=float)
-    if len(uv) < 3:
-        raise InvalidInputError(f"segmentation needs at least 3 points, got {len(uv)}")
-    c = float(grid_m)
-    # Local point spacing: mean distance to the 3 nearest neighbours.  Density
-    # falls ~10× with range, so gaps are closed with a radius per point.
+@dataclass
+class _Raster:
+    """The points on a ``c``-metre grid: each point's cell ``ij``, the grid
+    ``shape``, the occupied cells ``occ``, the per-point closing radius
+    ``r_pt`` (cells) and each point's nearest-neighbour distance ``nn``."""
+
+    c: float
+    ij: np.ndarray
+    shape: tuple[int, int]
+    occ: np.ndarray
+    r_pt: np.ndarray
+    nn: np.ndarray
+
+
+@dataclass
+class _Steel:
+    """The steel cells: grid ``mask``, their (Q, 2) coordinates ``cells``
+    (``xy`` as floats) and the cell index per grid position (−1 off steel)."""
+
+    mask: np.ndarray
+    cells: np.ndarray
+    xy: np.ndarray
+    index: np.ndarray
+
+
+@dataclass
+class _Chords:
+    """Step 2 per steel cell: flange width (shortest chord, cells), median
+    width, whether it is a bar cell (one run of long directions) and its axis
+    angle (rad in [0, π))."""
+
+    width: np.ndarray
+    w_med: float
+    single: np.ndarray
+    angle: np.ndarray
+
+
+def _rasterise(uv: np.ndarray, c: float) -> _Raster:
+    """Step 1a (replaces Alg. 3's GMM input): the points on a ``c`` grid, with a
+    closing radius per point of 1.2 × its mean distance to its 3 nearest
+    neighbours (1–6 cells): density falls ~10× with range (§5.2.1)."""
     dk = np.asarray(cKDTree(uv).query(uv, k=min(4, len(uv)))[0])  # k ≥ 2: an array
     nn = dk[:, 1]
     local = dk[:, 1:].mean(axis=1)
@@ -289,22 +310,32 @@ def segment_default(
     pad = int(r_pt.max()) + 3
     origin = uv.min(axis=0) - pad * c
     ij = np.floor((uv - origin) / c).astype(np.int64)
-    shape = tuple(ij.max(axis=0) + pad + 1)
+    shape = (int(ij[:, 0].max()) + pad + 1, int(ij[:, 1].max()) + pad + 1)
     occ = np.zeros(shape, dtype=bool)
     occ[ij[:, 0], ij[:, 1]] = True
+    return _Raster(c, ij, shape, occ, r_pt, nn)
 
-    # 1. Close the gaps of the sparse far field (each radius class on its own
-    #    points: a closing is extensive, so the union keeps every point), fill
-    #    small dropout holes, drop specks.
-    mask = occ.copy()
-    for r in np.unique(r_pt):
-        sub = np.zeros(shape, dtype=bool)
-        sel = r_pt == r
-        sub[ij[sel, 0], ij[sel, 1]] = True
-        # Neighbouring points of smaller radius still bridge the gap edges.
-        sub |= occ & ndimage.binary_dilation(sub, structure=_disk(int(r)))
+
+def _close_gaps(ras: _Raster) -> np.ndarray:
+    """Step 1b: a morphological closing per radius class, each on its own
+    points (a closing is extensive, so the union keeps every point);
+    neighbouring points of smaller radius still bridge the gap edges."""
+    mask = ras.occ.copy()
+    for r in np.unique(ras.r_pt):
+        sub = np.zeros(ras.shape, dtype=bool)
+        sel = ras.r_pt == r
+        sub[ras.ij[sel, 0], ras.ij[sel, 1]] = True
+        sub |= ras.occ & ndimage.binary_dilation(sub, structure=_disk(int(r)))
         mask |= ndimage.binary_closing(sub, structure=_disk(int(r)))
-    r_close = int(np.median(r_pt))
+    return mask
+
+
+def _fill_holes_drop_specks(
+    mask: np.ndarray, c: float, hole_fill_m2: float, min_component_m2: float
+) -> np.ndarray:
+    """Step 1c: fill enclosed holes smaller than ``hole_fill_m2`` (dropout),
+    then drop 8-connected steel components smaller than ``min_component_m2``."""
+    mask = mask.copy()
     holes, n_holes = ndimage.label(~mask)
     if n_holes:
         area = np.bincount(holes.ravel(), minlength=n_holes + 1)
@@ -317,29 +348,42 @@ def segment_default(
     area = np.bincount(comp.ravel(), minlength=n_comp + 1)
     big = area * c * c >= min_component_m2
     big[0] = False
-    mask = big[comp]
-    cells = np.argwhere(mask)
-    q = len(cells)
-    if q == 0:
-        raise InvalidInputError("no steel area left after rasterising the points")
-    index = np.full(shape, -1, dtype=np.int64)
-    index[cells[:, 0], cells[:, 1]] = np.arange(q)
+    return np.asarray(big[comp])
 
-    # 2. Directional chords; cells with one run of long directions are bar cells
-    #    with an axis angle.
-    chords = _chords(cells, n_directions)
+
+def _steel_cells(mask: np.ndarray) -> _Steel:
+    """The steel cells of ``mask`` and their index grid; raises
+    :class:`InvalidInputError` when none is left."""
+    cells = np.argwhere(mask)
+    if len(cells) == 0:
+        raise InvalidInputError("no steel area left after rasterising the points")
+    index = np.full(mask.shape, -1, dtype=np.int64)
+    index[cells[:, 0], cells[:, 1]] = np.arange(len(cells))
+    return _Steel(mask, cells, cells.astype(float), index)
+
+
+def _bar_cells(cells: np.ndarray, n_dirs: int, long_factor: float, bridge: int) -> _Chords:
+    """Step 2 (§4.1's premise, "bars are long in one direction", measured):
+    exact chords in ``n_dirs`` directions; a direction is long where its chord
+    is ≥ ``long_factor`` × the cell's width and × the median width; cells with
+    one run of long directions (gaps ≤ ``bridge`` closed) are bar cells."""
+    chords = _chords(cells, n_dirs)
     width = chords.min(axis=1)
     w_med = float(np.median(width))
     long_dir = chords >= np.maximum(long_factor * width, long_factor * w_med)[:, None]
-    long_dir = _bridge(long_dir, gap_bridge)
+    long_dir = _bridge(long_dir, bridge)
     single = (_count_runs(long_dir) == 1) & ~long_dir.all(axis=1)
-    angle = _axis_angles(chords)
+    return _Chords(width, w_med, single, _axis_angles(chords))
 
-    # 3. Bar pieces: 4-connected single-run cells whose axis angles agree.
+
+def _piece_ids(steel: _Steel, ch: _Chords, piece_angle_deg: float) -> np.ndarray:
+    """Step 3a: per steel cell its piece id (−1: not a bar cell) — components
+    of 4-connected bar cells whose axis angles differ by < ``piece_angle_deg``."""
+    cells, index, angle, single = steel.cells, steel.index, ch.angle, ch.single
     a_list, b_list = [cells[:0, 0]], [cells[:0, 0]]
     for di, dj in ((1, 0), (0, 1)):
         nb = cells + (di, dj)
-        ok = (nb[:, 0] < shape[0]) & (nb[:, 1] < shape[1])
+        ok = (nb[:, 0] < index.shape[0]) & (nb[:, 1] < index.shape[1])
         src = np.nonzero(ok)[0]
         dst = index[nb[ok, 0], nb[ok, 1]]
         keep = dst >= 0
@@ -348,36 +392,46 @@ def segment_default(
         keep = single[src] & single[dst] & (diff < np.deg2rad(piece_angle_deg))
         a_list.append(src[keep])
         b_list.append(dst[keep])
-    piece = _components(q, np.concatenate(a_list), np.concatenate(b_list))
-    piece = np.where(single, piece, -1)
-    xy = cells.astype(float)
+    piece = _components(len(cells), np.concatenate(a_list), np.concatenate(b_list))
+    return np.where(single, piece, -1)
+
+
+def _fit_pieces(
+    piece: np.ndarray, steel: _Steel, ch: _Chords, c: float, min_piece_m: float
+) -> list[tuple[np.ndarray, _Line]]:
+    """Step 3b: a line per piece (trimmed PCA, :func:`_fit_line`), kept when the
+    piece is long (≥ ``min_piece_m`` and 1.5 widths) and spans at least half
+    its flange: a sliver along a ragged (far, noisy) edge is no bar."""
+    xy = steel.xy
     pieces: list[tuple[np.ndarray, _Line]] = []
     order = np.argsort(piece, kind="stable")
     ids, starts = np.unique(piece[order], return_index=True)
-    bounds = np.append(starts, q)
+    bounds = np.append(starts, len(piece))
     for k, pid in enumerate(ids):  # per piece (tens to hundreds)
         if pid < 0:
             continue
         sel = order[bounds[k] : bounds[k + 1]]
-        ang = 0.5 * float(np.angle(np.exp(2j * angle[sel]).mean()))
-        line = _fit_line(xy[sel], ang, width[sel])
-        # A piece must be long and span most of its own flange width: a sliver
-        # along a ragged (far, noisy) edge is not a bar of its own.
+        ang = 0.5 * float(np.angle(np.exp(2j * ch.angle[sel]).mean()))
+        line = _fit_line(xy[sel], ang, ch.width[sel])
         _, t = line.coords(xy[sel])
         thick = float(np.subtract(*np.percentile(t, [95, 5]))) + 1.0
         if (line.s_hi - line.s_lo) * c >= max(min_piece_m, 1.5 * line.width * c) and (
             thick >= 0.5 * line.width
         ):
             pieces.append((sel, line))
+    return pieces
 
-    # 4. Pieces → lines, largest first: a piece mostly inside an accepted
-    #    line's strip is part of that line (joined when parallel, otherwise a
-    #    fringe artefact of a crossing and dropped); any other piece starts a
-    #    new line.
-    pieces.sort(key=lambda p: -len(p[0]))
+
+def _lines_from_pieces(
+    pieces: list[tuple[np.ndarray, _Line]], xy: np.ndarray, ch: _Chords, line_angle_deg: float
+) -> tuple[list[_Line], list[np.ndarray]]:
+    """Step 4a: pieces → lines, largest first.  A piece mostly (≥ 50 %) inside
+    an accepted line's strip is part of it — joined and refitted when within
+    ``line_angle_deg`` of parallel, otherwise a fringe artefact of a crossing
+    and dropped; any other piece starts a new line."""
     line_cells: list[np.ndarray] = []
     lines: list[_Line] = []
-    for sel, line in pieces:
+    for sel, line in sorted(pieces, key=lambda p: -len(p[0])):
         best, best_frac = -1, 0.0
         for k, other in enumerate(lines):
             _, t = other.coords(xy[sel])
@@ -389,33 +443,46 @@ def segment_default(
             line_cells.append(sel)
         elif abs(float(lines[best].d @ line.d)) >= np.cos(np.deg2rad(line_angle_deg)):
             merged = np.concatenate([line_cells[best], sel])
-            ang = 0.5 * float(np.angle(np.exp(2j * angle[merged]).mean()))
-            lines[best] = _fit_line(xy[merged], ang, width[merged])
+            ang = 0.5 * float(np.angle(np.exp(2j * ch.angle[merged]).mean()))
+            lines[best] = _fit_line(xy[merged], ang, ch.width[merged])
             line_cells[best] = merged
-    # Two lines fitted to the same bar from distant pieces (a long chord) can
-    # both survive; merge near-parallel lines when one strip explains both.
+    return lines, line_cells
+
+
+def _merge_parallel_lines(
+    lines: list[_Line],
+    line_cells: list[np.ndarray],
+    xy: np.ndarray,
+    ch: _Chords,
+    line_angle_deg: float,
+) -> tuple[list[_Line], list[np.ndarray]]:
+    """Step 4b: two lines fitted to one bar from distant pieces can both
+    survive step 4a; merge near-parallel (< 2 × ``line_angle_deg``) pairs
+    that one strip explains (:func:`_one_strip`), first pair first, until
+    none is left."""
+    lines, line_cells = list(lines), list(line_cells)
+    cos_max = np.cos(np.deg2rad(2 * line_angle_deg))
     merged_any = True
     while merged_any:
         merged_any = False
-        for i in range(len(lines)):
-            for j in range(i + 1, len(lines)):
-                if abs(float(lines[i].d @ lines[j].d)) < np.cos(np.deg2rad(2 * line_angle_deg)):
-                    continue
-                cells_ij = np.concatenate([line_cells[i], line_cells[j]])
-                line, ok = _one_strip(xy[cells_ij], angle[cells_ij], width[cells_ij])
-                if not ok:
-                    continue
+        for i, j in itertools.combinations(range(len(lines)), 2):
+            if abs(float(lines[i].d @ lines[j].d)) < cos_max:
+                continue
+            cells_ij = np.concatenate([line_cells[i], line_cells[j]])
+            line, ok = _one_strip(xy[cells_ij], ch.angle[cells_ij], ch.width[cells_ij])
+            if ok:
                 lines[i], line_cells[i] = line, cells_ij
                 del lines[j], line_cells[j]
                 merged_any = True
                 break
-            if merged_any:
-                break
+    return lines, line_cells
 
-    # 5. Strip membership of every steel cell; cross cells lie on two or more.
-    #    A strip runs along its line as far as steel continues from its pieces
-    #    (through the crossings at its ends to the far edge of the crossing bar).
-    member = np.zeros((q, len(lines)), dtype=bool)
+
+def _strip_membership(lines: list[_Line], xy: np.ndarray) -> np.ndarray:
+    """Step 5a: (Q, lines) — the steel cells on each line's strip.  A strip
+    runs along its line as far as steel continues from its own pieces
+    (through the crossings at its ends to the far edge of the crossing bar)."""
+    member = np.zeros((len(xy), len(lines)), dtype=bool)
     for k, line in enumerate(lines):
         s, t = line.coords(xy)
         half = 0.5 * line.width + max(1.0, 0.1 * line.width)
@@ -429,59 +496,82 @@ def segment_default(
         active = np.zeros(int(run.max()) + 1, dtype=bool)
         active[run[sbin[own] - lo]] = True
         member[:, k] = in_strip & active[run[sbin - lo]] & present[sbin - lo]
-    n_member = member.sum(axis=1)
-    cross_cells = np.zeros(shape, dtype=bool)
-    cross_cells[cells[:, 0], cells[:, 1]] = n_member >= 2
-    # A dropout notch can split one crossing in two with a sliver of bar
-    # between: close gaps narrower than about half a flange.
+    return member
+
+
+def _cross_areas(
+    n_member: np.ndarray, steel: _Steel, w_med: float, c: float
+) -> tuple[np.ndarray, int]:
+    """Step 5b (Alg. 3's cross areas, seen directly rather than by Eq. 4.1's
+    neighbour count): cells on two or more strips; gaps narrower than half a
+    flange closed (a dropout notch can split one crossing); 8-connected areas
+    of at least (0.3 flange)² kept.  Returns the label grid and the count."""
+    cross_cells = np.zeros(steel.mask.shape, dtype=bool)
+    cross_cells[steel.cells[:, 0], steel.cells[:, 1]] = n_member >= 2
     r_cross = max(1, round(0.5 * w_med))
-    cross_cells = ndimage.binary_closing(cross_cells, structure=_disk(r_cross)) & mask
+    cross_cells = ndimage.binary_closing(cross_cells, structure=_disk(r_cross)) & steel.mask
     cross_lab, n_cross = ndimage.label(cross_cells, structure=_EIGHT)
     if n_cross:
         area = np.bincount(cross_lab.ravel(), minlength=n_cross + 1)
         ok = area * c * c >= (0.3 * w_med * c) ** 2
         ok[0] = False
         cross_lab, n_cross = ndimage.label(ok[cross_lab], structure=_EIGHT)
+    return cross_lab, int(n_cross)
 
-    # 6. Bars: cells on exactly one line, split by the cross areas (4-connected).
+
+def _bars(member: np.ndarray, steel: _Steel, cross_lab: np.ndarray) -> tuple[np.ndarray, int]:
+    """Step 5c (Alg. 3's bars): per line, its cells on no other strip and in no
+    cross area, split into 4-connected bars.  Returns the label grid (1..n)
+    and n."""
+    n_member = member.sum(axis=1)
     owner = np.where(n_member == 1, np.argmax(member, axis=1), -1)
-    bar_lab = np.zeros(shape, dtype=np.int64)
+    bar_lab = np.zeros(steel.mask.shape, dtype=np.int64)
     n_bar = 0
-    for k in range(len(lines)):
-        on = np.zeros(shape, dtype=bool)
+    for k in range(member.shape[1]):
+        on = np.zeros(steel.mask.shape, dtype=bool)
         sel = owner == k
-        on[cells[sel, 0], cells[sel, 1]] = True
+        on[steel.cells[sel, 0], steel.cells[sel, 1]] = True
         on &= cross_lab == 0
         lab, n = ndimage.label(on, structure=_FOUR)
         bar_lab = np.where(lab > 0, lab + n_bar, bar_lab)
         n_bar += n
-    # Fragments shorter than min_bar_length_m are not bars: they are left
-    # unlabelled and join their neighbour below.
-    if n_bar:
-        bar_cells = np.argwhere(bar_lab > 0)
-        bid = bar_lab[bar_cells[:, 0], bar_cells[:, 1]]
-        srt = np.argsort(bid, kind="stable")
-        starts = np.searchsorted(bid[srt], np.arange(1, n_bar + 1))
-        ends = np.append(starts[1:], len(srt))
-        good = np.zeros(n_bar + 1, dtype=bool)
-        for b in range(n_bar):
-            pts = bar_cells[srt[starts[b] : ends[b]]].astype(float)
-            if len(pts) < 2:
-                continue
-            cen = pts - pts.mean(axis=0)
-            _, _, vt = np.linalg.svd(cen, full_matrices=False)
-            good[b + 1] = float(np.ptp(cen @ vt[0])) * c >= min_bar_length_m
-        bar_lab = np.where(good[bar_lab], bar_lab, 0)
+    return bar_lab, n_bar
 
-    # 7. Every other steel cell takes the label of the nearest labelled cell.
-    raw = np.where(cross_lab > 0, cross_lab, np.where(bar_lab > 0, n_cross + bar_lab, 0))
-    if np.any(raw > 0):
-        _, (ii, jj) = ndimage.distance_transform_edt(raw == 0, return_indices=True)
-        raw = np.where(mask, raw[ii, jj], 0)
 
-    # Renumber deterministically: cross areas first, then bars, each by (u, v)
-    # of their point centroid.
-    praw = raw[ij[:, 0], ij[:, 1]]
+def _drop_short_bars(bar_lab: np.ndarray, n_bar: int, c: float, min_len_m: float) -> np.ndarray:
+    """Step 5d: bars whose extent along their principal axis is shorter than
+    ``min_len_m`` are no bars: unlabelled, they join a neighbour in step 6."""
+    if not n_bar:
+        return bar_lab
+    bar_cells = np.argwhere(bar_lab > 0)
+    bid = bar_lab[bar_cells[:, 0], bar_cells[:, 1]]
+    srt = np.argsort(bid, kind="stable")
+    starts = np.searchsorted(bid[srt], np.arange(1, n_bar + 1))
+    ends = np.append(starts[1:], len(srt))
+    good = np.zeros(n_bar + 1, dtype=bool)
+    for b in range(n_bar):
+        pts = bar_cells[srt[starts[b] : ends[b]]].astype(float)
+        if len(pts) < 2:
+            continue
+        cen = pts - pts.mean(axis=0)
+        _, _, vt = np.linalg.svd(cen, full_matrices=False)
+        good[b + 1] = float(np.ptp(cen @ vt[0])) * c >= min_len_m
+    return np.where(good[bar_lab], bar_lab, 0)
+
+
+def _fill_nearest(raw: np.ndarray, mask: np.ndarray) -> np.ndarray:
+    """Step 6: every other steel cell takes the label of the nearest labelled
+    cell (Euclidean distance transform)."""
+    if not np.any(raw > 0):
+        return raw
+    _, (ii, jj) = ndimage.distance_transform_edt(raw == 0, return_indices=True)
+    return np.where(mask, raw[ii, jj], 0)
+
+
+def _renumber(praw: np.ndarray, uv: np.ndarray, n_cross: int) -> tuple[np.ndarray, list[str]]:
+    """Step 7: per-point labels renumbered deterministically — cross areas
+    first, then bars, each by the (u, v) of their points' centroid (raw
+    labels 1..``n_cross`` are cross areas); 0 → −1 (noise)."""
     present = np.unique(praw[praw > 0])
     kinds_raw = ["cross" if r <= n_cross else "bar" for r in present]
     cent = [uv[praw == r].mean(axis=0) for r in present]
@@ -496,16 +586,54 @@ def segment_default(
     remap = np.full(int(praw.max()) + 1, -1, dtype=np.int64)
     for new, k in enumerate(order_k):
         remap[present[k]] = new
-    labels = remap[praw]
-    kinds = [kinds_raw[k] for k in order_k]
+    return remap[praw], [kinds_raw[k] for k in order_k]
+
+
+def segment_default(
+    uv: np.ndarray,
+    *,
+    grid_m: float = 0.01,
+    n_directions: int = 24,
+    long_factor: float = 2.5,
+    gap_bridge: int = 2,
+    piece_angle_deg: float = 12.0,
+    line_angle_deg: float = 6.0,
+    min_piece_m: float = 0.08,
+    hole_fill_m2: float = 0.01,
+    min_component_m2: float = 0.002,
+    min_bar_length_m: float = 0.15,
+) -> Segmentation:
+    """Deterministic strip-based segmentation (module docstring, ``"default"``;
+    replaces Alg. 3's GMM and Eq. 4.1's neighbour count by §4.1's premise
+    measured directly).  Steps: 1 rasterise, close gaps, fill holes; 2 bar
+    cells by their chords; 3 pieces; 4 lines; 5 strips → cross areas and
+    bars; 6 leftovers to the nearest label; 7 deterministic numbering."""
+    uv = np.asarray(uv, dtype=float)
+    if len(uv) < 3:
+        raise InvalidInputError(f"segmentation needs at least 3 points, got {len(uv)}")
+    c = float(grid_m)
+    ras = _rasterise(uv, c)
+    mask = _fill_holes_drop_specks(_close_gaps(ras), c, hole_fill_m2, min_component_m2)
+    steel = _steel_cells(mask)
+    ch = _bar_cells(steel.cells, n_directions, long_factor, gap_bridge)
+    pieces = _fit_pieces(_piece_ids(steel, ch, piece_angle_deg), steel, ch, c, min_piece_m)
+    lines, cells_of = _lines_from_pieces(pieces, steel.xy, ch, line_angle_deg)
+    lines, cells_of = _merge_parallel_lines(lines, cells_of, steel.xy, ch, line_angle_deg)
+    member = _strip_membership(lines, steel.xy)
+    cross_lab, n_cross = _cross_areas(member.sum(axis=1), steel, ch.w_med, c)
+    bar_lab, n_bar = _bars(member, steel, cross_lab)
+    bar_lab = _drop_short_bars(bar_lab, n_bar, c, min_bar_length_m)
+    raw = np.where(cross_lab > 0, cross_lab, np.where(bar_lab > 0, n_cross + bar_lab, 0))
+    raw = _fill_nearest(raw, mask)
+    labels, kinds = _renumber(raw[ras.ij[:, 0], ras.ij[:, 1]], uv, n_cross)
     return Segmentation(
         labels=labels,
         kinds=kinds,
         method="default",
         info={
-            "point_spacing_m": float(np.median(nn)),
-            "closing_radius_cells": r_close,
-            "median_width_m": w_med * c,
+            "point_spacing_m": float(np.median(ras.nn)),
+            "closing_radius_cells": int(np.median(ras.r_pt)),
+            "median_width_m": ch.w_med * c,
             "n_lines": len(lines),
             "n_cross": kinds.count("cross"),
             "n_bar": kinds.count("bar"),

@@ -6,9 +6,11 @@ import itertools
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from planners.errors import InvalidInputError
-from planners.motion import plan_motion
+from planners.motion import interpolate, plan_motion, segment_validator, wrap_angle
 
 GAP = (0.45, 0.55)  # the wall x ∈ (0.45, 0.55) is open only for y in this band
 START, GOAL = np.array([0.1, 0.1]), np.array([0.9, 0.1])
@@ -119,3 +121,68 @@ def test_bad_input_raises(kw):
             args["start"], args["goals"], wall_valid,
             lower=args["lower"], upper=args["upper"], seed=0, **extra,
         )  # fmt: skip
+
+
+# --- periodic (SO2) dimensions: (x, θ) with the band |θ| < 1 forbidden, so a
+# path from θ = 2.5 to θ = −2.5 must turn the short way, through ±π.
+
+
+def band_valid(Q: np.ndarray) -> np.ndarray:
+    Q = np.atleast_2d(Q)
+    return np.abs(wrap_angle(Q[:, 1])) >= 1.0
+
+
+def test_periodic_dimension_turns_the_short_way_through_pi():
+    start, goal = np.array([0.1, 2.5]), np.array([0.9, -2.5])
+    # without the wrap the straight segment crosses the forbidden band ...
+    assert not segment_validator(band_valid, 0.01)(start, goal)
+    # ... with it, it does not, and the planner takes it directly
+    assert segment_validator(band_valid, 0.01, periodic=[1])(start, goal)
+    r = plan_motion(start, goal[None], band_valid, lower=[0, 0], upper=[1, 0], seed=0, periodic=[1])
+    assert r.success and r.iterations == 0 and len(r.path) == 2
+    assert np.array_equal(r.path[0], start) and np.array_equal(r.path[-1], goal)
+
+
+def test_periodic_search_exact_ends_free_and_deterministic():
+    # a wall in x open only at θ ∈ (2.8, π) ∪ [−π, −2.8): the search must go there
+    def valid(Q: np.ndarray) -> np.ndarray:
+        Q = np.atleast_2d(Q)
+        th = wrap_angle(Q[:, 1])
+        wall = (Q[:, 0] > 0.45) & (Q[:, 0] < 0.55) & (np.abs(th) < 2.8)
+        return band_valid(Q) & ~wall
+
+    start, goal = np.array([0.1, 1.5 + 2 * np.pi]), np.array([0.9, -1.5])  # any angle in
+    kw = dict(lower=[0, -9], upper=[1, 9], seed=4, periodic=[1], weights=[1.0, 0.2], range_=0.2)
+    r = plan_motion(start, goal[None], valid, **kw)
+    again = plan_motion(start, goal[None], valid, **kw)
+    assert r.success and r.iterations > 0
+    assert np.array_equal(r.path, again.path)
+    assert np.array_equal(r.path[0], start) and np.array_equal(r.path[-1], goal)
+    assert np.all(np.abs(r.path[1:-1, 1]) <= np.pi)  # inner states on the circle
+    # independently: every segment, sampled finely the short way round, is free
+    for a, b in itertools.pairwise(r.path):
+        assert valid(interpolate(a, b, 1e-3, periodic=[1])).all()
+    assert start[1] == 1.5 + 2 * np.pi  # the caller's array is untouched
+
+
+@settings(max_examples=60, deadline=None)
+@given(
+    st.tuples(st.floats(-3, 3), st.floats(-10, 10)),
+    st.tuples(st.floats(-3, 3), st.floats(-10, 10)),
+    st.floats(0.01, 0.5),
+)
+def test_interpolate_periodic_steps_the_short_way(a, b, res):
+    a, b = np.array(a), np.array(b)
+    P = interpolate(a, b, res, periodic=[1])
+    assert np.all(np.abs(P[:, 1]) <= np.pi)
+    assert np.isclose(P[-1, 0], b[0]) and abs(wrap_angle(P[-1, 1] - b[1])) < 1e-9
+    steps = np.vstack([a, P])
+    dth = np.abs(wrap_angle(np.diff(steps[:, 1])))
+    assert np.all(np.abs(np.diff(steps[:, 0])) <= res + 1e-9) and np.all(dth <= res + 1e-9)
+    # total turn = the short way, never more than π
+    assert dth.sum() == pytest.approx(abs(float(wrap_angle(b[1] - a[1]))), abs=1e-9)
+
+
+def test_bad_periodic_raises():
+    with pytest.raises(InvalidInputError, match="periodic"):
+        plan_motion(START, GOAL[None], wall_valid, lower=[0, 0], upper=[1, 1], seed=0, periodic=[2])

@@ -25,6 +25,7 @@ from planners.navigation.rrt import (
     DiffDrivePlanner,
     corridor_sampler,
     primitive_poses,
+    primitive_validator,
     rt_waypoints,
     rtr_cost,
     rtr_waypoints,
@@ -492,3 +493,41 @@ def test_turn_point_finds_an_in_place_turn_on_steel() -> None:
     # Drive in, turn in place, drive out: at most two straight drives.
     drives = [(p, q) for p, q in itertools.pairwise(way) if not _is_turn(p, q)]
     assert 1 <= len(drives) <= 2
+
+
+def test_injected_motion_validator_is_used_and_matches_the_default() -> None:
+    """The planner takes planners.motion's validity shape: an injected
+    motion validator decides every primitive (counted here), and injecting
+    the default one (:func:`primitive_validator`) gives the very path of the
+    default planner, whose batched way check is only an optimisation."""
+    bset, steel, union = _shape(L_SHAPE)
+    default, valid = _planner(bset, steel, max_iterations=1500)
+    calls = 0
+    base = primitive_validator(valid, resolution_m=0.01, turn_resolution_rad=0.05)
+
+    def counted(a: np.ndarray, b: np.ndarray) -> bool:
+        nonlocal calls
+        calls += 1
+        assert _primitive(a, b, tol=1e-7), (a, b)  # only primitives reach it
+        return base(a, b)
+
+    injected = DiffDrivePlanner(valid, yaw_radius_m=FOOT_L / 2, max_iterations=1500,
+                                motion_valid=counted)  # fmt: skip
+    start, goal = np.array([0.5, 0.0, np.pi]), np.array([0.0, 0.5, np.pi / 2])
+    paths = []
+    for planner in (default, injected):
+        rng = np.random.default_rng(2)
+        sampler = corridor_sampler(start[:2], np.zeros(2), rng, lateral_sigma_m=0.02, margin_m=0.06)
+        path, _ = planner.plan(start, goal, sampler)
+        assert path is not None
+        paths.append(planner.shortcut(path, rng))
+    assert calls > 0 and np.array_equal(paths[0], paths[1])
+    _check_path(injected.densify(paths[1]), union)
+    # a validator that refuses every turn in place leaves only straight drives
+    no_turns = DiffDrivePlanner(valid, yaw_radius_m=FOOT_L / 2, max_iterations=50,
+                                motion_valid=lambda a, b: not _is_turn(a, b) and base(a, b))  # fmt: skip
+    sampler = corridor_sampler(
+        start[:2], np.zeros(2), np.random.default_rng(0), lateral_sigma_m=0.02, margin_m=0.06
+    )
+    path, iters = no_turns.plan(start, goal, sampler)
+    assert path is None and iters == 50
