@@ -148,7 +148,11 @@ class EdgePlanner:
     ``max_iterations`` iterations, the metric ``‖Δxy‖ + r·|Δyaw|`` (``r`` =
     ``yaw_radius_m``, the footprint's half length, so a turn costs what its
     ends sweep), then OMPL's simplifier (``shortcut_rounds`` vertex
-    reductions, then collapsing close vertices).  ``valid`` is the batch
+    reductions, then collapsing close vertices).  A search that spends its
+    budget is restarted with the next seed up to ``restarts`` times (OMPL
+    samples the whole box uniformly where the hand-written planner drew
+    from the edge's corridor; a fresh tree recovers the narrow passages a
+    first one missed).  ``valid`` is the batch
     state validity (Alg. 6 on the footprint), ``motion_valid(a, b)`` the
     straight (x, y, yaw) motion — by default :meth:`motion_ok`: poses every
     ``resolution_m`` in the metric √(dx² + dy² + (r·dyaw)²), yaw the short
@@ -165,8 +169,10 @@ class EdgePlanner:
         max_iterations: int = 1500,
         shortcut_rounds: int = 60,
         motion_valid: MotionValid | None = None,
+        restarts: int = 2,
     ):
         self.valid = valid
+        self.restarts = int(restarts)
         self.r = float(max(yaw_radius_m, 1e-3))
         self.step = float(step_m)
         self.res = float(resolution_m)
@@ -210,15 +216,20 @@ class EdgePlanner:
         tried first."""
         lo = np.minimum(np.asarray(lower, dtype=float), np.minimum(start[:2], goal[:2]))
         hi = np.maximum(np.asarray(upper, dtype=float), np.maximum(start[:2], goal[:2]))
-        res = plan_motion(
-            start, goal[None], self.valid, lower=np.r_[lo, -np.pi], upper=np.r_[hi, np.pi],
-            seed=seed, motion_valid=self.motion_valid, range_=self.step,
-            # the iteration budget governs, not the clock
-            max_time_s=600.0, max_iterations=self.max_iter,
-            simplify_steps=self.shortcut_rounds,
-            weights=np.array([1.0, 1.0, self.r]), periodic=(2,),
-        )  # fmt: skip
-        return res.path, res.iterations
+        used = 0
+        for attempt in range(self.restarts + 1):
+            res = plan_motion(
+                start, goal[None], self.valid, lower=np.r_[lo, -np.pi], upper=np.r_[hi, np.pi],
+                seed=seed + attempt, motion_valid=self.motion_valid, range_=self.step,
+                # the iteration budget governs, not the clock
+                max_time_s=600.0, max_iterations=self.max_iter,
+                simplify_steps=self.shortcut_rounds,
+                weights=np.array([1.0, 1.0, self.r]), periodic=(2,),
+            )  # fmt: skip
+            used += res.iterations
+            if res.path is not None:
+                return res.path, used
+        return None, used
 
     def densify(self, path: np.ndarray) -> np.ndarray:
         """The poses along ``path`` every ``resolution_m`` (the metric of :meth:`dist`)."""

@@ -127,7 +127,8 @@ def test_infeasible_returns_none() -> None:
     start, goal = np.array([0.2, 0.0, 0.0]), np.array([0.7, 0.0, 0.0])
     assert planner.valid(np.stack([start, goal])).all()
     path, iters = planner.plan(start, goal, lower=LOWER, upper=UPPER, seed=0)
-    assert path is None and iters == 50
+    # every restart spends its whole budget
+    assert path is None and iters == 50 * (planner.restarts + 1) and planner.restarts == 2
     assert settle_pose(np.array([0.5, 0.0]), np.array([0.9, 0.0]), 0.0, valid) is None
 
 
@@ -141,3 +142,16 @@ def test_settle_pose_slides_in_from_a_bar_end() -> None:
     assert pose is not None
     # The footprint's half length (6 cm) must stay on the bar: x ≤ 1.0 - 0.06.
     assert 0.93 <= pose[0] <= 0.941 and abs(wrap(pose[2] - np.pi)) < 1e-9
+
+
+def test_a_spent_search_is_restarted_with_the_next_seed() -> None:
+    """Seed 3 spends its 1500 iterations on the L corner; a restart (seed 4's
+    tree) finds the corner, on steel, and the iterations of both count."""
+    _, none, spent = _plan(3, restarts=0)
+    assert none is None and spent == 1500
+    planner, path, iters = _plan(3, restarts=2)
+    _, alone, alone_iters = _plan(4, restarts=0)
+    assert path is not None and alone is not None
+    assert iters == 1500 + alone_iters and np.array_equal(path, alone)
+    _, union = _boundaries()
+    assert _on_steel(planner.densify(path), union)
