@@ -109,6 +109,9 @@ class JumpRobot:
     q_conv: np.ndarray
     base_foot_links: tuple[int, ...]  # links that move with foot 2 (chain base)
     end_foot_links: tuple[int, ...]  # links that move with foot 1 (chain end)
+    # ``ik_track_batch(T (B,4,4) path, Q0 (K,n)) → [ (B,n) | None ] * K``: the
+    # same tracks as ``ik_track`` row by row, all rows iterated at once.
+    ik_track_batch: Callable[[np.ndarray, np.ndarray], list[np.ndarray | None]] | None = None
 
     @staticmethod
     def from_model(model: Any, *, ik_seeds: int = 48, cell_m: float = 0.025) -> JumpRobot:
@@ -138,6 +141,29 @@ class JumpRobot:
                 out.append(q)
             return np.array(out)
 
+        def ik_track_batch(Ts: np.ndarray, Q0: np.ndarray) -> list[np.ndarray | None]:
+            # ik_track for every row of Q0 at once (DLS rows are independent);
+            # the same acceptance test, the end pose by batched FK.
+            Q0 = np.atleast_2d(np.asarray(Q0, float))
+            alive = np.ones(len(Q0), dtype=bool)
+            q = Q0.copy()
+            steps = np.empty((len(Ts), *Q0.shape))
+            for k, T in enumerate(Ts):
+                idx = np.nonzero(alive)[0]
+                if len(idx) == 0:
+                    break
+                sol, _ = model.ik_batch(T, q[idx], max_iter=100)
+                E = model.fk_all(sol)[:, -1]
+                pos = np.linalg.norm(E[:, :3, 3] - T[:3, 3], axis=1)
+                tr = np.einsum("bij,ij->b", E[:, :3, :3], T[:3, :3])
+                rot = np.arccos(np.clip((tr - 1) / 2, -1, 1))
+                jump = np.max(np.abs(sol - q[idx]), axis=1)
+                ok = (pos <= 2e-3) & (rot <= 0.02) & (jump <= 0.5)
+                alive[idx[~ok]] = False
+                q[idx[ok]] = sol[ok]
+                steps[k, idx[ok]] = sol[ok]
+            return [steps[:, r].copy() if alive[r] else None for r in range(len(Q0))]
+
         foot = model.params["foot"]
         return JumpRobot(
             fk_all=model.fk_all,
@@ -153,6 +179,7 @@ class JumpRobot:
             q_conv=np.asarray(model.q_conv, float),
             base_foot_links=(0,),
             end_foot_links=(len(names) - 2, len(names) - 1),
+            ik_track_batch=ik_track_batch,
         )
 
 
@@ -309,6 +336,8 @@ def _self_pairs(rob: JumpRobot) -> list[tuple[int, int, bool, np.ndarray, np.nda
 
 
 _CAP = 0.1  # clearances above this are only known to be ≥ it (culling bound)
+_EPS = 1e-9  # validity culls just above the margin (rounding of the bounds)
+_CHUNK = 128  # configurations per batch in :meth:`_Checker.clearances`
 
 
 class _Checker:
@@ -335,6 +364,7 @@ class _Checker:
         n = len(robot.link_names)
         self.bounds = cov.link_bounds(n)
         self.self_bounds = robot.self_cover.link_bounds(n)
+        self.self_arrays = _SelfArrays.build(robot, pairs, self.bounds, self.self_bounds)
 
     def world(self, Q: np.ndarray) -> np.ndarray:
         F = self.robot.fk_all(np.atleast_2d(Q))
@@ -344,10 +374,16 @@ class _Checker:
         return np.einsum("ij,bjk,blkm->blim", self.W, rel, F)
 
     def _scene(
-        self, F: np.ndarray, C: np.ndarray, subset: np.ndarray, obs: PointObstacles
+        self,
+        F: np.ndarray,
+        C: np.ndarray,
+        subset: np.ndarray,
+        obs: PointObstacles,
+        cap: float = _CAP,
     ) -> np.ndarray:
-        """Min scene clearance over the spheres in ``subset``; links whose
-        bounding sphere is ≥ _CAP away are not queried sphere by sphere."""
+        """Min scene clearance over the spheres in ``subset``, capped at
+        ``cap``; links whose bounding sphere is ≥ ``cap`` away are not
+        queried sphere by sphere (their spheres are at least as far)."""
         cov = self.robot.cover
         if not subset.any():
             return np.full(len(C), np.inf)
@@ -355,57 +391,197 @@ class _Checker:
         links = np.unique(cov.link[subset])
         FL = F[:, links]
         lc = np.einsum("blij,lj->bli", FL[..., :3, :3], bc[links]) + FL[..., :3, 3]
-        lb = obs.clearance(lc, br[links], upper=_CAP)  # (B, nl) lower bounds per link
+        lb = obs.clearance(lc, br[links], upper=cap)  # (B, nl) lower bounds per link
         need_link = np.zeros((len(C), len(self.robot.link_names)), dtype=bool)
-        need_link[:, links] = lb < _CAP
+        need_link[:, links] = lb < cap
         need = need_link[:, cov.link] & subset[None, :]
-        out = np.full(C.shape[:2], _CAP)
+        out = np.full(C.shape[:2], cap)
         if need.any():
             b_idx, s_idx = np.nonzero(need)
-            out[b_idx, s_idx] = obs.clearance(C[b_idx, s_idx], cov.radius[s_idx], upper=_CAP)
+            out[b_idx, s_idx] = obs.clearance(C[b_idx, s_idx], cov.radius[s_idx], upper=cap)
         return np.where(subset[None, :], out, np.inf).min(axis=1)
+
+    def _self(self, F: np.ndarray, C: np.ndarray, cap: float = _CAP) -> np.ndarray:
+        """Self clearance per configuration, all link pairs at once.
+
+        A link pair whose bounding spheres are ≥ ``cap`` apart contributes
+        that bound; for the others a sphere of one link farther than ``cap``
+        from the other link's bounding sphere is dropped (every pair with it
+        is at least that far: triangle inequality), and the pair contributes
+        the minimum over its remaining sphere pairs (closed form), or ``cap``
+        when none remain.  So min(result, cap) equals min(exact, cap)."""
+        sp = self.self_arrays
+        B = len(F)
+        if len(sp.a) == 0:
+            return np.full(B, np.inf)
+        Fa, Fb = F[:, sp.a], F[:, sp.b]
+        ca = np.einsum("bpij,pj->bpi", Fa[..., :3, :3], sp.ca) + Fa[..., :3, 3]
+        cb = np.einsum("bpij,pj->bpi", Fb[..., :3, :3], sp.cb) + Fb[..., :3, 3]
+        bound = np.linalg.norm(ca - cb, axis=2) - sp.rab  # (B, P) link-pair bounds
+        close = bound < cap
+        val = np.where(close, cap, bound)
+        rows = np.nonzero(close.any(axis=1))[0]
+        if len(rows) == 0:
+            return val.min(axis=1)
+        cr = close[rows]
+        P = C[rows]
+        if sp.any_coarse and cr[:, ~sp.fine].any():
+            P = np.concatenate([P, self.robot.self_cover.world(F[rows])], axis=1)
+        else:  # coarse spheres unused: placeholders keep the indices valid
+            P = np.concatenate([P, np.zeros((len(rows), len(sp.r) - P.shape[1], 3))], axis=1)
+        cut = cap + _EPS
+        eA = (
+            np.linalg.norm(P[:, sp.sa] - cb[rows][:, sp.sa_block], axis=2)
+            - sp.r[sp.sa]
+            - sp.rb[sp.sa_block]
+        )
+        eB = (
+            np.linalg.norm(P[:, sp.sb] - ca[rows][:, sp.sb_block], axis=2)
+            - sp.r[sp.sb]
+            - sp.ra[sp.sb_block]
+        )
+        needA = (eA < cut) & cr[:, sp.sa_block]
+        needB = eB < cut
+        need = needA[:, sp.pa] & needB[:, sp.pb]  # (R, sphere pairs)
+        r_idx, k_idx = np.nonzero(need)
+        if len(r_idx):
+            Pf = P.reshape(-1, 3)
+            n_s = P.shape[1]
+            i, j = sp.i[k_idx], sp.j[k_idx]
+            d = (
+                np.linalg.norm(Pf[r_idx * n_s + i] - Pf[r_idx * n_s + j], axis=1)
+                - sp.r[i]
+                - sp.r[j]
+            )
+            key = r_idx * len(sp.a) + sp.block[k_idx]  # non-decreasing (row-major, blocks sorted)
+            starts = np.flatnonzero(np.r_[True, key[1:] != key[:-1]])
+            mins = np.minimum.reduceat(d, starts)
+            vr = val[rows].ravel()
+            kk = key[starts]
+            vr[kk] = np.minimum(vr[kk], mins)
+            val[rows] = vr.reshape(len(rows), -1)
+        return val.min(axis=1)
 
     def clearances(self, Q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(scene clearance, self clearance) per configuration; values above
         0.1 m are lower bounds."""
+        Q = np.atleast_2d(Q)
+        if len(Q) > _CHUNK:  # bounded temporaries (the re-check passes whole phases)
+            parts = [self.clearances(Q[k : k + _CHUNK]) for k in range(0, len(Q), _CHUNK)]
+            return np.concatenate([p[0] for p in parts]), np.concatenate([p[1] for p in parts])
         cov = self.robot.cover
         F = self.world(Q)
         C = cov.world(F)  # (B, S, 3)
         scene = self._scene(F, C, self.rest, self.obstacles)
         obs = self.contact if self.contact is not None else self.obstacles
         scene = np.minimum(scene, self._scene(F, C, self.foot, obs))
-        selfc = np.full(len(C), np.inf)
-        D = None
-        for a, b, fine, i, j in self.pairs:
-            bc, br = self.bounds if fine else self.self_bounds
-            ca = F[:, a, :3, :3] @ bc[a] + F[:, a, :3, 3]
-            cb = F[:, b, :3, :3] @ bc[b] + F[:, b, :3, 3]
-            bound = np.linalg.norm(ca - cb, axis=1) - br[a] - br[b]
-            close = bound < _CAP
-            selfc = np.minimum(selfc, np.where(close, np.inf, np.maximum(bound, _CAP)))
-            if not close.any():
-                continue
-            if fine:
-                P, r = C[close], cov.radius
-            else:
-                if D is None:
-                    D = self.robot.self_cover.world(F)
-                P, r = D[close], self.robot.self_cover.radius
-            d = np.linalg.norm(P[:, i] - P[:, j], axis=2) - r[i] - r[j]
-            sub = selfc[close]
-            selfc[close] = np.minimum(sub, d.min(axis=1))
-        return scene, selfc
+        return scene, self._self(F, C)
 
     def valid(self, Q: np.ndarray) -> np.ndarray:
+        """Joint limits, scene clearance ≥ margin and self clearance ≥ margin.
+
+        Decides exactly as thresholding :meth:`clearances`, but culls at the
+        margins instead of at 0.1 m (``cap`` just above the margin): a value
+        capped there is ≥ the margin iff the exact one is, and a link or link
+        pair culled by its bounding sphere is at least the bound away.  So
+        the KD-tree searches only ``margin + radius`` around each sphere and
+        only for links within the margin."""
         Q = np.atleast_2d(Q)
         lo, hi = self.robot.joint_limits[:, 0], self.robot.joint_limits[:, 1]
-        inside = np.all((lo - 1e-9 <= Q) & (hi + 1e-9 >= Q), axis=1)
-        scene, selfc = self.clearances(Q)
-        return (
-            inside
-            & (scene >= self.params.clearance_margin_m)
-            & (selfc >= self.params.self_margin_m)
-        )
+        ok = np.all((lo - 1e-9 <= Q) & (hi + 1e-9 >= Q), axis=1)
+        if not ok.any():
+            return ok
+        sm, cm = self.params.self_margin_m, self.params.clearance_margin_m
+        F = self.world(Q)
+        C = self.robot.cover.world(F)
+        ok &= self._self(F, C, cap=sm + _EPS) >= sm
+        idx = np.nonzero(ok)[0]
+        if len(idx) == 0:
+            return ok
+        F, C = F[idx], C[idx]
+        cap = cm + _EPS
+        scene = self._scene(F, C, self.rest, self.obstacles, cap)
+        good = scene >= cm
+        if good.any():
+            obs = self.contact if self.contact is not None else self.obstacles
+            g = np.nonzero(good)[0]
+            good[g] = self._scene(F[g], C[g], self.foot, obs, cap) >= cm
+        ok[idx] = good
+        return ok
+
+
+@dataclass
+class _SelfArrays:
+    """Self-collision pairs flattened for :meth:`_Checker._self`.  Per link
+    pair (block): links ``a``, ``b``, bounding-sphere centres ``ca``/``cb``
+    (link frames) and radii ``ra``/``rb`` (sum ``rab``), ``fine``.  Spheres
+    index [fine cover, coarse cover] (radii ``r``); ``sa``/``sb`` list each
+    block's spheres on link a / b (blocks ``sa_block``/``sb_block``); per
+    sphere pair ``i``, ``j``, its ``block`` (sorted) and positions ``pa``,
+    ``pb`` of its spheres in ``sa``/``sb``."""
+
+    a: np.ndarray
+    b: np.ndarray
+    ca: np.ndarray
+    cb: np.ndarray
+    ra: np.ndarray
+    rb: np.ndarray
+    rab: np.ndarray
+    fine: np.ndarray
+    r: np.ndarray
+    sa: np.ndarray
+    sa_block: np.ndarray
+    sb: np.ndarray
+    sb_block: np.ndarray
+    i: np.ndarray
+    j: np.ndarray
+    block: np.ndarray
+    pa: np.ndarray
+    pb: np.ndarray
+    any_coarse: bool
+
+    @staticmethod
+    def build(
+        robot: JumpRobot,
+        pairs: list[tuple[int, int, bool, np.ndarray, np.ndarray]],
+        bounds: tuple[np.ndarray, np.ndarray],
+        self_bounds: tuple[np.ndarray, np.ndarray],
+    ) -> _SelfArrays:
+        S = len(robot.cover.radius)
+        n = len(pairs)
+        a = np.array([p[0] for p in pairs], dtype=int)
+        b = np.array([p[1] for p in pairs], dtype=int)
+        fine = np.array([p[2] for p in pairs], dtype=bool)
+        ca, cb = np.zeros((n, 3)), np.zeros((n, 3))
+        ra, rb = np.zeros(n), np.zeros(n)
+        sa, sab, sb, sbb, ii, jj, blk, pa, pb = ([] for _ in range(9))
+        na = nb = 0
+        for k, (la, lb_, f, i, j) in enumerate(pairs):
+            bc, br = bounds if f else self_bounds
+            ca[k], cb[k], ra[k], rb[k] = bc[la], bc[lb_], br[la], br[lb_]
+            off = 0 if f else S
+            ua, ia = np.unique(np.asarray(i), return_inverse=True)
+            ub, ib = np.unique(np.asarray(j), return_inverse=True)
+            sa.append(ua + off)
+            sab.append(np.full(len(ua), k))
+            sb.append(ub + off)
+            sbb.append(np.full(len(ub), k))
+            ii.append(np.asarray(i) + off)
+            jj.append(np.asarray(j) + off)
+            blk.append(np.full(len(i), k))
+            pa.append(ia.ravel() + na)
+            pb.append(ib.ravel() + nb)
+            na += len(ua)
+            nb += len(ub)
+
+        def cat(x: list[np.ndarray]) -> np.ndarray:
+            return np.concatenate(x).astype(int) if x else np.zeros(0, int)
+
+        r = np.concatenate([robot.cover.radius, robot.self_cover.radius])
+        return _SelfArrays(
+            a, b, ca, cb, ra, rb, ra + rb, fine, r, cat(sa), cat(sab), cat(sb), cat(sbb),
+            cat(ii), cat(jj), cat(blk), cat(pa), cat(pb), bool((~fine).any()),
+        )  # fmt: skip
 
 
 def _time_parameterise(
@@ -517,8 +693,14 @@ def _landing_configs(
             continue
         if prefer is not None:
             sols = sols[np.argsort(prefer(sols), kind="stable")]
-        for q in sols:
-            track = robot.ik_track(up, q)
+        # Every solution's track at once (batched DLS); the checks below run
+        # in the same order as one track at a time.
+        tracks = (
+            robot.ik_track_batch(up, sols)
+            if robot.ik_track_batch is not None
+            else [robot.ik_track(up, q) for q in sols]
+        )
+        for q, track in zip(sols, tracks, strict=True):
             if track is None:
                 continue
             approach = np.vstack([track[::-1], q[None]])  # hover → contact

@@ -59,21 +59,44 @@ class AraModel(RobotModel):
 
         ``q`` (6,) → (L,4,4), ``q`` (B,6) → (B,L,4,4) for the links in
         :attr:`link_names` order (base_link, link1 … link5, foot1, foot1_sole).
+        All joint rotations are built at once (Rodrigues with the axis
+        matrices precomputed) and the chain is composed on 3×3 rotations and
+        translations; equal to the per-joint 4×4 product within rounding.
         """
         q = np.asarray(q, dtype=float)
         single = q.ndim == 1
         Q = np.atleast_2d(q)
         if Q.shape[1] != self.dof:
             raise ValueError(f"ara: expected {self.dof} joint values, got shape {q.shape}")
+        K, K2, O_R, O_t, E = self._fk_consts
         B = len(Q)
-        out = np.empty((B, len(self.link_names), 4, 4))
-        out[:, 0] = np.eye(4)
+        s, c = np.sin(Q)[..., None, None], np.cos(Q)[..., None, None]
+        # Joint i's local rotation: O_R[i] · (I + sin K_i + (1 − cos) K_i²).
+        A = O_R[None] + s * K[None] + (1.0 - c) * K2[None]  # (B, 6, 3, 3)
+        out = np.zeros((B, len(self.link_names), 4, 4))
+        out[:, :, 3, 3] = 1.0
+        R = np.broadcast_to(np.eye(3), (B, 3, 3))
+        p = np.zeros((B, 3))
+        out[:, 0, :3, :3] = R
         for i in range(self.dof):
-            out[:, i + 1] = (
-                out[:, i] @ self.joint_origins[i] @ _axis_rotation(self.joint_axes[i], Q[:, i])
-            )
-        out[:, -1] = out[:, -2] @ self.end_offset
+            p = p + R @ O_t[i]
+            R = R @ A[:, i]
+            out[:, i + 1, :3, :3] = R
+            out[:, i + 1, :3, 3] = p
+        out[:, -1, :3, 3] = p + R @ E[:3, 3]
+        out[:, -1, :3, :3] = R @ E[:3, :3]
         return out[0] if single else out
+
+    @cached_property
+    def _fk_consts(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """Per joint: O_R·K, O_R·K² (K the axis cross matrix), O_R, O_t; the end offset."""
+        ks = []
+        for a in self.joint_axes:
+            ks.append(np.array([[0.0, -a[2], a[1]], [a[2], 0.0, -a[0]], [-a[1], a[0], 0.0]]))
+        K = np.array(ks)
+        O_R = np.asarray(self.joint_origins, float)[:, :3, :3]
+        O_t = np.asarray(self.joint_origins, float)[:, :3, 3]
+        return O_R @ K, O_R @ K @ K, O_R, O_t.copy(), np.asarray(self.end_offset, float)
 
     @cached_property
     def urdf_chain(self) -> UrdfChain:

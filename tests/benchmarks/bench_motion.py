@@ -1,20 +1,23 @@
-"""Inch-worm jump: hand-written RRT-Connect vs OMPL's, same run (issue #13 §1).
+"""Inch-worm jump: today's kernels vs the batched ones, same run (issue #13).
 
     .venv/bin/python tests/benchmarks/bench_motion.py [N] [scene,scene,...]
+    .venv/bin/python tests/benchmarks/bench_motion.py --quick [scene,...]      (N = 5)
     .venv/bin/python tests/benchmarks/bench_motion.py --replay [R] [scene,...] [jump seeds]
     .venv/bin/python tests/benchmarks/bench_motion.py --blasting
 
 For every scene of :mod:`planners.switching.scenes` whose switching decision
 is an inch-worm jump (the others — mobile, no surface — plan no jump), and
-every noise seed 0..N-1, the full jump (:func:`plan_inchworm_jump`, default
-parameters, ``seed`` = the scene seed) is planned twice: ``legacy`` (the
-former hand-written RRT-Connect + shortcutting,
-``tests/switching/_reference_rrt.py``, patched in as the jump's
-``plan_path``) and ``ompl`` (the jump as shipped: OMPL RRT-Connect +
-simplifier through planners/motion), on the same decision and the same
-``_Checker.valid``.  Success = a plan comes back; time = wall time of
-the whole jump (IK, RRT, checks); checks = configurations passed to
-``_Checker.valid``.  Ratios are OMPL / legacy from this run.
+every noise seed 0..N-1 (default 20), the full jump
+(:func:`plan_inchworm_jump`, default parameters, ``seed`` = the scene seed)
+is planned twice, interleaved: ``before`` — the kernels of commit 111f02a
+patched back in from ``tests/switching/_reference_collision.py``
+(``_Checker.clearances``/``valid`` with the per-link-pair Python loop and the
+0.1 m KD-tree culling, ``AraModel.fk_all`` one 4×4 Rodrigues per joint,
+``_landing_configs`` one IK track per solution) — and ``after`` (the code as
+shipped).  Both plan with OMPL.  Success = a plan comes back; time = wall
+time of the whole jump (IK, RRT, checks); checks = configurations passed to
+``_Checker.valid``; same plan = identical joint trajectory.  Ratios are
+after / before from this run.
 
 ``--replay`` isolates the planner (IK, the swing search and the checks
 around it are the same for both and dominate the jump's time on easy
@@ -49,21 +52,47 @@ from planners.switching import jump as _jump
 from planners.switching.decide import decide_mode
 from planners.switching.jump import JumpParams, plan_inchworm_jump
 from planners.switching.scenes import SCENES, make_scene
+from robots.ara.model import AraModel
+from tests.switching import _reference_collision as _ref
 from tests.switching._reference_rrt import plan_path_legacy
 
 ARA = robots.load_robot("ara")
 FOOT = (float(ARA.params["foot"]["length_m"]), float(ARA.params["foot"]["width_m"]))
 BACKENDS = ("legacy", "ompl")
+VARIANTS = ("before", "after")
 _COUNT = [0]
-_valid = _jump._Checker.valid
+_AFTER = {
+    "valid": _jump._Checker.valid,
+    "clearances": _jump._Checker.clearances,
+    "fk_all": AraModel.fk_all,
+    "landing": _jump._landing_configs,
+}
+_BEFORE = {
+    "valid": _ref.valid_reference,
+    "clearances": _ref.clearances_reference,
+    "fk_all": _ref.fk_all_reference,
+    "landing": _ref.landing_configs_reference,
+}
+_KERNELS = dict(_AFTER)
 
 
 def _counting_valid(self, Q):  # count configurations checked, same checker
     _COUNT[0] += len(np.atleast_2d(Q))
-    return _valid(self, Q)
+    return _KERNELS["valid"](self, Q)
 
 
 _jump._Checker.valid = _counting_valid
+
+
+def use_kernels(variant: str) -> None:
+    """Patch the jump's kernels: ``before`` (111f02a) or ``after``."""
+    k = _BEFORE if variant == "before" else _AFTER
+    _KERNELS.update(k)
+    _jump._Checker.clearances = k["clearances"]
+    AraModel.fk_all = k["fk_all"]
+    _jump._landing_configs = k["landing"]
+
+
 _OMPL_PLAN_PATH = _jump.plan_path
 
 
@@ -83,21 +112,27 @@ def use_backend(backend: str) -> None:
     _jump.plan_path = PLAN_PATH[backend]
 
 
-def run(d, seed: int, backend: str) -> tuple[bool, float, int, str]:
+def run(d, seed: int, backend: str = "ompl", variant: str = "after"):
+    """One jump; (ok, seconds, checks, error name, joint trajectory or None)."""
     c = d.chosen
     surface = (c.frame.origin, c.frame.x_axis, c.frame.y_axis, c.area.hull)
     _COUNT[0] = 0
     use_backend(backend)
+    use_kernels(variant)
     t0 = time.perf_counter()
+    Q = None
     try:
-        plan_inchworm_jump(
+        plan = plan_inchworm_jump(
             ARA, d.foothold_candidates, obstacles=d.points, surface=surface,
             params=JumpParams(seed=seed),
         )  # fmt: skip
-        ok, why = True, ""
+        ok, why, Q = True, "", plan.joint_trajectory
     except PlannerError as exc:
         ok, why = False, type(exc).__name__
-    return ok, time.perf_counter() - t0, _COUNT[0], why
+    finally:
+        use_backend("ompl")
+        use_kernels("after")
+    return ok, time.perf_counter() - t0, _COUNT[0], why, Q
 
 
 def replay(r: int, names: list[str], jump_seeds: list[int]) -> None:
@@ -119,7 +154,7 @@ def replay(r: int, names: list[str], jump_seeds: list[int]) -> None:
             if d.mode != "inchworm":
                 print(f"{name:15s} seed {seed}: no inch-worm decision", flush=True)
                 continue
-            ok, t, _, why = run(d, seed, "legacy")
+            ok, t, _, why, _ = run(d, seed, "legacy")
             print(f"{name:15s} seed {seed}: recorded {len(problems)} problems "
                   f"(jump {'ok' if ok else why}, {t:.1f} s)", flush=True)  # fmt: skip
         _jump._plan_free = orig
@@ -204,44 +239,53 @@ def main() -> None:
         seeds = [int(x) for x in sys.argv[4].split(",")] if len(sys.argv) > 4 else [0]
         replay(r, names, seeds)
         return
-    n = int(sys.argv[1]) if len(sys.argv) > 1 else 20
-    names = sys.argv[2].split(",") if len(sys.argv) > 2 else list(SCENES)
+    args = sys.argv[1:]
+    if args and args[0] == "--quick":
+        n, names = 5, (args[1].split(",") if len(args) > 1 else list(SCENES))
+    else:
+        n = int(args[0]) if args else 20
+        names = args[1].split(",") if len(args) > 1 else list(SCENES)
     summary = []
     for name in names:
-        rows: dict[str, list] = {b: [] for b in BACKENDS}
+        rows: dict[str, list] = {v: [] for v in VARIANTS}
+        same = 0
         for seed in range(n):
             sc = make_scene(name, seed)
             d = decide_mode(sc.points, camera_to_base=sc.camera_to_base, base_height=0.0, foot=FOOT)
             if d.mode != "inchworm":
                 continue
-            for b in BACKENDS:
-                rows[b].append(run(d, seed, b))
+            # Interleaved, alternating which goes first (machine load drifts).
+            order = VARIANTS if seed % 2 == 0 else VARIANTS[::-1]
+            for v in order:
+                rows[v].append(run(d, seed, "ompl", v))
+            qb, qa = rows["before"][-1][4], rows["after"][-1][4]
+            same += int(qb is not None and qa is not None and np.array_equal(qb, qa))
             print(
                 f"{name:15s} seed {seed:2d}  "
                 + "  ".join(
-                    f"{b}: {'ok ' if r[-1][0] else 'FAIL'} {r[-1][1]:6.2f}s {r[-1][2]:7d} chk {r[-1][3]}"
-                    for b, r in rows.items()
+                    f"{v}: {'ok ' if r[-1][0] else 'FAIL'} {r[-1][1]:6.2f}s {r[-1][2]:7d} chk {r[-1][3]}"
+                    for v, r in rows.items()
                 ),
                 flush=True,
             )
-        if not rows["legacy"]:
+        if not rows["before"]:
             print(f"{name:15s} no inch-worm decision on any seed: no jump to plan")
             continue
         stats = {}
-        for b, r in rows.items():
+        for v, r in rows.items():
             ok = np.array([x[0] for x in r])
             t = np.array([x[1] for x in r])
             chk = np.array([x[2] for x in r])
-            stats[b] = (ok.sum(), len(ok), np.median(t[ok]) if ok.any() else np.nan, np.median(chk))
-        summary.append((name, stats))
+            stats[v] = (ok.sum(), len(ok), np.median(t[ok]) if ok.any() else np.nan, np.median(chk))
+        summary.append((name, stats, same))
     print()
-    print(f"{'scene':15s} {'legacy ok':>10s} {'ompl ok':>8s} {'legacy med s':>13s} "
-          f"{'ompl med s':>11s} {'time ratio':>11s} {'checks ratio':>13s}")  # fmt: skip
-    for name, s in summary:
-        (lk, ln, lt, lc), (ok_, on, ot, oc) = s["legacy"], s["ompl"]
+    print(f"{'scene':15s} {'before ok':>10s} {'after ok':>9s} {'before med s':>13s} "
+          f"{'after med s':>12s} {'time ratio':>11s} {'checks ratio':>13s} {'same plan':>10s}")  # fmt: skip
+    for name, s, same in summary:
+        (bk, bn, bt, bc), (ak, an, at, ac) = s["before"], s["after"]
         print(
-            f"{name:15s} {lk:4d}/{ln:<5d} {ok_:3d}/{on:<4d} {lt:13.2f} {ot:11.2f} "
-            f"{ot / lt:11.2f} {oc / lc:13.2f}"
+            f"{name:15s} {bk:4d}/{bn:<5d} {ak:4d}/{an:<4d} {bt:13.2f} {at:12.2f} "
+            f"{at / bt:11.2f} {ac / bc:13.2f} {same:4d}/{bn:<5d}"
         )
 
 

@@ -1,0 +1,140 @@
+"""Batched validity / kinematics kernels of the inch-worm jump (issue #13)
+against the reference copies of the former ones
+(``tests/switching/_reference_collision.py``): FK equal, clearances equal
+below the 0.1 m cap (and both ≥ it above), validity decided identically
+(also at other margins), batched IK tracks equal to one-at-a-time tracks,
+and the landing search returning the same landings."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+import robots
+from planners.switching import decide_mode
+from planners.switching import jump as J
+from planners.switching.scenes import make_scene
+from tests.switching import _reference_collision as ref
+
+ARA = robots.load_robot("ara")
+ROB = J.JumpRobot.from_model(ARA)
+LO, HI = ROB.joint_limits[:, 0], ROB.joint_limits[:, 1]
+
+
+@pytest.fixture(scope="module")
+def cx():
+    sc = make_scene("perpendicular", 0)
+    d = decide_mode(sc.points, camera_to_base=sc.camera_to_base, base_height=0.0, foot=(0.18, 0.12))
+    return J._jump_context(ARA, d.foothold_candidates, d.points, 0.0, J.JumpParams()), d
+
+
+def _configs(rng: np.random.Generator, n: int) -> np.ndarray:
+    """Uniform in (slightly beyond) the limits, and near P_conv / mobile
+    (where the arm is close to the surfaces and to itself)."""
+    parts = [rng.uniform(LO - 0.05, HI + 0.05, (n, 6))]
+    for q, sig in ((ROB.q_conv, 0.1), (ROB.q_conv, 0.4), (ROB.q_mobile, 0.05), (ROB.q_mobile, 0.3)):
+        parts.append(q + rng.normal(0.0, sig, (n, 6)))
+    return np.vstack(parts)
+
+
+def test_fk_all_equals_reference():
+    Q = np.random.default_rng(0).uniform(-4, 4, (500, 6))
+    np.testing.assert_allclose(ARA.fk_all(Q), ref.fk_all_reference(ARA, Q), rtol=0, atol=1e-14)
+    np.testing.assert_allclose(
+        ARA.fk_all(Q[3]), ref.fk_all_reference(ARA, Q[3]), rtol=0, atol=1e-14
+    )
+
+
+def _checkers(ctx, d):
+    W1 = ctx.foot1_start
+    target = d.foothold_candidates[0]
+    return [
+        ctx.checker(0, np.eye(4), None),
+        ctx.checker(0, np.eye(4), ctx.zone(target)),
+        ctx.checker(0, np.eye(4), ctx.zone(ctx.foot1_start)),
+        ctx.checker(1, W1, None),
+        ctx.checker(1, W1, ctx.zone(ctx.foot2_start)),
+    ]
+
+
+def _assert_same(chk, Q):
+    s_ref, c_ref = ref.clearances_reference(chk, Q)
+    s_new, c_new = chk.clearances(Q)
+    np.testing.assert_array_equal(np.minimum(s_new, J._CAP), np.minimum(s_ref, J._CAP))
+    np.testing.assert_array_equal(np.minimum(c_new, J._CAP), np.minimum(c_ref, J._CAP))
+    assert np.all(c_new[c_ref >= J._CAP] >= J._CAP)
+    np.testing.assert_array_equal(chk.valid(Q), ref.valid_reference(chk, Q))
+
+
+def test_clearances_and_validity_equal_reference(cx):
+    ctx, d = cx
+    rng = np.random.default_rng(1)
+    n_valid = n_invalid = 0
+    for chk in _checkers(ctx, d):
+        Q = _configs(rng, 60)
+        _assert_same(chk, Q)
+        v = chk.valid(Q)
+        n_valid, n_invalid = n_valid + int(v.sum()), n_invalid + int((~v).sum())
+        for k in range(0, 40, 7):  # small batches (OMPL's single states, segments)
+            _assert_same(chk, Q[k : k + 1 + k % 5])
+    assert n_valid > 100 and n_invalid > 100  # both outcomes exercised
+
+
+@pytest.mark.parametrize("margins", [(0.0, 0.0), (0.03, 0.01), (0.08, 0.05), (0.0, 0.09)])
+def test_validity_equal_reference_at_other_margins(cx, margins):
+    ctx, d = cx
+    cm, sm = margins
+    params = J.JumpParams(clearance_margin_m=cm, self_margin_m=sm)
+    rng = np.random.default_rng(2)
+    for chk in _checkers(ctx, d)[::2]:
+        chk.params = params
+        Q = _configs(rng, 40)
+        np.testing.assert_array_equal(chk.valid(Q), ref.valid_reference(chk, Q))
+
+
+@settings(max_examples=30, deadline=None)
+@given(
+    st.lists(st.floats(-1.0, 1.0), min_size=6, max_size=6),
+    st.floats(0.0, 0.5),
+    st.integers(0, 4),
+    st.integers(0, 2**31 - 1),
+)
+def test_validity_equal_reference_hypothesis(cx, u, spread, which, seed):
+    # Configurations around an arbitrary point of the joint box, every checker.
+    ctx, d = cx
+    chk = _checkers(ctx, d)[which]
+    centre = (LO + HI) / 2 + np.asarray(u) * (HI - LO) / 2
+    Q = centre + np.random.default_rng(seed).normal(0.0, spread + 1e-3, (16, 6))
+    _assert_same(chk, Q)
+
+
+def test_ik_track_batch_equals_ik_track(cx):
+    _, d = cx
+    W = d.foothold_candidates[0]
+    up = J._cartesian_line(W, J._translate(W, W[:3, 2] * 0.04), 6)
+    sols = ROB.ik(W, None, 0)
+    assert len(sols) >= 3
+    batch = ROB.ik_track_batch(up, sols)
+    assert sum(t is not None for t in batch) >= 1
+    for q, tb in zip(sols, batch, strict=True):
+        t1 = ROB.ik_track(up, q)
+        assert (t1 is None) == (tb is None)
+        if t1 is not None:
+            np.testing.assert_allclose(tb, t1, rtol=0, atol=1e-9)
+
+
+def test_landing_configs_equal_reference(cx):
+    ctx, d = cx
+    p = ctx.params
+    free2 = ctx.checker(0, np.eye(4), None)
+    for W in d.foothold_candidates[:2]:
+        zone = ctx.checker(0, np.eye(4), ctx.zone(W))
+        hover = J._translate(W, W[:3, 2] * p.standoff_m)
+        new = J._landing_configs(ROB, W, hover, free2, zone, p, 0)
+        old = ref.landing_configs_reference(ROB, W, hover, free2, zone, p, 0)
+        assert len(new) == len(old)
+        for (g1, a1), (g0, a0) in zip(new, old, strict=True):
+            np.testing.assert_allclose(g1, g0, rtol=0, atol=1e-9)
+            np.testing.assert_allclose(a1, a0, rtol=0, atol=1e-9)
