@@ -22,9 +22,10 @@ import numpy as np
 from scipy.interpolate import CubicSpline, PchipInterpolator
 
 from planners.cmbot.arm import ArmKinematics
+from planners.cmbot.balance import arm_mass_points, climber_mass_points, flip_moment, merge
 from planners.cmbot.distance import Cuboid, boxes_arrays, sphere_box_exact
 from planners.cmbot.experiment import ClearanceFilter, Section4Trajectory
-from planners.cmbot.gait import GaitTrajectory, flip_moments
+from planners.cmbot.gait import GaitTrajectory
 from planners.cmbot.guardrail import Guardrail
 from planners.cmbot.scene import CLIMBER_LINKS, arm_base_pose, climber_box_arrays
 
@@ -198,7 +199,7 @@ def min_clearance(
 COARSE_STRIDE = 16
 
 #: Samples per FK/clearance chunk of :func:`simulate_climb` (bounds every per-sample array).
-GATE_CHUNK = 2048
+GATE_CHUNK = 1024
 
 #: Slack on the coarse-then-fine lower bound against rounding (metres; far below any margin).
 _BOUND_SLACK_M = 1e-9
@@ -286,17 +287,19 @@ def _group_clearance(
     cap: float,
     chunk: int = 256,
 ) -> np.ndarray:
-    """Smallest sphere–box distance (capped) per time step and box group (T, G)."""
+    """Smallest distance (capped) per time step, box group and sphere,
+    flattened group-major (T, G·S); boxes may carry the time axis."""
     bc, bh, bR = boxes
-    out = np.full((len(centers), n_groups), cap)
-    for a in range(0, len(centers), chunk):
-        b = min(a + chunk, len(centers))
-        d, _ = sphere_box_exact(centers[a:b], radii, (bc[a:b], bh, bR[a:b]), directions=False)
-        dm = d.min(axis=1)  # (t, M)
+    T, S = centers.shape[:2]
+    out = np.full((T, n_groups, S), cap)
+    for a in range(0, T, chunk):
+        b = min(a + chunk, T)
+        sub = (bc[a:b], bh, bR[a:b]) if bc.ndim == 3 else (bc, bh, bR)
+        d, _ = sphere_box_exact(centers[a:b], radii, sub, directions=False)  # (t, S, M)
         for g in range(n_groups):
             if np.any(group == g):
-                out[a:b, g] = np.minimum(dm[:, group == g].min(axis=1), cap)
-    return out
+                out[a:b, g] = np.minimum(d[:, :, group == g].min(axis=2), cap)
+    return out.reshape(T, n_groups * S)
 
 
 def _interiors(a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -343,6 +346,43 @@ def _limit_checks(
         "joint speed / limit",
         "",
     )
+
+
+def _flip_moment_chunked(
+    model: Any,
+    arm: ArmKinematics,
+    t: np.ndarray,
+    q: np.ndarray,
+    rear: np.ndarray,
+    front: np.ndarray,
+    sup: np.ndarray,
+    chunk: int,
+) -> np.ndarray:
+    """Eq. 9 about the holding sole, counterweight as planned: the ``M`` of
+    :func:`planners.cmbot.gait.flip_moments` (same step dt, same arithmetic)
+    over chunks.  The accelerations are central differences of central
+    differences, so each chunk is evaluated with two samples of margin on
+    each side and only its own samples are kept: identical values, memory
+    bounded by the chunk instead of the motion."""
+    n = len(t)
+    dt = float(np.median(np.diff(t))) if n > 1 else 1.0
+    if n < 3:
+        dt = 0.0  # accelerations() is zero below three samples
+    out = np.zeros((n, 3))
+    chunk = max(chunk, 3)
+    for s in range(0, n, chunk):
+        e = min(s + chunk, n)
+        lo, hi = max(0, s - 2), min(n, e + 2)
+        T_wr = np.broadcast_to(np.eye(4), (hi - lo, 4, 4)).copy()
+        T_wr[:, :3, 3] = rear[lo:hi]
+        T_wk = arm_base_pose(model, q[lo:hi, :5], T_wr)
+        pts = merge(
+            climber_mass_points(model, q[lo:hi, :5], T_wr),
+            arm_mass_points(arm, q[lo:hi, 5:], T_wk),
+        )
+        pivot = np.where((sup[lo:hi] == 2)[:, None], front[lo:hi], rear[lo:hi])
+        out[s:e] = flip_moment(pts, pivot, dt if dt else None)[s - lo : e - lo]
+    return out
 
 
 def simulate_climb(
@@ -414,7 +454,7 @@ def simulate_climb(
     )
     # Flip moment (Eq. 9) at the fine steps, single support only.
     arm = ArmKinematics.from_model(model)
-    M, _ = flip_moments(model, arm, traj, t, q, rear, front, sup)
+    M = _flip_moment_chunked(model, arm, t, q, rear, front, sup, chunk)
     hold = c["foot_length_m"] / 2 * model.params["magnet"]["holding_force_N"]
     My = np.where(sup > 0, np.abs(M[:, 1]), 0.0)
     _record(
@@ -444,6 +484,7 @@ def simulate_climb(
         [k for k, ln in enumerate(CLIMBER_LINKS) for _ in model.collision_boxes.get(ln, [])]
     )
     links, box_link = np.unique(box_frame, return_inverse=True)
+    env_group = np.zeros(len(env), dtype=int)
     step = max(1, chunk // env_cf.stride) * env_cf.stride
     s = 0
     while n:
@@ -456,11 +497,13 @@ def simulate_climb(
             np.einsum("tij,tsj->tsi", T_wk[:, :3, :3], arm.sphere_centers(arm.frames(q[sl, 5:])))
             + T_wk[:, None, :3, 3]
         )
-        moved = np.linalg.norm(np.diff(centers, axis=0), axis=-1).max(axis=1, initial=0.0)
+        # Per sphere: its own displacement bounds its own clearance.
+        moved = np.linalg.norm(np.diff(centers, axis=0), axis=-1)
         env_cf.add(
             s,
             moved,
             lambda k, C=centers: min_clearance(C[k], radii, env_arr, cap=1.0),
+            lambda k, C=centers: _group_clearance(C[k], radii, env_arr, env_group, 1, cap=1.0),
         )
         # Self clearance: the boxes ride on the climber's links, so the bound is
         # the spheres' displacement in every link frame.
@@ -468,7 +511,7 @@ def simulate_climb(
         cb = centers[:, body]
         F = F[:, links]
         local = (cb[:, None] - F[:, :, None, :3, 3]) @ F[:, :, :3, :3]
-        moved_rel = np.linalg.norm(np.diff(local, axis=0), axis=-1).max(axis=2, initial=0.0)
+        moved_rel = np.linalg.norm(np.diff(local, axis=0), axis=-1).reshape(e - s, -1)
         bc, bh, bR, bnames = climber_box_arrays(model, q[sl, :5], T_wr)
         self_cf.add(
             s,
