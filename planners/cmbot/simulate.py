@@ -238,20 +238,26 @@ class CoarseFineClearance:
         start: int,
         steps: np.ndarray,
         evaluate: Callable[[np.ndarray], tuple[np.ndarray, np.ndarray, np.ndarray]],
-        groups: Callable[[np.ndarray], np.ndarray] | None = None,
+        groups: Callable[[np.ndarray], tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]]
+        | None = None,
     ) -> None:
         """Samples ``start … start + len(steps)``; ``evaluate(local indices)``
         returns their exact (clearance, sphere, box).  With ``groups`` the
         clearance is the minimum over groups of boxes, each with its own step
-        bound: ``steps`` (n−1, G) and ``groups(indices)`` (k, G) the exact
-        clearance to each group (capped like ``evaluate``'s); the window bound
+        bound: ``steps`` (n−1, G), and ``groups(indices)`` evaluates the coarse
+        samples: ``evaluate``'s triple plus (k, G) the exact clearance to each
+        group (capped like ``evaluate``'s); the window bound
         is the smallest of the groups' bounds (tighter when the groups move
         differently, e.g. the climber's links)."""
         steps = np.asarray(steps, dtype=float).reshape(len(steps), -1)
         n = len(steps) + 1
         coarse = np.unique(np.concatenate([np.arange(0, n, self.stride), [n - 1]]))
-        self._store(start, coarse, evaluate(coarse))
-        d = self.value[start + coarse][:, None] if groups is None else groups(coarse)
+        if groups is None:
+            self._store(start, coarse, evaluate(coarse))
+            d = self.value[start + coarse][:, None]
+        else:
+            dmin, sph, box, d = groups(coarse)
+            self._store(start, coarse, (dmin, sph, box))
         thr = max(self.limit, self._seen) + _BOUND_SLACK_M
         path = np.concatenate([np.zeros((1, steps.shape[1])), np.cumsum(steps, axis=0)])
         a, b = coarse[:-1], coarse[1:]
@@ -286,20 +292,34 @@ def _group_clearance(
     *,
     cap: float,
     chunk: int = 256,
-) -> np.ndarray:
-    """Smallest distance (capped) per time step, box group and sphere,
-    flattened group-major (T, G·S); boxes may carry the time axis."""
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """:func:`min_clearance`'s (clearance, sphere, box) per time step and, from
+    the same distances, the smallest distance (capped) per box group and
+    sphere, flattened group-major (T, G·S).  Boxes may carry the time axis.
+
+    The same values as :func:`min_clearance` (which only skips boxes that
+    cannot come below ``cap``); the sphere and box of a sample whose
+    clearance is capped may differ (they name no violation)."""
     bc, bh, bR = boxes
     T, S = centers.shape[:2]
-    out = np.full((T, n_groups, S), cap)
-    for a in range(0, T, chunk):
+    M = len(bh)
+    out = np.full(T, cap)
+    sph = np.zeros(T, dtype=int)
+    box = np.zeros(T, dtype=int)
+    per = np.full((T, n_groups, S), cap)
+    for a in range(0, T if M else 0, chunk):
         b = min(a + chunk, T)
         sub = (bc[a:b], bh, bR[a:b]) if bc.ndim == 3 else (bc, bh, bR)
         d, _ = sphere_box_exact(centers[a:b], radii, sub, directions=False)  # (t, S, M)
+        flat = d.reshape(b - a, -1)
+        kk = flat.argmin(axis=1)
+        out[a:b] = np.minimum(flat[np.arange(b - a), kk], cap)
+        sph[a:b] = kk // M
+        box[a:b] = kk % M
         for g in range(n_groups):
             if np.any(group == g):
-                out[a:b, g] = np.minimum(d[:, :, group == g].min(axis=2), cap)
-    return out.reshape(T, n_groups * S)
+                per[a:b, g] = np.minimum(d[:, :, group == g].min(axis=2), cap)
+    return out, sph, box, per.reshape(T, n_groups * S)
 
 
 def _interiors(a: np.ndarray, b: np.ndarray) -> np.ndarray:
