@@ -249,7 +249,8 @@ class CoarseFineClearance:
         group (capped like ``evaluate``'s); the window bound
         is the smallest of the groups' bounds (tighter when the groups move
         differently, e.g. the climber's links)."""
-        steps = np.asarray(steps, dtype=float).reshape(len(steps), -1)
+        steps = np.asarray(steps, dtype=float)
+        steps = steps.reshape(len(steps), int(np.prod(steps.shape[1:])))
         n = len(steps) + 1
         coarse = np.unique(np.concatenate([np.arange(0, n, self.stride), [n - 1]]))
         if groups is None:
@@ -531,7 +532,9 @@ def simulate_climb(
         cb = centers[:, body]
         F = F[:, links]
         local = (cb[:, None] - F[:, :, None, :3, 3]) @ F[:, :, :3, :3]
-        moved_rel = np.linalg.norm(np.diff(local, axis=0), axis=-1).reshape(e - s, -1)
+        moved_rel = np.linalg.norm(np.diff(local, axis=0), axis=-1).reshape(
+            e - s, local[0, ..., 0].size
+        )
         bc, bh, bR, bnames = climber_box_arrays(model, q[sl, :5], T_wr)
         self_cf.add(
             s,

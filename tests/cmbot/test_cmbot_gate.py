@@ -153,6 +153,22 @@ def test_arm_bent_into_the_climber_equals_dense(short_climb):
     assert_same_report(simulate_climb(MODEL, g, bent, coarse_stride=32), dense)
 
 
+@pytest.mark.parametrize("n", [1, 2, 3, 40])
+def test_very_short_motions_equal_dense(short_climb, n):
+    """A few planning samples (one resampled sample, no window, one window)."""
+    g, tr = short_climb
+    k = len(tr.times) // 3
+    cut = dataclasses.replace(
+        tr,
+        times=tr.times[k : k + n],
+        q=tr.q[k : k + n],
+        rear=tr.rear[k : k + n],
+        front=tr.front[k : k + n],
+        support=tr.support[k : k + n],
+    )
+    assert_same_report(simulate_climb(MODEL, g, cut), simulate_climb_dense(MODEL, g, cut))
+
+
 def _dense_walk(values: np.ndarray, limit: float) -> tuple[float, int, np.ndarray]:
     return float(values.min()), int(values.argmin()), np.flatnonzero(values < limit)
 
