@@ -195,6 +195,9 @@ def min_clearance(
     return out, sph, box
 
 
+_Clearance = tuple[np.ndarray, np.ndarray, np.ndarray]
+_GroupClearance = tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]
+
 #: Coarse clearance stride [samples] of :func:`simulate_climb` (0.16 s at the default 10 ms).
 COARSE_STRIDE = 16
 
@@ -237,9 +240,8 @@ class CoarseFineClearance:
         self,
         start: int,
         steps: np.ndarray,
-        evaluate: Callable[[np.ndarray], tuple[np.ndarray, np.ndarray, np.ndarray]],
-        groups: Callable[[np.ndarray], tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]]
-        | None = None,
+        evaluate: Callable[[np.ndarray], _Clearance],
+        groups: Callable[[np.ndarray], _GroupClearance] | None = None,
     ) -> None:
         """Samples ``start … start + len(steps)``; ``evaluate(local indices)``
         returns their exact (clearance, sphere, box).  With ``groups`` the
@@ -520,12 +522,14 @@ def simulate_climb(
         )
         # Per sphere: its own displacement bounds its own clearance.
         moved = np.linalg.norm(np.diff(centers, axis=0), axis=-1)
-        env_cf.add(
-            s,
-            moved,
-            lambda k, C=centers: min_clearance(C[k], radii, env_arr, cap=1.0),
-            lambda k, C=centers: _group_clearance(C[k], radii, env_arr, env_group, 1, cap=1.0),
-        )
+
+        def env_min(k: np.ndarray, C: np.ndarray = centers) -> _Clearance:
+            return min_clearance(C[k], radii, env_arr, cap=1.0)
+
+        def env_groups(k: np.ndarray, C: np.ndarray = centers) -> _GroupClearance:
+            return _group_clearance(C[k], radii, env_arr, env_group, 1, cap=1.0)
+
+        env_cf.add(s, moved, env_min, env_groups)
         # Self clearance: the boxes ride on the climber's links, so the bound is
         # the spheres' displacement in every link frame.
         F = T_wr[:, None] @ model.climber.link_frames(q[sl, :5])
@@ -536,16 +540,28 @@ def simulate_climb(
             e - s, local[0, ..., 0].size
         )
         bc, bh, bR, bnames = climber_box_arrays(model, q[sl, :5], T_wr)
-        self_cf.add(
-            s,
-            moved_rel,
-            lambda k, C=cb, c=bc, h=bh, R=bR: min_clearance(
-                C[k], radii[body], (c[k], h, R[k]), cap=1.0
-            ),
-            lambda k, C=cb, c=bc, h=bh, R=bR: _group_clearance(
+
+        def self_min(
+            k: np.ndarray,
+            C: np.ndarray = cb,
+            c: np.ndarray = bc,
+            h: np.ndarray = bh,
+            R: np.ndarray = bR,
+        ) -> _Clearance:
+            return min_clearance(C[k], radii[body], (c[k], h, R[k]), cap=1.0)
+
+        def self_groups(
+            k: np.ndarray,
+            C: np.ndarray = cb,
+            c: np.ndarray = bc,
+            h: np.ndarray = bh,
+            R: np.ndarray = bR,
+        ) -> _GroupClearance:
+            return _group_clearance(
                 C[k], radii[body], (c[k], h, R[k]), box_link, len(links), cap=1.0
-            ),
-        )
+            )
+
+        self_cf.add(s, moved_rel, self_min, self_groups)
         if e >= n - 1:
             break
         s = e
