@@ -371,6 +371,19 @@ def _limit_checks(
     )
 
 
+def _world_sphere_centers(arm: ArmKinematics, q_arm: np.ndarray, T_wk: np.ndarray) -> np.ndarray:
+    """World centres (T,S,3) of the arm's spheres: ``T_wk · sphere_centers(frames(q))``
+    regrouped per frame (one (T,3,3) product per frame instead of a (T,S,4,4)
+    gather), equal to rounding."""
+    s = arm.spheres
+    W = T_wk[:, None] @ arm.frames(q_arm)
+    out = np.empty((len(q_arm), len(s.frame), 3))
+    for f in np.unique(s.frame):
+        idx = np.flatnonzero(s.frame == f)
+        out[:, idx] = s.local[idx] @ np.swapaxes(W[:, f, :3, :3], -1, -2) + W[:, None, f, :3, 3]
+    return out
+
+
 def _flip_moment_chunked(
     model: Any,
     arm: ArmKinematics,
@@ -523,10 +536,7 @@ def simulate_climb(
         T_wr = np.broadcast_to(np.eye(4), (e + 1 - s, 4, 4)).copy()
         T_wr[:, :3, 3] = rear[sl]
         T_wk = arm_base_pose(model, q[sl, :5], T_wr)
-        centers = (
-            np.einsum("tij,tsj->tsi", T_wk[:, :3, :3], arm.sphere_centers(arm.frames(q[sl, 5:])))
-            + T_wk[:, None, :3, 3]
-        )
+        centers = _world_sphere_centers(arm, q[sl, 5:], T_wk)
         # Per sphere: its own displacement bounds its own clearance.
         moved = np.linalg.norm(np.diff(centers, axis=0), axis=-1)
 
