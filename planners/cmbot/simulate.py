@@ -22,11 +22,12 @@ import numpy as np
 from scipy.interpolate import CubicSpline, PchipInterpolator
 
 from planners.cmbot.arm import ArmKinematics
+from planners.cmbot.balance import arm_mass_points, climber_mass_points, flip_moment, merge
 from planners.cmbot.distance import Cuboid, boxes_arrays, sphere_box_exact
 from planners.cmbot.experiment import ClearanceFilter, Section4Trajectory
-from planners.cmbot.gait import GaitTrajectory, flip_moments
+from planners.cmbot.gait import GaitTrajectory
 from planners.cmbot.guardrail import Guardrail
-from planners.cmbot.scene import arm_base_pose, climber_box_arrays
+from planners.cmbot.scene import CLIMBER_LINKS, arm_base_pose, climber_box_arrays
 
 
 @dataclass(frozen=True)
@@ -59,6 +60,8 @@ class GateReport:
     violations: list[Violation] = field(default_factory=list)
     dt_s: float = 0.0
     samples: int = 0
+    #: Samples each clearance check evaluated exactly (coarse-then-fine gates only).
+    clearance_samples: dict[str, int] = field(default_factory=dict)
 
     @property
     def passed(self) -> bool:
@@ -125,9 +128,10 @@ def _resample(
     T_out, V_out, D_out = [], [], []
     for i, (a, b) in enumerate(itertools.pairwise(cuts)):
         ts, vs = t[a : b + 1], v[a : b + 1]
-        fine = np.concatenate(
-            [np.linspace(x, y, substeps, endpoint=False) for x, y in itertools.pairwise(ts)]
-        )
+        # np.linspace(x, y, substeps, endpoint=False) for every interval at once
+        # (same arithmetic: k·((y − x)/substeps) + x, so the same floats).
+        step = (ts[1:] - ts[:-1]) / substeps
+        fine = (np.arange(substeps)[None, :] * step[:, None] + ts[:-1, None]).ravel()
         if i == len(cuts) - 2:
             fine = np.concatenate([fine, ts[-1:]])
         f: CubicSpline | PchipInterpolator
@@ -191,6 +195,145 @@ def min_clearance(
     return out, sph, box
 
 
+_Clearance = tuple[np.ndarray, np.ndarray, np.ndarray]
+_GroupClearance = tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]
+
+#: Coarse clearance stride [samples] of :func:`simulate_climb` (0.16 s at the default 10 ms).
+COARSE_STRIDE = 16
+
+#: Samples per FK/clearance chunk of :func:`simulate_climb` (bounds every per-sample array).
+GATE_CHUNK = 1024
+
+#: Slack on the coarse-then-fine lower bound against rounding (metres; far below any margin).
+_BOUND_SLACK_M = 1e-9
+
+
+class CoarseFineClearance:
+    """Exact minimum clearance per sample without evaluating every sample.
+
+    Samples come in chunks (:meth:`add`), each with ``steps[j]`` ≥ how far
+    the clearance can change between its samples j and j+1 — the largest
+    displacement of any sphere centre between them, in the frame of every box
+    it is checked against (the distance to a fixed box is 1-Lipschitz in the
+    centre).  Along a path of length P between samples a < b,
+    ``d_j ≥ max(d_a − P(a, j), d_b − P(j, b)) ≥ (d_a + d_b − P(a, b)) / 2``.
+
+    Every ``stride``-th sample (and each chunk's last) is evaluated exactly
+    (coarse); the samples between two coarse ones are evaluated too (fine)
+    only when that lower bound is within reach of the threshold
+    ``max(limit, smallest clearance seen so far)``.  A sample left out is
+    therefore strictly above the limit and strictly above the motion's
+    minimum: the violations, the minimum and where it is are those of the
+    dense check.  Left-out samples hold their lower bound in :attr:`value`.
+    """
+
+    def __init__(self, n: int, limit: float, stride: int) -> None:
+        self.limit = float(limit)
+        self.stride = max(1, int(stride))
+        self.value = np.full(n, np.inf)
+        self.sphere = np.zeros(n, dtype=int)
+        self.box = np.zeros(n, dtype=int)
+        self.evaluated = 0
+        self._seen = np.inf
+
+    def add(
+        self,
+        start: int,
+        steps: np.ndarray,
+        evaluate: Callable[[np.ndarray], _Clearance],
+        groups: Callable[[np.ndarray], _GroupClearance] | None = None,
+    ) -> None:
+        """Samples ``start … start + len(steps)``; ``evaluate(local indices)``
+        returns their exact (clearance, sphere, box).  With ``groups`` the
+        clearance is the minimum over groups of boxes, each with its own step
+        bound: ``steps`` (n−1, G), and ``groups(indices)`` evaluates the coarse
+        samples: ``evaluate``'s triple plus (k, G) the exact clearance to each
+        group (capped like ``evaluate``'s); the window bound
+        is the smallest of the groups' bounds (tighter when the groups move
+        differently, e.g. the climber's links)."""
+        steps = np.asarray(steps, dtype=float)
+        steps = steps.reshape(len(steps), int(np.prod(steps.shape[1:])))
+        n = len(steps) + 1
+        coarse = np.unique(np.concatenate([np.arange(0, n, self.stride), [n - 1]]))
+        if groups is None:
+            self._store(start, coarse, evaluate(coarse))
+            d = self.value[start + coarse][:, None]
+        else:
+            dmin, sph, box, d = groups(coarse)
+            self._store(start, coarse, (dmin, sph, box))
+        thr = max(self.limit, self._seen) + _BOUND_SLACK_M
+        path = np.concatenate([np.zeros((1, steps.shape[1])), np.cumsum(steps, axis=0)])
+        a, b = coarse[:-1], coarse[1:]
+        lb = ((d[:-1] + d[1:] - (path[b] - path[a])) / 2.0).min(axis=1)
+        gaps = b - a - 1
+        refine = (lb <= thr) & (gaps > 0)
+        fine = _interiors(a[refine], b[refine])
+        if len(fine):
+            self._store(start, fine, evaluate(fine))
+        skip = ~refine & (gaps > 0)
+        left = _interiors(a[skip], b[skip])
+        self.value[start + left] = np.repeat(lb[skip], gaps[skip])
+
+    def _store(
+        self, start: int, idx: np.ndarray, res: tuple[np.ndarray, np.ndarray, np.ndarray]
+    ) -> None:
+        d, s, b = res
+        self.value[start + idx] = d
+        self.sphere[start + idx] = s
+        self.box[start + idx] = b
+        self.evaluated += len(idx)
+        if len(d):
+            self._seen = min(self._seen, float(np.min(d)))
+
+
+def _group_clearance(
+    centers: np.ndarray,
+    radii: np.ndarray,
+    boxes: tuple[np.ndarray, np.ndarray, np.ndarray],
+    group: np.ndarray,
+    n_groups: int,
+    *,
+    cap: float,
+    chunk: int = 256,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """:func:`min_clearance`'s (clearance, sphere, box) per time step and, from
+    the same distances, the smallest distance (capped) per box group and
+    sphere, flattened group-major (T, G·S).  Boxes may carry the time axis.
+
+    The same values as :func:`min_clearance` (which only skips boxes that
+    cannot come below ``cap``); the sphere and box of a sample whose
+    clearance is capped may differ (they name no violation)."""
+    bc, bh, bR = boxes
+    T, S = centers.shape[:2]
+    M = len(bh)
+    out = np.full(T, cap)
+    sph = np.zeros(T, dtype=int)
+    box = np.zeros(T, dtype=int)
+    per = np.full((T, n_groups, S), cap)
+    for a in range(0, T if M else 0, chunk):
+        b = min(a + chunk, T)
+        sub = (bc[a:b], bh, bR[a:b]) if bc.ndim == 3 else (bc, bh, bR)
+        d, _ = sphere_box_exact(centers[a:b], radii, sub, directions=False)  # (t, S, M)
+        flat = d.reshape(b - a, -1)
+        kk = flat.argmin(axis=1)
+        out[a:b] = np.minimum(flat[np.arange(b - a), kk], cap)
+        sph[a:b] = kk // M
+        box[a:b] = kk % M
+        for g in range(n_groups):
+            if np.any(group == g):
+                per[a:b, g] = np.minimum(d[:, :, group == g].min(axis=2), cap)
+    return out, sph, box, per.reshape(T, n_groups * S)
+
+
+def _interiors(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """All integers strictly between a[i] and b[i], concatenated (a < b)."""
+    lens = b - a - 1
+    if not len(a) or lens.sum() <= 0:
+        return np.zeros(0, dtype=int)
+    offs = np.arange(int(lens.sum())) - np.repeat(np.cumsum(lens) - lens, lens)
+    return np.repeat(a + 1, lens) + offs
+
+
 def _limit_checks(
     report: GateReport,
     names: list[str],
@@ -228,6 +371,56 @@ def _limit_checks(
     )
 
 
+def _world_sphere_centers(arm: ArmKinematics, q_arm: np.ndarray, T_wk: np.ndarray) -> np.ndarray:
+    """World centres (T,S,3) of the arm's spheres: ``T_wk · sphere_centers(frames(q))``
+    regrouped per frame (one (T,3,3) product per frame instead of a (T,S,4,4)
+    gather), equal to rounding."""
+    s = arm.spheres
+    W = T_wk[:, None] @ arm.frames(q_arm)
+    out = np.empty((len(q_arm), len(s.frame), 3))
+    for f in np.unique(s.frame):
+        idx = np.flatnonzero(s.frame == f)
+        out[:, idx] = s.local[idx] @ np.swapaxes(W[:, f, :3, :3], -1, -2) + W[:, None, f, :3, 3]
+    return out
+
+
+def _flip_moment_chunked(
+    model: Any,
+    arm: ArmKinematics,
+    t: np.ndarray,
+    q: np.ndarray,
+    rear: np.ndarray,
+    front: np.ndarray,
+    sup: np.ndarray,
+    chunk: int,
+) -> np.ndarray:
+    """Eq. 9 about the holding sole, counterweight as planned: the ``M`` of
+    :func:`planners.cmbot.gait.flip_moments` (same step dt, same arithmetic)
+    over chunks.  The accelerations are central differences of central
+    differences, so each chunk is evaluated with two samples of margin on
+    each side and only its own samples are kept: identical values, memory
+    bounded by the chunk instead of the motion."""
+    n = len(t)
+    dt = float(np.median(np.diff(t))) if n > 1 else 1.0
+    if n < 3:
+        dt = 0.0  # accelerations() is zero below three samples
+    out = np.zeros((n, 3))
+    chunk = max(chunk, 3)
+    for s in range(0, n, chunk):
+        e = min(s + chunk, n)
+        lo, hi = max(0, s - 2), min(n, e + 2)
+        T_wr = np.broadcast_to(np.eye(4), (hi - lo, 4, 4)).copy()
+        T_wr[:, :3, 3] = rear[lo:hi]
+        T_wk = arm_base_pose(model, q[lo:hi, :5], T_wr)
+        pts = merge(
+            climber_mass_points(model, q[lo:hi, :5], T_wr),
+            arm_mass_points(arm, q[lo:hi, 5:], T_wk),
+        )
+        pivot = np.where((sup[lo:hi] == 2)[:, None], front[lo:hi], rear[lo:hi])
+        out[s:e] = flip_moment(pts, pivot, dt if dt else None)[s - lo : e - lo]
+    return out
+
+
 def simulate_climb(
     model: Any,
     guardrail: Guardrail,
@@ -235,6 +428,8 @@ def simulate_climb(
     *,
     substeps: int = 2,
     arm_clearance_m: float = 0.05,
+    coarse_stride: int = COARSE_STRIDE,
+    chunk: int = GATE_CHUNK,
 ) -> GateReport:
     """Replay a climbing trajectory finely and check it (seed §4 simulation system).
 
@@ -243,6 +438,13 @@ def simulate_climb(
     moment about the holding sole ≤ the magnet's holding moment (single
     support), folded-arm spheres clear of the guardrail and of the climbing
     mechanism.
+
+    The two clearances are checked coarse-then-fine (:class:`CoarseFineClearance`,
+    every ``coarse_stride``-th sample, windows refined where the motion bound
+    reaches the limit or the minimum): the same verdicts, worst values and
+    violations as evaluating every sample (tested against the dense gate in
+    ``tests/cmbot/_reference_gate.py``).  FK, distances and flip moments run
+    in chunks of ``chunk`` samples, so memory does not grow with the motion.
     """
     c = model.params["climber"]
     rep = GateReport()
@@ -295,7 +497,7 @@ def simulate_climb(
     )
     # Flip moment (Eq. 9) at the fine steps, single support only.
     arm = ArmKinematics.from_model(model)
-    M, _ = flip_moments(model, arm, traj, t, q, rear, front, sup)
+    M = _flip_moment_chunked(model, arm, t, q, rear, front, sup, chunk)
     hold = c["foot_length_m"] / 2 * model.params["magnet"]["holding_force_N"]
     My = np.where(sup > 0, np.abs(M[:, 1]), 0.0)
     _record(
@@ -308,22 +510,84 @@ def simulate_climb(
         "|flip moment| about the holding sole",
         "N·m",
     )
-    # Clearance of the folded arm: guardrail (≥ arm_clearance_m) and own climbing links (≥ 0).
-    T_wr = np.broadcast_to(np.eye(4), (len(t), 4, 4)).copy()
-    T_wr[:, :3, 3] = rear
-    T_wk = arm_base_pose(model, q[:, :5], T_wr)
-    centers = (
-        np.einsum("tij,tsj->tsi", T_wk[:, :3, :3], arm.sphere_centers(arm.frames(q[:, 5:])))
-        + T_wk[:, None, :3, 3]
-    )
+    # Clearance of the folded arm: guardrail (≥ arm_clearance_m) and own climbing
+    # links (≥ 0), coarse-then-fine (CoarseFineClearance) over bounded chunks.
     lo = float(min(rear[:, 0].min(), front[:, 0].min())) - 3.0
     hi = float(max(rear[:, 0].max(), front[:, 0].max())) + 3.0
     env = guardrail.boxes(lo, hi)
-    dmin, si, bi = min_clearance(centers, arm.spheres.radius, boxes_arrays(env), cap=1.0)
+    env_arr = boxes_arrays(env)
+    radii = arm.spheres.radius
+    body = arm.spheres.body >= 1
+    n = len(t)
+    env_cf = CoarseFineClearance(n, arm_clearance_m, coarse_stride)
+    self_cf = CoarseFineClearance(n, 0.0, coarse_stride)
+    bnames: list[str] = []
+    # Link (frame) of each climber box, as climber_box_arrays orders them.
+    box_frame = np.array(
+        [k for k, ln in enumerate(CLIMBER_LINKS) for _ in model.collision_boxes.get(ln, [])]
+    )
+    links, box_link = np.unique(box_frame, return_inverse=True)
+    env_group = np.zeros(len(env), dtype=int)
+    step = max(1, chunk // env_cf.stride) * env_cf.stride
+    s = 0
+    while n:
+        e = min(s + step, n - 1)
+        sl = slice(s, e + 1)
+        T_wr = np.broadcast_to(np.eye(4), (e + 1 - s, 4, 4)).copy()
+        T_wr[:, :3, 3] = rear[sl]
+        T_wk = arm_base_pose(model, q[sl, :5], T_wr)
+        centers = _world_sphere_centers(arm, q[sl, 5:], T_wk)
+        # Per sphere: its own displacement bounds its own clearance.
+        moved = np.linalg.norm(np.diff(centers, axis=0), axis=-1)
+
+        def env_min(k: np.ndarray, C: np.ndarray = centers) -> _Clearance:
+            return min_clearance(C[k], radii, env_arr, cap=1.0)
+
+        def env_groups(k: np.ndarray, C: np.ndarray = centers) -> _GroupClearance:
+            return _group_clearance(C[k], radii, env_arr, env_group, 1, cap=1.0)
+
+        env_cf.add(s, moved, env_min, env_groups)
+        # Self clearance: the boxes ride on the climber's links, so the bound is
+        # the spheres' displacement in every link frame.
+        F = T_wr[:, None] @ model.climber.link_frames(q[sl, :5])
+        cb = centers[:, body]
+        F = F[:, links]
+        local = (cb[:, None] - F[:, :, None, :3, 3]) @ F[:, :, :3, :3]
+        moved_rel = np.linalg.norm(np.diff(local, axis=0), axis=-1).reshape(
+            e - s, local[0, ..., 0].size
+        )
+        bc, bh, bR, bnames = climber_box_arrays(model, q[sl, :5], T_wr)
+
+        def self_min(
+            k: np.ndarray,
+            C: np.ndarray = cb,
+            c: np.ndarray = bc,
+            h: np.ndarray = bh,
+            R: np.ndarray = bR,
+        ) -> _Clearance:
+            return min_clearance(C[k], radii[body], (c[k], h, R[k]), cap=1.0)
+
+        def self_groups(
+            k: np.ndarray,
+            C: np.ndarray = cb,
+            c: np.ndarray = bc,
+            h: np.ndarray = bh,
+            R: np.ndarray = bR,
+        ) -> _GroupClearance:
+            return _group_clearance(
+                C[k], radii[body], (c[k], h, R[k]), box_link, len(links), cap=1.0
+            )
+
+        self_cf.add(s, moved_rel, self_min, self_groups)
+        if e >= n - 1:
+            break
+        s = e
+    rep.clearance_samples = {"arm_env": env_cf.evaluated, "self": self_cf.evaluated}
+    si, bi = env_cf.sphere, env_cf.box
     _record(
         rep,
         "arm_env_clearance",
-        dmin,
+        env_cf.value,
         arm_clearance_m,
         t,
         lambda k: f"arm sphere {si[k]} ↔ {env[bi[k]].name}",
@@ -331,13 +595,11 @@ def simulate_climb(
         "m",
         upper=False,
     )
-    body = arm.spheres.body >= 1
-    bc, bh, bR, bnames = climber_box_arrays(model, q[:, :5], T_wr)
-    self_d, _, kk = min_clearance(centers[:, body], arm.spheres.radius[body], (bc, bh, bR), cap=1.0)
+    kk = self_cf.box
     _record(
         rep,
         "self_clearance",
-        self_d,
+        self_cf.value,
         0.0,
         t,
         lambda k: f"arm ↔ {bnames[kk[k]]}",

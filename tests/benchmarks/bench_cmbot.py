@@ -16,6 +16,11 @@ Sections:
    simulation gate) on a random guardrail.
 3. Sphere–cuboid distance: GJK vs brute-force surface sampling (41×41 per
    face) and vs the closed form; ratio of times per query.
+4. Simulation gate (issue #18): the dense reference gate
+   (``tests/cmbot/_reference_gate.py``) against the coarse-then-fine
+   ``simulate_climb`` on the default climb and a 12 m guardrail climb —
+   time, tracemalloc peak, clearance samples evaluated, ratios, and whether
+   both reports agree.  ``--gate`` runs this section only.
 """
 
 from __future__ import annotations
@@ -23,6 +28,7 @@ from __future__ import annotations
 import argparse
 import sys
 import time
+import tracemalloc
 from dataclasses import replace
 from pathlib import Path
 
@@ -37,6 +43,7 @@ from planners.cmbot.distance import Cuboid, sphere_box_bruteforce, sphere_box_ex
 from planners.cmbot.gait import GaitParams, build_trajectory, chain_limits, plan_footholds
 from planners.cmbot.guardrail import make_guardrail
 from planners.cmbot.simulate import simulate_climb
+from tests.cmbot._reference_gate import simulate_climb_dense  # the dense gate (issue #18)
 from tests.cmbot._reference_gjk import sphere_box_gjk  # the former GJK (issue #13 §1)
 
 
@@ -151,14 +158,77 @@ def section_distance(quick: bool) -> None:
     )
 
 
+def _walk(model, length: float):
+    """Guardrail and trajectory of the longest walk on a random guardrail."""
+    g = make_guardrail(length, seed=5)
+    p = GaitParams()
+    lim = chain_limits(model, p)
+    xs = np.arange(g.x_min + 0.3, g.x_max - 0.5, 0.01)
+    ok = g.valid_foothold(xs, lim.foot_length) & g.valid_foothold(xs + lim.d_work, lim.foot_length)
+    start, goal = xs[ok][0], xs[ok][-1]
+    _phases, tr = build_trajectory(model, plan_footholds(g, start, goal, lim, p.grid_m), start, p)
+    return g, tr
+
+
+def _measure(f, *args):
+    tracemalloc.start()
+    t0 = time.perf_counter()
+    rep = f(*args)
+    dt = time.perf_counter() - t0
+    peak = tracemalloc.get_traced_memory()[1]
+    tracemalloc.stop()
+    return rep, dt, peak / 1e6
+
+
+def _same(a, b) -> bool:
+    return (
+        [(c.name, c.passed, c.message) for c in a.checks]
+        == [(c.name, c.passed, c.message) for c in b.checks]
+        and [(v.check, v.t_s, v.where) for v in a.violations]
+        == [(v.check, v.t_s, v.where) for v in b.violations]
+        and all(abs(c.value - d.value) <= 1e-12 for c, d in zip(a.checks, b.checks, strict=True))
+    )
+
+
+def section_gate(model, quick: bool) -> None:
+    print("== 4. Simulation gate: dense reference vs coarse-then-fine (same run) ==")
+    print("     time and peak memory measured under tracemalloc; 'clearance evals' =")
+    print("     samples evaluated by the two clearance checks (dense: 2 × samples)")
+    cases = [("default climb (seed scene)", None)]
+    cases.append(("12 m guardrail climb", 12.0) if not quick else ("4 m guardrail climb", 4.0))
+    for label, length in cases:
+        if length is None:
+            cp = plan_climb(model, simulate=False)
+            g, tr = cp.guardrail, cp.trajectory
+        else:
+            g, tr = _walk(model, length)
+        ref, t_ref, m_ref = _measure(simulate_climb_dense, model, g, tr)
+        new, t_new, m_new = _measure(simulate_climb, model, g, tr)
+        ev = sum(new.clearance_samples.values())
+        print(f"  {label}: {tr.times[-1]:.0f} s of motion, {new.samples} samples")
+        print(f"    {'gate':<18}{'time [s]':>10}{'peak [MB]':>11}{'clearance evals':>17}")
+        print(f"    {'dense (before)':<18}{t_ref:>10.2f}{m_ref:>11.0f}{2 * ref.samples:>17}")
+        print(
+            f"    {'coarse-fine':<18}{t_new:>10.2f}{m_new:>11.0f}{ev:>17}  {new.clearance_samples}"
+        )
+        print(
+            f"    ratio before/after: time {t_ref / t_new:.1f}×, memory {m_ref / m_new:.1f}×, "
+            f"clearance evals {2 * ref.samples / max(ev, 1):.1f}×; reports identical: "
+            f"{_same(new, ref)}; verdict {'PASS' if new.passed else 'FAIL'}"
+        )
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--quick", action="store_true", help="smaller walk and fewer distance queries")
+    ap.add_argument("--gate", action="store_true", help="only section 4 (the simulation gate)")
     args = ap.parse_args()
     model = robots.load_robot("cmbot")
-    section_experiment(model)
-    section_gait(model, args.quick)
-    section_distance(args.quick)
+    if not args.gate:
+        section_experiment(model)
+        section_gait(model, args.quick)
+        section_distance(args.quick)
+    section_gate(model, args.quick)
 
 
 if __name__ == "__main__":
