@@ -260,11 +260,36 @@ def _frames_jac(
     robot: DensoVM6083, q: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Flange position (K,3), z axis (K,3) and their derivatives d/dq1..5
-    (K,3,5) each, from the batched D-H frames (geometric Jacobian: joint i
-    turns about z of frame i − 1)."""
-    F = robot.frames(q)  # (K,7,4,4)
-    pe, ze = F[:, -1, :3, 3], F[:, -1, :3, 2]
-    zi, oi = F[:, :5, :3, 2], F[:, :5, :3, 3]  # (K,5,3)
+    (K,3,5) each (geometric Jacobian: joint i turns about z of frame i − 1).
+
+    The D-H chain of :meth:`robots.model.DHRobotModel.frames`, written
+    component-wise on (K,) arrays (a batched 4×4 matmul per link costs
+    ~10× more for small matrices); the tests compare it with ``frames``."""
+    q = np.asarray(q, dtype=float)
+    K = len(q)
+    R = [[np.full(K, robot.base[i, j]) for j in range(3)] for i in range(3)]
+    o = [np.full(K, robot.base[i, 3]) for i in range(3)]
+    zs, os_ = [], []
+    for i in range(6):
+        zs.append(np.stack([R[0][2], R[1][2], R[2][2]], axis=1))
+        os_.append(np.stack(o, axis=1))
+        th = q[:, i] + robot.offset[i]
+        ct, st = np.cos(th), np.sin(th)
+        ca, sa = float(np.cos(robot.alpha[i])), float(np.sin(robot.alpha[i]))
+        ai, di = float(robot.a[i]), float(robot.d[i])
+        o = [o[r] + R[r][0] * (ai * ct) + R[r][1] * (ai * st) + R[r][2] * di for r in range(3)]
+        # columns of Rz(θ)Rx(α): (ct, st, 0), (−st·ca, ct·ca, sa), (st·sa, −ct·sa, ca)
+        R = [
+            [
+                R[r][0] * ct + R[r][1] * st,
+                -R[r][0] * (st * ca) + R[r][1] * (ct * ca) + R[r][2] * sa,
+                R[r][0] * (st * sa) - R[r][1] * (ct * sa) + R[r][2] * ca,
+            ]
+            for r in range(3)
+        ]
+    pe = np.stack(o, axis=1)
+    ze = np.stack([R[0][2], R[1][2], R[2][2]], axis=1)
+    zi, oi = np.stack(zs[:5], axis=1), np.stack(os_[:5], axis=1)  # (K,5,3)
     Jp = np.cross(zi, pe[:, None, :] - oi).transpose(0, 2, 1)
     Jz = np.cross(zi, np.broadcast_to(ze[:, None, :], zi.shape)).transpose(0, 2, 1)
     return pe, ze, Jp, Jz
@@ -287,28 +312,34 @@ def _lm_batch(
     """Batched bounded Levenberg–Marquardt on rows x (K,5): least squares of
     the residual [αp(P − p); αo(z − a)] (``irls=False``) or Eq. 3.11 itself
     (``irls=True``: each block weighted by 1/its norm, a step kept only
-    when Eq. 3.11 decreases).  Steps are clipped into the joint limits."""
+    when Eq. 3.11 decreases).  Steps are clipped into the joint limits; a
+    row stops once its damping saturates or a kept step gains < 1e-12
+    (relative), so converged rows cost nothing."""
     lo, hi = robot.joint_limits[:5, 0], robot.joint_limits[:5, 1]
+    x = x.copy()
     K = len(x)
     lam = np.full(K, 1e-3)
 
-    def evaluate(xx: np.ndarray) -> tuple[np.ndarray, ...]:
-        pe, ze, Jp, Jz = _frames_jac(robot, np.concatenate([xx, q6[:, None]], axis=1))
-        rp, ro = ALPHA_P * (pe - p), ALPHA_O * (ze - a)
+    def evaluate(rows: np.ndarray, xx: np.ndarray) -> tuple[np.ndarray, ...]:
+        pe, ze, Jp, Jz = _frames_jac(robot, np.concatenate([xx, q6[rows, None]], axis=1))
+        rp, ro = ALPHA_P * (pe - p[rows]), ALPHA_O * (ze - a[rows])
         if irls:
             f = np.linalg.norm(rp, axis=1) + np.linalg.norm(ro, axis=1)
         else:
             f = (rp * rp).sum(axis=1) + (ro * ro).sum(axis=1)
         return f, rp, ro, ALPHA_P * Jp, ALPHA_O * Jz
 
-    f, rp, ro, Jp, Jz = evaluate(x)
+    act = np.arange(K)
+    f, rp, ro, Jp, Jz = evaluate(act, x)
     eye = np.eye(5)
     for _ in range(iters):
+        if not len(act):
+            break
         if irls:
             wp = 1.0 / np.maximum(np.linalg.norm(rp, axis=1), 1e-12)
             wo = 1.0 / np.maximum(np.linalg.norm(ro, axis=1), 1e-12)
         else:
-            wp = wo = np.ones(K)
+            wp = wo = np.ones(len(act))
         H = wp[:, None, None] * np.einsum("kri,krj->kij", Jp, Jp) + wo[:, None, None] * np.einsum(
             "kri,krj->kij", Jz, Jz
         )
@@ -316,20 +347,23 @@ def _lm_batch(
             "kri,kr->ki", Jz, ro
         )
         dg = np.einsum("kii->ki", H)
-        A = H + lam[:, None, None] * (dg[:, :, None] * eye + 1e-9 * eye)
+        la = lam[act]
+        A = H + la[:, None, None] * (dg[:, :, None] * eye + 1e-9 * eye)
         step = -np.linalg.solve(A, g[..., None])[..., 0]
-        xn = np.clip(x + step, lo, hi)
-        fn, rpn, ron, Jpn, Jzn = evaluate(xn)
+        xa = x[act]
+        xn = np.clip(xa + step, lo, hi)
+        fn, rpn, ron, Jpn, Jzn = evaluate(act, xn)
         better = fn < f
-        x = np.where(better[:, None], xn, x)
+        gain = np.where(better, (f - fn) / np.maximum(np.abs(f), 1e-300), 0.0)
+        x[act] = np.where(better[:, None], xn, xa)
         f = np.where(better, fn, f)
         rp = np.where(better[:, None], rpn, rp)
         ro = np.where(better[:, None], ron, ro)
         Jp = np.where(better[:, None, None], Jpn, Jp)
         Jz = np.where(better[:, None, None], Jzn, Jz)
-        lam = np.clip(np.where(better, lam * 0.3, lam * 10.0), 1e-9, 1e9)
-        if np.all(lam >= 1e9):
-            break
+        lam[act] = np.clip(np.where(better, la * 0.3, la * 10.0), 1e-9, 1e9)
+        go = (lam[act] < 1e9) & ~(better & (gain < 1e-12))
+        act, f, rp, ro, Jp, Jz = act[go], f[go], rp[go], ro[go], Jp[go], Jz[go]
     return x
 
 
