@@ -3,7 +3,8 @@
 ``approximate_ik`` optimiser call per spot without a collision-free
 closed-form solution), kept verbatim so the batched path is checked against
 it and the benchmark can time it in the same run
-(``pipeline._spot_poses = spot_poses_per_spot``).
+(``pipeline._spot_poses = spot_poses_per_spot``), with the Eq. 3.15 flags
+sampled for every pair (``penalty_matrix_sampled``, before the exact pruning).
 """
 
 from __future__ import annotations
@@ -11,16 +12,18 @@ from __future__ import annotations
 from typing import Any
 
 import numpy as np
+import shapely
+from scipy.spatial import cKDTree
 
 from planners.blasting import arm as _arm
-from planners.blasting.collision import clearance
+from planners.blasting.collision import Obstacles, clearance
 from planners.blasting.constants import FOCI, MAX_TILT_DEG, SAFETY_M
 from planners.blasting.footprint import exact_ellipse
 from planners.blasting.pipeline import _Discs, _Frame, _Poses, _Setup
-from planners.blasting.spots import _collision_free, _penalty_matrix, _tilted_axis
+from planners.blasting.spots import _collision_free, _tilted_axis
 from planners.blasting.surface import Surface
 
-__all__ = ["spot_poses_per_spot"]
+__all__ = ["penalty_matrix_sampled", "spot_poses_per_spot"]
 
 
 def spot_poses_per_spot(
@@ -95,8 +98,54 @@ def spot_poses_per_spot(
             keep[i] = False
     penalty = None
     if not obst.empty:
-        penalty = _penalty_matrix(
+        penalty = penalty_matrix_sampled(
             robot, surface, d.c2, keep, st.r, obst, axes[0], standoff, nozzle_length_m, kp,
             st.q_start,
         )  # fmt: skip
     return _Poses(keep, Qs, ok_free, residual_mm, residual_deg, penalty, axes, flange)
+
+
+def penalty_matrix_sampled(
+    robot: Any,
+    surface: Surface,
+    c2: np.ndarray,
+    keep: np.ndarray,
+    r: float,
+    obst: Obstacles,
+    axis: np.ndarray,
+    standoff: np.ndarray,
+    nozzle_m: float,
+    kp: tuple[float, ...],
+    q_start: np.ndarray,
+) -> np.ndarray | None:
+    """Eq. 3.15 flags: a move i→j is flagged when it passes within r of a
+    surface point whose normal pose has no collision-free branch (a grid of
+    pitch r over the surface)."""
+    poly = surface.polygon
+    minx, miny, maxx, maxy = poly.bounds
+    gx, gy = np.meshgrid(np.arange(minx, maxx + r, r), np.arange(miny, maxy + r, r))
+    g = np.stack([gx.ravel(), gy.ravel()], axis=1)
+    g = g[shapely.contains_xy(poly, g[:, 0], g[:, 1])]
+    if len(g) == 0:
+        return None
+    fl = surface.to_world(g) - axis * float(standoff[0, 0])
+    Q, ok = robot.ik_axis(fl, np.repeat(axis[None], len(g), axis=0), q_start)
+    free = _collision_free(robot, Q, ok, obst, nozzle_m, kp).any(axis=1)
+    blocked = g[~free]
+    if len(blocked) == 0:
+        return None
+    n = len(c2)
+    if n > 1500:
+        return None  # dense N² flags would cost more than they help; trajectory check still applies
+    tree = cKDTree(blocked)
+    pen = np.zeros((n, n))
+    samples = np.linspace(0.0, 1.0, 9)
+    for i in range(n):
+        seg = c2[i][None, None, :] + samples[None, :, None] * (
+            c2[None, :, :] - c2[i][None, None, :]
+        ).transpose(1, 0, 2)
+        d, _ = tree.query(seg.reshape(-1, 2), k=1)
+        # k=1 over many points gives an array (the stubs also allow a scalar)
+        pen[i] = (np.asarray(d).reshape(n, len(samples)) < r).any(axis=1)
+    np.fill_diagonal(pen, 0.0)
+    return pen
