@@ -441,11 +441,13 @@ def _retilt(
         rows = np.nonzero(open_ & reach[:, cols].any(axis=1))[0]
         if not len(rows):
             continue
-        freet = _collision_free(
-            robot, Qt[rows, cols].reshape(-1, 8, 6), okt[rows, cols].reshape(-1, 8), st.obst,
-            nozzle_length_m, kp,
+        freet: np.ndarray = np.asarray(
+            _collision_free(
+                robot, Qt[rows, cols].reshape(-1, 8, 6), okt[rows, cols].reshape(-1, 8), st.obst,
+                nozzle_length_m, kp,
+            )
         ).reshape(len(rows), per, 8)  # fmt: skip
-        hit = freet.any(axis=2)
+        hit = np.asarray(freet.any(axis=2))
         for r in np.nonzero(hit.any(axis=1))[0]:
             k = rows[r]
             j = t * per + int(np.argmax(hit[r]))
