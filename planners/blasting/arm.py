@@ -367,6 +367,23 @@ def _lm_batch(
     return x
 
 
+def _nearer_wrist_twin(robot: DensoVM6083, q: np.ndarray, q_ref: np.ndarray) -> np.ndarray:
+    """Each row or its wrist twin (q4 ± π, −q5: the same flange position and
+    z axis, so the same Eq. 3.11 value), whichever is inside the limits and
+    the least change from ``q_ref`` — neighbouring spots then agree on the
+    wrist instead of each taking whichever twin its optimiser ended in."""
+    lo, hi = robot.joint_limits[:, 0], robot.joint_limits[:, 1]
+    best = q.copy()
+    for shift in (np.pi, -np.pi):
+        tw = q.copy()
+        tw[:, 3] += shift
+        tw[:, 4] = -tw[:, 4]
+        inside = np.all((tw >= lo) & (tw <= hi), axis=1)
+        better = inside & (_change(tw, q_ref) < _change(best, q_ref))
+        best[better] = tw[better]
+    return best
+
+
 def approximate_ik_batch(
     robot: DensoVM6083,
     p: np.ndarray,
@@ -455,7 +472,7 @@ def approximate_ik_batch(
     f = _eq311(Fq[:, :3, 3], Fq[:, :3, 2], P_, A_).reshape(M, k)
     best = np.argmin(f, axis=1)
     xb = X.reshape(M, k, 5)[np.arange(M), best]
-    q = np.concatenate([xb, q6[:, None]], axis=1)
+    q = _nearer_wrist_twin(robot, np.concatenate([xb, q6[:, None]], axis=1), q_ref)
     Tq = robot.frames(q)[:, -1]
     pe = np.linalg.norm(Tq[:, :3, 3] - p, axis=1)
     ae = np.degrees(np.arccos(np.clip((Tq[:, :3, 2] * a).sum(axis=1), -1.0, 1.0)))
