@@ -256,3 +256,30 @@ def test_4m_square_plans_to_strict_json_with_honest_checks():
     assert not checks["coverage"].passed or not checks["skipped_spots"].passed
     assert r.metrics["discs"] > 3500
     assert all(np.isfinite(v) for v in r.metrics.values())
+
+
+@pytest.mark.parametrize("kind", ["random", "lattice", "duplicates"])
+def test_delaunay_mst_equals_the_dense_mst(kind):
+    from scipy.sparse.csgraph import minimum_spanning_tree
+    from scipy.spatial.distance import pdist, squareform
+
+    from planners.blasting import coverage as C
+    from planners.blasting import sequencing as S
+
+    rng = np.random.default_rng(5)
+    if kind == "random":
+        pts = rng.uniform(0, 3, (2000, 2))
+    else:
+        import shapely.geometry
+
+        pts = C.hex_lattice(shapely.geometry.box(0, 0, 2.2, 2.2), 0.03)
+        if kind == "duplicates":
+            pts = np.vstack([pts, pts[:40]])
+    assert len(pts) > S.MST_DENSE_MAX
+    uniq = np.unique(pts, axis=0)
+    D = squareform(pdist(uniq))
+    np.fill_diagonal(D, 0.0)
+    # coincident points: joined by 1e-12 m edges (on the complete graph scipy
+    # drops such tiny entries and joins them by a full edge instead)
+    want = float(minimum_spanning_tree(D).sum()) + (len(pts) - len(uniq)) * 1e-12
+    assert S.mst_length(pts) == pytest.approx(want, rel=1e-12)
