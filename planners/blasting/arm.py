@@ -43,7 +43,11 @@ ALPHA_O = 0.05  # Eq. 3.11 weight per unit of |a − n| (chosen: 1° ≈ 0.9 mm)
 
 # -- geometry of the tool and the force-field ellipsoids --------------------------
 def link_spheroids(
-    robot: DensoVM6083, q: np.ndarray, nozzle_m: float, kp: tuple[float, ...], foci: tuple[tuple[int, int], ...]
+    robot: DensoVM6083,
+    q: np.ndarray,
+    nozzle_m: float,
+    kp: tuple[float, ...],
+    foci: tuple[tuple[int, int], ...],
 ) -> Spheroids:
     """Spheroids (T,E) covering the links for joint vectors q (T,6): foci are
     D-H frame origins (index −1 = nozzle tip); major axis L·Kp (§3.4.2)."""
@@ -114,7 +118,9 @@ class ApproxIK:
     objective: float
 
 
-def _axis_residual(robot: DensoVM6083, q5: np.ndarray, q6: float, p: np.ndarray, a: np.ndarray) -> np.ndarray:
+def _axis_residual(
+    robot: DensoVM6083, q5: np.ndarray, q6: float, p: np.ndarray, a: np.ndarray
+) -> np.ndarray:
     q = np.append(q5, q6)
     T = robot.fk(q)  # one configuration: pinocchio on the URDF
     return np.concatenate([ALPHA_P * (T[:3, 3] - p), ALPHA_O * (T[:3, 2] - a)])
@@ -192,6 +198,286 @@ def approximate_ik(
     pe = float(np.linalg.norm(T[:3, 3] - p))
     ae = float(np.degrees(np.arccos(np.clip(T[:3, 2] @ a, -1.0, 1.0))))
     return ApproxIK(q, pe, ae, ALPHA_P * pe + ALPHA_O * float(np.linalg.norm(T[:3, 2] - a)))
+
+
+# -- reach bound and batched approximate IK (issue #18) ----------------------------------
+def wrist_reach_m(robot: DensoVM6083) -> float:
+    """Largest distance of the wrist centre from the shoulder: a2 + √(a3² + d4²).
+
+    Proof (D-H of :meth:`robots.denso_vm6083.DensoVM6083._position_branches`):
+    with the wrist centre at radius ρ from the J1 axis and height h above
+    the shoulder plane (z = d1), θ1 is φ or φ + π (no lateral offset), and
+    the wrist centre in frame 1 is (x, y) = (±ρ − a1, −h).  The elbow
+    triangle (a2, L3 = √(a3² + d4²)) closes iff (a2 − L3)² ≤ x² + y² ≤
+    (a2 + L3)².  Since ρ, a1 ≥ 0, min(x² + y²) = (ρ − a1)² + h², the squared
+    distance from the wrist centre to the shoulder circle (radius a1 about
+    the J1 axis at height d1).  So a wrist centre farther than a2 + L3 from
+    that circle has no closed-form solution on any branch."""
+    return float(robot.a[1] + np.hypot(robot.a[2], robot.d[3]))
+
+
+def shoulder_distance(robot: DensoVM6083, pts: np.ndarray) -> np.ndarray:
+    """Distance (M,) of world points ``pts`` (M,3) from the shoulder circle
+    (radius a1 about the J1 axis at height d1, in the robot's base frame)."""
+    Binv = np.linalg.inv(robot.base)
+    pb = np.atleast_2d(pts) @ Binv[:3, :3].T + Binv[:3, 3]
+    rho = np.hypot(pb[:, 0], pb[:, 1])
+    return np.hypot(rho - robot.a[0], pb[:, 2] - robot.d[0])
+
+
+#: slack (m) beyond the reach before a target counts as out of reach: covers the
+#: closed-form IK's |D| ≤ 1 + 1e-12 tolerance (≈ 1e-12·a2·L3/(a2 + L3) m)
+REACH_TOL_M = 1e-9
+
+
+def beyond_reach(
+    robot: DensoVM6083, p: np.ndarray, a: np.ndarray, slack_m: np.ndarray | float = 0.0
+) -> np.ndarray:
+    """True (M,) where no closed-form solution can exist for the flange at
+    ``p`` (M,3) with blast axis ``a`` (M,3): the wrist centre p − d6·a lies
+    more than :func:`wrist_reach_m` from the shoulder circle.  With
+    ``slack_m`` > 0 (per row or scalar) the answer holds for every flange
+    point within ``slack_m`` of ``p`` and every axis (the wrist centre moves
+    at most slack + 2·d6 — use it with ``a`` = 0 for "any axis": then it must
+    cover d6 itself, see :func:`beyond_reach_any_axis`)."""
+    a = np.atleast_2d(np.asarray(a, dtype=float))
+    n = np.linalg.norm(a, axis=1, keepdims=True)
+    a = np.where(n > 0, a / np.where(n > 0, n, 1.0), 0.0)
+    pc = np.atleast_2d(p) - robot.d[5] * a
+    return shoulder_distance(robot, pc) > wrist_reach_m(robot) + slack_m + REACH_TOL_M
+
+
+def beyond_reach_any_axis(robot: DensoVM6083, w: np.ndarray, radius_m: np.ndarray) -> np.ndarray:
+    """True (M,) where no flange point within ``radius_m`` (M,) of ``w``
+    (M,3) has a closed-form solution with any axis: the wrist centre is
+    then within radius + d6 of ``w``, and the distance to the shoulder
+    circle is 1-Lipschitz."""
+    slack = np.asarray(radius_m, dtype=float) + robot.d[5]
+    return shoulder_distance(robot, w) > wrist_reach_m(robot) + slack + REACH_TOL_M
+
+
+def _frames_jac(
+    robot: DensoVM6083, q: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Flange position (K,3), z axis (K,3) and their derivatives d/dq1..5
+    (K,3,5) each (geometric Jacobian: joint i turns about z of frame i − 1).
+
+    The D-H chain of :meth:`robots.model.DHRobotModel.frames`, written
+    component-wise on (K,) arrays (a batched 4×4 matmul per link costs
+    ~10× more for small matrices); the tests compare it with ``frames``."""
+    q = np.asarray(q, dtype=float)
+    K = len(q)
+    R = [[np.full(K, robot.base[i, j]) for j in range(3)] for i in range(3)]
+    o = [np.full(K, robot.base[i, 3]) for i in range(3)]
+    zs, os_ = [], []
+    for i in range(6):
+        zs.append(np.stack([R[0][2], R[1][2], R[2][2]], axis=1))
+        os_.append(np.stack(o, axis=1))
+        th = q[:, i] + robot.offset[i]
+        ct, st = np.cos(th), np.sin(th)
+        ca, sa = float(np.cos(robot.alpha[i])), float(np.sin(robot.alpha[i]))
+        ai, di = float(robot.a[i]), float(robot.d[i])
+        o = [o[r] + R[r][0] * (ai * ct) + R[r][1] * (ai * st) + R[r][2] * di for r in range(3)]
+        # columns of Rz(θ)Rx(α): (ct, st, 0), (−st·ca, ct·ca, sa), (st·sa, −ct·sa, ca)
+        R = [
+            [
+                R[r][0] * ct + R[r][1] * st,
+                -R[r][0] * (st * ca) + R[r][1] * (ct * ca) + R[r][2] * sa,
+                R[r][0] * (st * sa) - R[r][1] * (ct * sa) + R[r][2] * ca,
+            ]
+            for r in range(3)
+        ]
+    pe = np.stack(o, axis=1)
+    ze = np.stack([R[0][2], R[1][2], R[2][2]], axis=1)
+    zi, oi = np.stack(zs[:5], axis=1), np.stack(os_[:5], axis=1)  # (K,5,3)
+    Jp = np.cross(zi, pe[:, None, :] - oi).transpose(0, 2, 1)
+    Jz = np.cross(zi, np.broadcast_to(ze[:, None, :], zi.shape)).transpose(0, 2, 1)
+    return pe, ze, Jp, Jz
+
+
+def _eq311(pe: np.ndarray, ze: np.ndarray, p: np.ndarray, a: np.ndarray) -> np.ndarray:
+    return ALPHA_P * np.linalg.norm(pe - p, axis=-1) + ALPHA_O * np.linalg.norm(ze - a, axis=-1)
+
+
+def _lm_batch(
+    robot: DensoVM6083,
+    x: np.ndarray,
+    q6: np.ndarray,
+    p: np.ndarray,
+    a: np.ndarray,
+    iters: int,
+    *,
+    irls: bool,
+) -> np.ndarray:
+    """Batched bounded Levenberg–Marquardt on rows x (K,5): least squares of
+    the residual [αp(P − p); αo(z − a)] (``irls=False``) or Eq. 3.11 itself
+    (``irls=True``: each block weighted by 1/its norm, a step kept only
+    when Eq. 3.11 decreases).  Steps are clipped into the joint limits; a
+    row stops once its damping saturates or a kept step gains < 1e-12
+    (relative), so converged rows cost nothing."""
+    lo, hi = robot.joint_limits[:5, 0], robot.joint_limits[:5, 1]
+    x = x.copy()
+    K = len(x)
+    lam = np.full(K, 1e-3)
+
+    def evaluate(rows: np.ndarray, xx: np.ndarray) -> tuple[np.ndarray, ...]:
+        pe, ze, Jp, Jz = _frames_jac(robot, np.concatenate([xx, q6[rows, None]], axis=1))
+        rp, ro = ALPHA_P * (pe - p[rows]), ALPHA_O * (ze - a[rows])
+        if irls:
+            f = np.linalg.norm(rp, axis=1) + np.linalg.norm(ro, axis=1)
+        else:
+            f = (rp * rp).sum(axis=1) + (ro * ro).sum(axis=1)
+        return f, rp, ro, ALPHA_P * Jp, ALPHA_O * Jz
+
+    act = np.arange(K)
+    f, rp, ro, Jp, Jz = evaluate(act, x)
+    eye = np.eye(5)
+    for _ in range(iters):
+        if not len(act):
+            break
+        if irls:
+            wp = 1.0 / np.maximum(np.linalg.norm(rp, axis=1), 1e-12)
+            wo = 1.0 / np.maximum(np.linalg.norm(ro, axis=1), 1e-12)
+        else:
+            wp = wo = np.ones(len(act))
+        H = wp[:, None, None] * np.einsum("kri,krj->kij", Jp, Jp) + wo[:, None, None] * np.einsum(
+            "kri,krj->kij", Jz, Jz
+        )
+        g = wp[:, None] * np.einsum("kri,kr->ki", Jp, rp) + wo[:, None] * np.einsum(
+            "kri,kr->ki", Jz, ro
+        )
+        dg = np.einsum("kii->ki", H)
+        la = lam[act]
+        A = H + la[:, None, None] * (dg[:, :, None] * eye + 1e-9 * eye)
+        step = -np.linalg.solve(A, g[..., None])[..., 0]
+        xa = x[act]
+        xn = np.clip(xa + step, lo, hi)
+        fn, rpn, ron, Jpn, Jzn = evaluate(act, xn)
+        better = fn < f
+        gain = np.where(better, (f - fn) / np.maximum(np.abs(f), 1e-300), 0.0)
+        x[act] = np.where(better[:, None], xn, xa)
+        f = np.where(better, fn, f)
+        rp = np.where(better[:, None], rpn, rp)
+        ro = np.where(better[:, None], ron, ro)
+        Jp = np.where(better[:, None, None], Jpn, Jp)
+        Jz = np.where(better[:, None, None], Jzn, Jz)
+        lam[act] = np.clip(np.where(better, la * 0.3, la * 10.0), 1e-9, 1e9)
+        go = (lam[act] < 1e9) & ~(better & (gain < 1e-12))
+        act, f, rp, ro, Jp, Jz = act[go], f[go], rp[go], ro[go], Jp[go], Jz[go]
+    return x
+
+
+def _nearer_wrist_twin(robot: DensoVM6083, q: np.ndarray, q_ref: np.ndarray) -> np.ndarray:
+    """Each row or its wrist twin (q4 ± π, −q5: the same flange position and
+    z axis, so the same Eq. 3.11 value), whichever is inside the limits and
+    the least change from ``q_ref`` — neighbouring spots then agree on the
+    wrist instead of each taking whichever twin its optimiser ended in."""
+    lo, hi = robot.joint_limits[:, 0], robot.joint_limits[:, 1]
+    best = q.copy()
+    for shift in (np.pi, -np.pi):
+        tw = q.copy()
+        tw[:, 3] += shift
+        tw[:, 4] = -tw[:, 4]
+        inside = np.all((tw >= lo) & (tw <= hi), axis=1)
+        better = inside & (_change(tw, q_ref) < _change(best, q_ref))
+        best[better] = tw[better]
+    return best
+
+
+def approximate_ik_batch(
+    robot: DensoVM6083,
+    p: np.ndarray,
+    a: np.ndarray,
+    q_ref: np.ndarray,
+    *,
+    n_starts: int = 8,
+    iters: int = 40,
+    n_random: int = 64,
+    seed: int = 0,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Eq. 3.11 optimum for many targets at once (flange ``p`` (M,3), blast
+    axis ``a`` (M,3)): the batched counterpart of :func:`approximate_ik`.
+
+    Starts per target, all from the closed-form IK: the target pulled back
+    along the ray from the shoulder circle until the wrist centre is just
+    inside :func:`wrist_reach_m` (the closest reachable point along that
+    ray; ×0.999, 0.97, 0.9 of the reach), the target pulled toward the base
+    as :func:`approximate_ik` does (×1, 0.97, 0.93, 0.85), every valid
+    branch of each, ``q_ref`` and ``n_random`` joint vectors drawn uniformly
+    inside the limits (the role of :func:`ga_ik`'s population; deterministic
+    for ``seed``); the ``n_starts`` with the least Eq. 3.11
+    value are refined together by bounded Levenberg–Marquardt on the
+    residual vector, then on Eq. 3.11 itself (reweighted), and the best per
+    target is kept.  Returns q (M,6) (q6 = q_ref[5]), position error (M,) m,
+    axis error (M,) degrees and the Eq. 3.11 objective (M,)."""
+    p = np.atleast_2d(np.asarray(p, dtype=float))
+    a = np.atleast_2d(np.asarray(a, dtype=float))
+    a = a / np.linalg.norm(a, axis=1, keepdims=True)
+    M = len(p)
+    q_ref = np.asarray(q_ref, dtype=float)
+    if M == 0:
+        z = np.zeros(0)
+        return np.zeros((0, 6)), z, z, z
+    lo, hi = robot.joint_limits[:5, 0], robot.joint_limits[:5, 1]
+    targets = []
+    # the closest reachable wrist centre along the ray from the shoulder circle
+    Binv = np.linalg.inv(robot.base)
+    pc = p - robot.d[5] * a
+    pb = pc @ Binv[:3, :3].T + Binv[:3, 3]
+    rho = np.maximum(np.hypot(pb[:, 0], pb[:, 1]), 1e-12)
+    sh = np.stack(
+        [robot.a[0] * pb[:, 0] / rho, robot.a[0] * pb[:, 1] / rho, np.full(M, robot.d[0])], axis=1
+    )
+    v = pb - sh
+    dist = np.maximum(np.linalg.norm(v, axis=1, keepdims=True), 1e-12)
+    R = wrist_reach_m(robot)
+    for s in (0.999, 0.97, 0.9):
+        pcb = sh + v * np.minimum(1.0, s * R / dist)
+        pcw = pcb @ robot.base[:3, :3].T + robot.base[:3, 3]
+        targets.append(pcw + robot.d[5] * a)
+    base_p = robot.base[:3, 3]
+    for s in (1.0, 0.97, 0.93, 0.85):
+        targets.append(base_p + s * (p - base_p))
+    T = np.concatenate(targets)  # (nt·M,3)
+    Q, ok = robot.ik_axis(T, np.tile(a, (len(targets), 1)), q_ref)
+    rand = np.random.default_rng(seed).uniform(lo, hi, size=(n_random, 5))
+    S = np.concatenate(
+        [Q.reshape(len(targets), M, 8, 6).transpose(1, 0, 2, 3).reshape(M, -1, 6)[..., :5],
+         np.broadcast_to(rand, (M, n_random, 5)),
+         np.broadcast_to(np.clip(q_ref[:5], lo, hi), (M, 1, 5))],
+        axis=1,
+    )  # fmt: skip
+    valid = np.concatenate(
+        [ok.reshape(len(targets), M, 8).transpose(1, 0, 2).reshape(M, -1),
+         np.ones((M, n_random + 1), bool)],
+        axis=1,
+    )  # fmt: skip
+    q6 = np.full(M, q_ref[5])
+    F = robot.frames(
+        np.concatenate([S.reshape(-1, 5), np.repeat(q6, S.shape[1])[:, None]], axis=1)
+    )[:, -1]
+    f0 = _eq311(
+        F[:, :3, 3].reshape(M, -1, 3), F[:, :3, 2].reshape(M, -1, 3), p[:, None], a[:, None]
+    )
+    f0 = np.where(valid, f0, np.inf)
+    k = min(n_starts, S.shape[1])
+    pick = np.argsort(f0, axis=1, kind="stable")[:, :k]
+    pick = np.where(np.isfinite(np.take_along_axis(f0, pick, axis=1)), pick, S.shape[1] - 1)
+    X = np.take_along_axis(S, pick[..., None], axis=1).reshape(-1, 5)
+    X = np.clip(X, lo + 1e-9, hi - 1e-9)
+    P_, A_, q6_ = np.repeat(p, k, axis=0), np.repeat(a, k, axis=0), np.repeat(q6, k)
+    X = _lm_batch(robot, X, q6_, P_, A_, iters, irls=False)
+    X = _lm_batch(robot, X, q6_, P_, A_, iters, irls=True)
+    Fq = robot.frames(np.concatenate([X, q6_[:, None]], axis=1))[:, -1]
+    f = _eq311(Fq[:, :3, 3], Fq[:, :3, 2], P_, A_).reshape(M, k)
+    best = np.argmin(f, axis=1)
+    xb = X.reshape(M, k, 5)[np.arange(M), best]
+    q = _nearer_wrist_twin(robot, np.concatenate([xb, q6[:, None]], axis=1), q_ref)
+    Tq = robot.frames(q)[:, -1]
+    pe = np.linalg.norm(Tq[:, :3, 3] - p, axis=1)
+    ae = np.degrees(np.arccos(np.clip((Tq[:, :3, 2] * a).sum(axis=1), -1.0, 1.0)))
+    obj = ALPHA_P * pe + ALPHA_O * np.linalg.norm(Tq[:, :3, 2] - a, axis=1)
+    return q, pe, ae, obj
 
 
 def ga_ik(

@@ -138,7 +138,7 @@ def plan_blast_result(
     summary = _summary(surf, base, boxes, plan, motion, picked, plane_index)
     arrays = _arrays(plan, motion, tip, axis, picked, cloud)
     checks = [
-        Check(**c)
+        _finite_check(c)
         for c in plan.checks(
             coverage_min=lim.coverage_min,
             overspray_max=lim.overspray_max,
@@ -146,7 +146,31 @@ def plan_blast_result(
         )
     ]
     metrics = _metrics(plan, motion, t0)
+    dropped = sorted(k for k, v in metrics.items() if not math.isfinite(v))
+    if dropped:
+        # strict JSON has no NaN/inf: a non-finite metric is left out and named here
+        summary["metrics_not_finite"] = dropped
+        metrics = {k: v for k, v in metrics.items() if k not in dropped}
     return PlanResult(summary=json_safe(summary), arrays=arrays, checks=checks, metrics=metrics)
+
+
+def _finite_check(c: dict[str, Any]) -> Check:
+    """A plan check in the stored form, strict-JSON safe: a non-finite value
+    or limit is stored as ``None`` with the message saying what it was; a
+    NaN value always fails (it measured nothing), an infinite one keeps its
+    verdict (e.g. no obstacles: clearance ``inf`` passes)."""
+    out = dict(c)
+    notes = []
+    for key in ("value", "limit"):
+        v = out.get(key)
+        if isinstance(v, float) and not math.isfinite(v):
+            notes.append(f"{key} {v}")
+            if math.isnan(v):
+                out["passed"] = False
+            out[key] = None
+    if notes:
+        out["message"] = f"{out.get('message', '')} ({', '.join(notes)}: not finite)"
+    return Check(**out)
 
 
 def _summary(

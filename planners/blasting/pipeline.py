@@ -27,7 +27,7 @@ from planners.blasting import arm as _arm
 from planners.blasting import coverage as _cov
 from planners.blasting import sequencing as _seq
 from planners.blasting.bound import pointwise_bound, zero_overspray_reach
-from planners.blasting.collision import Box, Obstacles, clearance
+from planners.blasting.collision import Box, Obstacles
 from planners.blasting.constants import (
     COVERAGE_TARGET,
     FOCI,
@@ -331,45 +331,47 @@ def _spot_poses(
     ok_free = _collision_free(robot, Qs, oks, obst, nozzle_length_m, kp)
     # Surface.__post_init__ always resolves x_axis (None only as an argument)
     assert surface.x_axis is not None
-    # spots with no collision-free closed-form solution: tilt, then Eq. 3.11
-    for i in np.nonzero(~ok_free.any(axis=1))[0]:
+    # spots with no collision-free closed-form solution: tilt, then Eq. 3.11,
+    # all in one vectorised pass (issue #18)
+    fail = np.nonzero(~ok_free.any(axis=1))[0]
+    if len(fail):
         tilts = np.arange(5.0, MAX_TILT_DEG - np.degrees(beta) + 1e-9, 5.0)
-        cand = _arm.tilted_axes(axes[i], tilts) if len(tilts) else np.zeros((0, 3))
-        # exact footprint of each candidate axis, aimed so it stays centred
-        bc = np.arccos(np.clip(cand @ n_in, -1.0, 1.0))
-        e3 = cand - np.cos(bc)[:, None] * n_in
-        e2 = np.stack([e3 @ surface.x_axis, e3 @ surface.y_axis], axis=1)
-        e2 /= np.maximum(np.linalg.norm(e2, axis=1, keepdims=True), 1e-12)
-        ac, bcm, cc = exact_ellipse(L0 * d.scale[i], cone.tan_alpha, bc)
-        aims = d.c2[i] - cc[:, None] * e2
-        fl = surface.to_world(aims) - cand * standoff[i]
-        Qt, okt = robot.ik_axis(fl, cand, st.q_start)
-        freet = _collision_free(robot, Qt, okt, obst, nozzle_length_m, kp)
-        good = np.nonzero(freet.any(axis=1))[0]
-        if len(good):
-            j = int(good[0])  # tilts ascend: least extra tilt first
-            axes[i], flange[i], d.aim2[i] = cand[j], fl[j], aims[j]
-            Qs[i], oks[i], ok_free[i] = Qt[j], okt[j], freet[j]
-            d.tilt[i] = float(np.degrees(bc[j]))
-            d.semi[i] = (ac[j], bcm[j])
-            d.major[i] = e2[j]
-            continue
-        if oks[i].any() or okt.any():
-            # reachable, but every configuration penetrates: rejected
-            keep[i] = False
-            continue
-        # out of reach (or limits) for every axis tried: Eq. 3.11 optimum
-        ap = _arm.approximate_ik(robot, flange[i], axes[i], st.q_start, seed=seed)
-        Sq = _arm.link_spheroids(robot, ap.q[None], nozzle_length_m, kp, FOCI)
-        if obst.empty or clearance(Sq, obst)[0] > SAFETY_M:
-            Qs[i] = ap.q
-            oks[i] = False
-            oks[i, 0] = True
-            ok_free[i] = oks[i]
-            residual_mm[i] = ap.pos_err_m * 1000.0
-            residual_deg[i] = ap.axis_err_deg
-        else:
-            keep[i] = False
+        # reach bound: every tilt candidate's flange lies within standoff +
+        # the largest footprint-centre shift of the disc centre (see
+        # _aim_shift_bound), so beyond that no tilt has an exact solution
+        far = _arm.beyond_reach_any_axis(
+            robot, d.world[fail], standoff[fail, 0] + _aim_shift_bound(L0 * d.scale[fail], cone)
+        )
+        near = fail[~far]
+        tried = np.zeros(N, dtype=bool)  # some tilt candidate has an exact solution
+        if len(tilts) and len(near):
+            tried[near] = _retilt(
+                robot, surface, st, fr, d, near, tilts, n_in, standoff, axes, flange, Qs, oks,
+                ok_free, nozzle_length_m, kp,
+            )  # fmt: skip
+        rescued = ok_free[fail].any(axis=1)
+        # reachable, but every configuration penetrates: rejected
+        reject = ~rescued & (oks[fail].any(axis=1) | tried[fail])
+        keep[fail[reject]] = False
+        # out of reach (or limits) for every axis tried: Eq. 3.11 optimum, batched
+        rest = fail[~rescued & ~reject]
+        if len(rest):
+            qa, pe, ae, _ = _arm.approximate_ik_batch(
+                robot, flange[rest], axes[rest], st.q_start, seed=seed
+            )
+            if obst.empty:
+                clear_ok = np.ones(len(rest), dtype=bool)
+            else:
+                c = _arm.waypoint_clearance(robot, qa, obst, nozzle_length_m, kp, FOCI)
+                clear_ok = c > SAFETY_M
+            good, bad = rest[clear_ok], rest[~clear_ok]
+            Qs[good] = qa[clear_ok, None, :]
+            oks[good] = False
+            oks[good, 0] = True
+            ok_free[good] = oks[good]
+            residual_mm[good] = pe[clear_ok] * 1000.0
+            residual_deg[good] = ae[clear_ok]
+            keep[bad] = False
     penalty = None
     if not obst.empty:
         penalty = _penalty_matrix(
@@ -377,6 +379,86 @@ def _spot_poses(
             st.q_start,
         )  # fmt: skip
     return _Poses(keep, Qs, ok_free, residual_mm, residual_deg, penalty, axes, flange)
+
+
+def _aim_shift_bound(L: np.ndarray, cone: Cone) -> np.ndarray:
+    """Upper bound on the footprint-centre shift |c| of
+    :func:`planners.blasting.footprint.exact_ellipse` for apex distances
+    ``L`` and any tilt β ≤ 45° (:data:`MAX_TILT_DEG`): c = h·sβ·cβ/A −
+    h·tan β with h = L·cos β ≤ L, A = cos²α − sin²β; both terms grow with β
+    on [0°, 45°], so |c| ≤ L·(½/(cos²α − ½) + 1)."""
+    ca2 = 1.0 / (1.0 + cone.tan_alpha**2)
+    return np.asarray(L, dtype=float) * (0.5 / (ca2 - 0.5) + 1.0)
+
+
+def _retilt(
+    robot: Any,
+    surface: Surface,
+    st: _Setup,
+    fr: _Frame,
+    d: _Discs,
+    spots: np.ndarray,
+    tilts: np.ndarray,
+    n_in: np.ndarray,
+    standoff: np.ndarray,
+    axes: np.ndarray,
+    flange: np.ndarray,
+    Qs: np.ndarray,
+    oks: np.ndarray,
+    ok_free: np.ndarray,
+    nozzle_length_m: float,
+    kp: tuple[float, ...],
+) -> np.ndarray:
+    """Re-tilt ``spots`` (no collision-free closed-form solution on the
+    global tilt) to the least extra tilt with one, the exact footprint
+    re-aimed so it stays centred: the closed-form IK of every candidate of
+    every spot in one batch, the collision check tilt by tilt over the spots
+    still unresolved (least extra tilt first, then azimuth order, as the
+    per-spot search).  Edits the arrays and ``d`` in place for re-tilted
+    spots; returns, per spot, whether any candidate had an exact solution."""
+    assert surface.x_axis is not None
+    n = len(spots)
+    # every failing spot still has the global axis here
+    cand = _arm.tilted_axes(axes[spots[0]], tilts)  # (C,3), tilts ascend, 8 azimuths each
+    C = len(cand)
+    bc = np.arccos(np.clip(cand @ n_in, -1.0, 1.0))
+    e3 = cand - np.cos(bc)[:, None] * n_in
+    e2 = np.stack([e3 @ surface.x_axis, e3 @ surface.y_axis], axis=1)
+    e2 /= np.maximum(np.linalg.norm(e2, axis=1, keepdims=True), 1e-12)
+    ac, bcm, cc = exact_ellipse(fr.L0 * d.scale[spots][:, None], st.cone.tan_alpha, bc[None, :])
+    aims = d.c2[spots][:, None, :] - cc[..., None] * e2[None]  # (n,C,2)
+    fl = (
+        surface.to_world(aims.reshape(-1, 2)).reshape(n, C, 3)
+        - cand[None] * standoff[spots][:, :, None]
+    )
+    Qt, okt = robot.ik_axis(fl.reshape(-1, 3), np.tile(cand, (n, 1)), st.q_start)
+    Qt, okt = Qt.reshape(n, C, 8, 6), okt.reshape(n, C, 8)
+    reach = okt.any(axis=2)
+    open_ = np.ones(n, dtype=bool)
+    per = C // len(tilts)
+    for t in range(len(tilts)):
+        cols = slice(t * per, (t + 1) * per)
+        rows = np.nonzero(open_ & reach[:, cols].any(axis=1))[0]
+        if not len(rows):
+            continue
+        freet: np.ndarray = np.asarray(
+            _collision_free(
+                robot, Qt[rows, cols].reshape(-1, 8, 6), okt[rows, cols].reshape(-1, 8), st.obst,
+                nozzle_length_m, kp,
+            )
+        ).reshape(len(rows), per, 8)  # fmt: skip
+        hit = np.asarray(freet.any(axis=2))
+        for r in np.nonzero(hit.any(axis=1))[0]:
+            k = rows[r]
+            j = t * per + int(np.argmax(hit[r]))
+            i = spots[k]
+            axes[i], flange[i], d.aim2[i] = cand[j], fl[k, j], aims[k, j]
+            Qs[i], oks[i], ok_free[i] = Qt[k, j], okt[k, j], freet[r, j - t * per]
+            d.tilt[i] = float(np.degrees(bc[j]))
+            d.semi[i] = (ac[k, j], bcm[k, j])
+            d.major[i] = e2[j]
+            open_[k] = False
+    return reach.any(axis=1)
 
 
 def _sequence(

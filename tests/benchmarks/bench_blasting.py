@@ -20,6 +20,12 @@ Sections:
 5. Whole surface (coverage + sequence + IK trajectory + collision check) on
    Surfaces 1–3 in the Fig. 4.4 environment; Table 4.3 and the seed's 37 s /
    93 s / 78 s / 58 s / 1,756 s beside ours.
+6. Issue #18: ``plan_blast_result`` on squares of 0.5 / 1 / 2 / 4 m at the
+   deck (the ``blast`` kind's ``polygon``: origin (0.5, 0.5, 1.7) m, normal
+   −z, the channel boxes) before (the per-spot path kept in
+   ``tests/blasting/_reference_spot_poses.py``, patched in) and after, in the
+   same run: time, stage times and the fitted growth exponent in discs
+   (``--squares 0.5,1,2`` skips the 4 m case).
 """
 
 from __future__ import annotations
@@ -306,12 +312,72 @@ def section_whole() -> None:
     print(f"goal < 2 s: slowest seed scene {worst:.2f} s ({worst / 2.0:.2f} of the goal)")
 
 
+def section_squares(sides: tuple[float, ...]) -> None:
+    import dataclasses
+
+    from planners.blasting import pipeline as PL
+    from planners.blasting.blast_plan import plan_blast_result
+    from planners.blasting.surface import Surface
+
+    sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
+    from tests.blasting._reference_spot_poses import spot_poses_per_spot
+
+    print(
+        "\n== 6. Squares at the deck through plan_blast_result: per-spot IK (before) vs batched (after) =="
+    )
+    arm = load_robot("denso_vm6083")
+    boxes = scenes.bridge_obstacles()
+    batched = PL._spot_poses
+
+    def square(side: float) -> Surface:
+        h = side / 2
+        return Surface(
+            np.array([0.5, 0.5, 1.7]), np.array([0.0, 0.0, -1.0]),
+            np.array([[-h, -h], [h, -h], [h, h], [-h, h]]),
+        )  # fmt: skip
+
+    print(f"{'side m':>6s} {'path':6s} {'discs':>5s} {'total s':>8s} {'cover':>6s} {'ik':>6s} {'seq':>6s} "
+          f"{'traj':>6s} {'failed checks':30s} {'strict JSON':>11s}")  # fmt: skip
+    rows: dict[str, list[tuple[float, float]]] = {"before": [], "after": []}
+    for side in sides:
+        for label, fn in (("before", spot_poses_per_spot), ("after", batched)):
+            PL._spot_poses = fn  # type: ignore[assignment]
+            try:
+                t = time.perf_counter()
+                r = plan_blast_result(
+                    square(side), arm, robot_base_m=[0.5, 0.375, 0.37], boxes=boxes
+                )
+                dt = time.perf_counter() - t
+            finally:
+                PL._spot_poses = batched  # type: ignore[assignment]
+            try:
+                json.dumps(
+                    [r.summary, r.metrics, [dataclasses.asdict(c) for c in r.checks]],
+                    allow_nan=False,
+                )
+                strict = "yes"
+            except ValueError:
+                strict = "NO"
+            m = r.metrics
+            failed = ",".join(c.name for c in r.checks if not c.passed) or "-"
+            rows[label].append((m["discs"], dt))
+            print(f"{side:6.1f} {label:6s} {int(m['discs']):5d} {dt:8.2f} {m['stage_coverage_s']:6.2f} "
+                  f"{m['stage_ik_collision_s']:6.2f} {m['stage_sequencing_s']:6.2f} {m['stage_trajectory_s']:6.2f} "
+                  f"{failed:30s} {strict:>11s}", flush=True)  # fmt: skip
+    for label, pts in rows.items():
+        if len(pts) >= 2:
+            n, t = np.log([p[0] for p in pts]), np.log([p[1] for p in pts])
+            k = float(np.polyfit(n, t, 1)[0])
+            print(f"{label}: time ∝ discs^{k:.2f} (least squares on log–log, {len(pts)} sizes)")
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--quick", action="store_true", help="skip the 3 m coverage cases")
     ap.add_argument(
         "--sections", default="5,2,3,4,1", help="comma-separated section numbers, in run order"
     )
+    ap.add_argument("--squares", default="0.5,1,2,4", help="square sides (m) of section 6")
     args = ap.parse_args()
     run = {
         "1": lambda: section_coverage((0.5,) if args.quick else (0.5, 3.0)),
@@ -319,10 +385,11 @@ def main() -> None:
         "3": section_500,
         "4": section_ik,
         "5": section_whole,
+        "6": lambda: section_squares(tuple(float(v) for v in args.squares.split(","))),
     }
     for k in args.sections.split(","):
         if k.strip() not in run:
-            ap.error(f"unknown section {k!r}; sections are 1-5")
+            ap.error(f"unknown section {k!r}; sections are 1-6")
         run[k.strip()]()
 
 
