@@ -55,6 +55,9 @@ from planners.errors import InfeasibleError, InvalidInputError
 
 __all__ = ["plan_blasting"]
 
+#: Targets per closed-form IK call in the re-tilt search (bounds its temporaries).
+IK_CHUNK = 8192
+
 
 def _progress(cb: Callable[[float, str], None] | None, f: float, stage: str) -> None:
     if cb is not None:
@@ -431,9 +434,17 @@ def _retilt(
         surface.to_world(aims.reshape(-1, 2)).reshape(n, C, 3)
         - cand[None] * standoff[spots][:, :, None]
     )
-    Qt, okt = robot.ik_axis(fl.reshape(-1, 3), np.tile(cand, (n, 1)), st.q_start)
-    Qt, okt = Qt.reshape(n, C, 8, 6), okt.reshape(n, C, 8)
-    reach = okt.any(axis=2)
+    # closed-form IK of every candidate, IK_CHUNK targets a call: its
+    # temporaries are a few (targets, 8, 4, 4) arrays each
+    flat, axs = fl.reshape(-1, 3), np.tile(cand, (n, 1))
+    Qf: np.ndarray = np.empty((len(flat), 8, 6))
+    okf: np.ndarray = np.empty((len(flat), 8), dtype=bool)
+    for a in range(0, len(flat), IK_CHUNK):
+        Qf[a : a + IK_CHUNK], okf[a : a + IK_CHUNK] = robot.ik_axis(
+            flat[a : a + IK_CHUNK], axs[a : a + IK_CHUNK], st.q_start
+        )
+    Qt, okt = Qf.reshape(n, C, 8, 6), okf.reshape(n, C, 8)
+    reach = np.asarray(okt.any(axis=2), dtype=bool)
     open_ = np.ones(n, dtype=bool)
     per = C // len(tilts)
     for t in range(len(tilts)):
@@ -458,7 +469,7 @@ def _retilt(
             d.semi[i] = (ac[k, j], bcm[k, j])
             d.major[i] = e2[j]
             open_[k] = False
-    return reach.any(axis=1)
+    return np.asarray(reach.any(axis=1), dtype=bool)
 
 
 def _sequence(
