@@ -170,6 +170,10 @@ class Streamer:
         # A CLEAR in flight: reports sent before the robot got it still show those
         # faults, and must not be taken for new ones.
         self._pending_clear: tuple[int, int] | None = None  # (seq, fault bits)
+        # Fault bits a FAULTED refusal told us of before any report carried them:
+        # a resume right after such a refusal must clear them although the last
+        # report (older than the refusal) does not show them yet.
+        self._refused_faults = 0
         self._lock = threading.Lock()
         self._cond = threading.Condition(self._lock)
         self._queue: queue.Queue[tuple[str, object]] = queue.Queue()
@@ -376,8 +380,9 @@ class Streamer:
                 StreamFault(FaultKind.ROBOT_BUSY, f"robot is executing run {report.run_id}"),
             )
             return
-        to_clear = report.faults & LINK_FAULTS
-        if report.faults & FaultFlag.DRIVE:
+        latched = report.faults | self._refused_faults
+        to_clear = latched & LINK_FAULTS
+        if latched & FaultFlag.DRIVE:
             if not self._clear_robot_faults:
                 self._to_fault(
                     ExecState.FAULTED,
@@ -390,6 +395,7 @@ class Streamer:
                 return
             to_clear |= FaultFlag.DRIVE
         self._clear_robot_faults = False
+        self._refused_faults = 0
         self._pending_clear = None
         if to_clear:
             try:
@@ -495,6 +501,15 @@ class Streamer:
             index = msg.index if isinstance(msg, CommandMessage) else None
             what = f"command {index}" if index is not None else type(msg).__name__
             latched = int(event.nak.detail) if event.nak.reason == NakReason.FAULTED else 0
+            if (
+                latched
+                and self._pending_clear is not None
+                and not latched & ~self._pending_clear[1]
+            ):
+                # Refused for faults our CLEAR (in flight) removes: the robot sent
+                # this before it got the CLEAR; the command is sent again anyway.
+                return
+            self._refused_faults |= latched
             prefix = ""
             if latched & FaultFlag.ESTOP:
                 # An E-stop latched on the robot, reported as this refusal
@@ -559,6 +574,8 @@ class Streamer:
 
     def _on_report(self, report: State) -> None:
         self._call(self._on_state, report)
+        # A report is newer than any refusal before it on the link: it is the truth.
+        self._refused_faults = 0
         if self._waiting_link:
             if self._state == ExecState.PENDING and self.link.connected:
                 self._begin()

@@ -251,3 +251,40 @@ def test_faulted_refusal_before_the_report_is_classified_by_its_bits() -> None:
         else:
             assert faults[0].kind == kind and faults[0].index == 3
             assert f"FAULTED (detail {bits})" in faults[0].message
+
+
+def test_a_resume_right_after_a_drive_fault_refusal_clears_the_drive_fault() -> None:
+    """The robot latched a drive fault and refused the next command before the
+    report carrying the fault arrived; the operator resumes with a fault clear at
+    once.  The last report the host has is older than the refusal and shows no
+    fault, so the CLEAR must take its bits from the refusal: otherwise the robot
+    stays faulted and the report that follows faults the resumed run again."""
+    from robots.protocol.messages import FaultFlag
+
+    drive = int(FaultFlag.DRIVE)
+    prog = moves(20, 0.05)
+    faults: list = []
+    cleared: list[int] = []
+    with (
+        Emulator("generic", time_scale=4) as emu,
+        RobotLink(emu.url, link_config(emu)) as link,
+        Streamer(prog, link, run_id=47, on_fault=faults.append) as s,
+    ):
+        assert emu.wait_for(lambda e: e.robot.last_done >= 0, 10)
+        real_clear = link.clear_faults
+
+        def spy(bits: int) -> int:
+            cleared.append(int(bits))
+            return real_clear(bits)
+
+        link.clear_faults = spy  # type: ignore[method-assign]
+        with emu._lock:  # the robot's drive fault, really latched
+            emu.robot.faults |= drive
+            emu.robot.fault_code = 42
+        # Refusal and resume queued back to back: no report between them.
+        s._on_link_event(_refusal(link, prog, 47, 3, drive))
+        s.resume(clear_robot_faults=True)
+        assert s.wait(timeout=30) == ExecState.COMPLETED, faults
+        assert cleared and cleared[0] & drive
+        assert [f.kind for f in faults] == [FaultKind.ROBOT_FAULT]
+        assert check_exactly_once(emu.execution_log(), 47, len(prog)) == []
