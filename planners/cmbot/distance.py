@@ -97,6 +97,48 @@ def boxes_arrays(boxes: Sequence[Cuboid]) -> tuple[np.ndarray, np.ndarray, np.nd
     )
 
 
+def point_box_closed_form(
+    rel: np.ndarray,
+    half: np.ndarray,
+    R: np.ndarray,
+    *,
+    directions: bool = True,
+) -> tuple[np.ndarray, np.ndarray | None]:
+    """Signed distance (…) and unit direction (…,3) from oriented boxes to points.
+
+    ``rel`` (…,3) is the point minus the box centre, ``half`` (…,3) the half
+    extents and ``R`` (…,3,3) the box axes (columns), all broadcast together.
+    Outside: ‖local − clamp(local)‖ and the normalised difference; inside: minus
+    the depth to the nearest face and that face's normal.  Written per axis
+    (no reductions over the length-3 axis): numpy's reductions and small
+    matmuls over tiny trailing axes cost far more than the arithmetic.
+    """
+    r0, r1, r2 = rel[..., 0:1], rel[..., 1:2], rel[..., 2:3]
+    # local_i = Σ_j R_ji·rel_j: the point in the box's own axes
+    local = r0 * R[..., 0, :] + r1 * R[..., 1, :] + r2 * R[..., 2, :]
+    gap = half - np.abs(local)
+    excess = np.maximum(-gap, 0.0)
+    e0, e1, e2 = excess[..., 0], excess[..., 1], excess[..., 2]
+    dist_out = np.sqrt(e0 * e0 + e1 * e1 + e2 * e2)
+    g0, g1, g2 = gap[..., 0], gap[..., 1], gap[..., 2]
+    depth = np.minimum(np.minimum(g0, g1), g2)
+    inside = dist_out <= 0.0
+    d = np.where(inside, -depth, dist_out)
+    if not directions:
+        return d, None
+    # Inside: the nearest face's outward normal (first axis on ties, as argmin).
+    first = (g0 <= g1) & (g0 <= g2)
+    second = ~first & (g1 <= g2)
+    third = ~first & ~second
+    side = np.where(local >= 0.0, 1.0, -1.0)
+    n_in = side * np.stack([first, second, third], axis=-1)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        n_out = np.sign(local) * excess / dist_out[..., None]
+    n = np.where(inside[..., None], n_in, n_out)
+    u = R[..., :, 0] * n[..., 0:1] + R[..., :, 1] * n[..., 1:2] + R[..., :, 2] * n[..., 2:3]
+    return d, u
+
+
 def sphere_box_exact(
     centers: np.ndarray,
     radii: np.ndarray,
@@ -114,26 +156,25 @@ def sphere_box_exact(
     c = np.asarray(centers, dtype=float)
     r = np.asarray(radii, dtype=float)
     rel = c[..., :, None, :] - bc[..., None, :, :]  # (…,N,M,3); boxes may carry the batch axes too
-    # local_i = Σ_j R_ji·rel_j: the centre in each box's own axes
-    local = np.matmul(rel[..., None, :], bR[..., None, :, :, :])[..., 0, :]
-    a = np.abs(local)
-    excess = np.maximum(a - bh, 0.0)
-    dist_out = np.sqrt(np.einsum("...i,...i->...", excess, excess))
-    depth = np.min(bh - a, axis=-1)
-    inside = dist_out <= 0.0
-    d = np.where(inside, -depth, dist_out) - r[..., :, None]
-    if not directions:
-        return d, None
-    diff = np.sign(local) * excess
-    k = np.argmin(bh - a, axis=-1)
-    n_in = np.zeros_like(local)
-    side = np.where(np.take_along_axis(local, k[..., None], axis=-1) >= 0.0, 1.0, -1.0)
-    np.put_along_axis(n_in, k[..., None], side, axis=-1)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        n_out = diff / dist_out[..., None]
-    n_local = np.where(inside[..., None], n_in, n_out)
-    u = np.matmul(bR[..., None, :, :, :], n_local[..., :, None])[..., 0]
-    return d, u
+    d, u = point_box_closed_form(
+        rel, bh[..., None, :, :], bR[..., None, :, :, :], directions=directions
+    )
+    return d - r[..., :, None], u
+
+
+def sphere_box_pairs(
+    centers: np.ndarray,
+    radii: np.ndarray,
+    boxes: tuple[np.ndarray, np.ndarray, np.ndarray],
+    spheres_idx: np.ndarray,
+    boxes_idx: np.ndarray,
+) -> np.ndarray:
+    """Signed distances (…,P) of the P listed sphere–box pairs only (static boxes):
+    sphere ``spheres_idx[p]`` of ``centers`` (…,N,3) against box ``boxes_idx[p]``."""
+    bc, bh, bR = boxes
+    rel = centers[..., spheres_idx, :] - bc[boxes_idx]
+    d, _ = point_box_closed_form(rel, bh[boxes_idx], bR[boxes_idx], directions=False)
+    return d - np.asarray(radii, dtype=float)[spheres_idx]
 
 
 def sphere_box_bruteforce(center: np.ndarray, radius: float, box: Cuboid, n: int = 41) -> float:

@@ -30,7 +30,12 @@ from scipy.spatial.transform import Rotation, Slerp
 
 from planners.cmbot.arm import ArmKinematics, rotation_error, rpy_to_matrix
 from planners.cmbot.avoidance import AvoidanceParams, combine, escape_velocities
-from planners.cmbot.distance import Cuboid, boxes_arrays, sphere_box_exact
+from planners.cmbot.distance import (
+    Cuboid,
+    boxes_arrays,
+    point_box_closed_form,
+    sphere_box_exact,
+)
 from planners.errors import CancelledError, InvalidInputError, UnreachableError
 
 ANGULAR_UNITS = {"mrad": 1e-3, "deg": np.pi / 180.0, "rad": 1.0}
@@ -197,13 +202,19 @@ def pair_distances(
     ``cutoff``.  (It replaced a per-pair GJK, which agreed to 1e-9 and was
     slower: issue #13 §1.)
     """
-    d, u = sphere_box_exact(centers, radii, arrays)
-    assert u is not None  # directions=True
+    d, _ = sphere_box_exact(centers, radii, arrays, directions=False)
     d = np.where(mask, d, np.inf)
-    near = [
-        (int(i), int(j), float(d[i, j]), u[i, j])
-        for i, j in zip(*np.nonzero(d <= cutoff), strict=True)
-    ]
+    si, bi = np.nonzero(d <= cutoff)
+    near: list[tuple[int, int, float, np.ndarray]] = []
+    if len(si):
+        # Directions only for the few pairs Eq. 15 acts on.
+        bc, bh, bR = arrays
+        _, u = point_box_closed_form(centers[si] - bc[bi], bh[bi], bR[bi])
+        assert u is not None  # directions=True
+        near = [
+            (int(i), int(j), float(d[i, j]), u[k])
+            for k, (i, j) in enumerate(zip(si, bi, strict=True))
+        ]
     flat = int(np.argmin(d))
     i, j = np.unravel_index(flat, d.shape)
     return near, (float(d[i, j]), int(i), int(j))

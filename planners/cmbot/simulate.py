@@ -23,7 +23,7 @@ from scipy.interpolate import CubicSpline, PchipInterpolator
 
 from planners.cmbot.arm import ArmKinematics
 from planners.cmbot.balance import arm_mass_points, climber_mass_points, flip_moment, merge
-from planners.cmbot.distance import Cuboid, boxes_arrays, sphere_box_exact
+from planners.cmbot.distance import Cuboid, boxes_arrays, sphere_box_exact, sphere_box_pairs
 from planners.cmbot.experiment import ClearanceFilter, Section4Trajectory
 from planners.cmbot.gait import GaitTrajectory
 from planners.cmbot.guardrail import Guardrail
@@ -153,22 +153,34 @@ def min_clearance(
     mask: np.ndarray | None = None,
     cap: float = 1.0,
     chunk: int = 500,
+    window: int = 48,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Per time step: the smallest sphere–box distance (capped at ``cap``), and
     which sphere and box give it.  ``boxes`` centres/rotations may carry the
-    time axis.  Boxes whose bounding-sphere lower bound exceeds ``cap`` over a
-    whole chunk are skipped (they cannot be the minimum below the cap)."""
+    time axis.
+
+    Static boxes: the samples go in windows of ``window``; within one, each
+    sphere stays in a ball (centre m_i, radius ρ_i) and, the signed distance to
+    a box being 1-Lipschitz, every sample's d_ij lies in D_ij(m_i) − r_i ± ρ_i.
+    U = min over pairs of the upper ends bounds every sample's minimum, so only
+    the pairs whose lower end is ≤ min(U, cap) are evaluated exactly — the
+    minimum (below the cap) is never among the pairs left out.  Moving boxes:
+    boxes whose bounding-sphere lower bound exceeds ``cap`` over a whole chunk
+    are skipped.
+    """
     bc, bh, bR = boxes
     T = len(centers)
-    circum = np.linalg.norm(bh, axis=-1)
     out = np.full(T, cap)
     sph = np.zeros(T, dtype=int)
     box = np.zeros(T, dtype=int)
-    batched = bc.ndim == 3
+    if bc.ndim == 2:
+        _min_clearance_static(centers, radii, boxes, mask, cap, window, out, sph, box)
+        return out, sph, box
+    circum = np.linalg.norm(bh, axis=-1)
     for a in range(0, T, chunk):
         b = min(a + chunk, T)
         C = centers[a:b]
-        bcc = bc[a:b] if batched else bc[None]
+        bcc = bc[a:b]
         lb = (
             np.linalg.norm(C[:, :, None, :] - bcc[:, None, :, :], axis=-1)
             - radii[None, :, None]
@@ -179,12 +191,9 @@ def min_clearance(
         near = np.flatnonzero(lb.min(axis=(0, 1)) <= cap)
         if not len(near):
             continue
-        sub = (
-            bcc[:, near] if batched else bc[near],
-            bh[near],
-            bR[a:b][:, near] if batched else bR[near],
+        d, _ = sphere_box_exact(
+            C, radii, (bcc[:, near], bh[near], bR[a:b][:, near]), directions=False
         )
-        d, _ = sphere_box_exact(C, radii, sub, directions=False)
         if mask is not None:
             d = np.where(mask[None][:, :, near], d, np.inf)
         flat = d.reshape(b - a, -1)
@@ -193,6 +202,75 @@ def min_clearance(
         sph[a:b] = kk // len(near)
         box[a:b] = near[kk % len(near)]
     return out, sph, box
+
+
+def _min_clearance_static(
+    centers: np.ndarray,
+    radii: np.ndarray,
+    boxes: tuple[np.ndarray, np.ndarray, np.ndarray],
+    mask: np.ndarray | None,
+    cap: float,
+    window: int,
+    out: np.ndarray,
+    sph: np.ndarray,
+    box: np.ndarray,
+) -> None:
+    """:func:`min_clearance` against static boxes, windowed with Lipschitz bounds."""
+    r = np.asarray(radii, dtype=float)
+    for a in range(0, len(centers), window):
+        b = min(a + window, len(centers))
+        C = centers[a:b]
+        mid = 0.5 * (C.max(axis=0) + C.min(axis=0))  # (N,3)
+        rho = np.sqrt(((C - mid) ** 2).sum(axis=-1)).max(axis=0)  # (N,)
+        dm, _ = sphere_box_exact(mid, r, boxes, directions=False)  # (N,M)
+        lo = dm - rho[:, None]
+        hi = dm + rho[:, None]
+        if mask is not None:
+            lo = np.where(mask, lo, np.inf)
+            hi = np.where(mask, hi, np.inf)
+        bound = min(float(hi.min()), cap)
+        si, bi = np.nonzero(lo <= bound)
+        if not len(si):
+            continue  # every pair stays beyond the cap here
+        d = sphere_box_pairs(C, r, boxes, si, bi)  # (t,P)
+        kk = d.argmin(axis=1)
+        out[a:b] = np.minimum(d[np.arange(b - a), kk], cap)
+        sph[a:b] = si[kk]
+        box[a:b] = bi[kk]
+
+
+def min_pair_clearance(
+    centers: np.ndarray, radii: np.ndarray, pairs: np.ndarray, *, window: int = 48
+) -> tuple[np.ndarray, np.ndarray]:
+    """Per sample, the smallest sphere–sphere distance over ``pairs`` (P,2) of
+    ``centers`` (T,N,3) and which pair gives it (first on ties).
+
+    Windowed like :func:`min_clearance`: within a window, sphere i stays in a
+    ball (m_i, ρ_i), so each pair's distance lies in ‖m_i − m_j‖ − r_i − r_j
+    ± (ρ_i + ρ_j); only the pairs whose lower end can reach the smallest upper
+    end are evaluated.  Every array is (window × pairs) at most.
+    """
+    r = np.asarray(radii, dtype=float)
+    i, j = pairs[:, 0], pairs[:, 1]
+    T = len(centers)
+    out = np.full(T, np.inf)
+    which = np.zeros(T, dtype=int)
+    if not len(pairs):
+        return out, which
+    for a in range(0, T, window):
+        b = min(a + window, T)
+        C = centers[a:b]
+        mid = 0.5 * (C.max(axis=0) + C.min(axis=0))
+        rho = np.sqrt(((C - mid) ** 2).sum(axis=-1)).max(axis=0)
+        dm = np.sqrt(((mid[i] - mid[j]) ** 2).sum(axis=-1)) - r[i] - r[j]
+        spread = rho[i] + rho[j]
+        keep = np.flatnonzero(dm - spread <= (dm + spread).min())
+        diff = C[:, i[keep]] - C[:, j[keep]]
+        d = np.sqrt((diff**2).sum(axis=-1)) - r[i[keep]] - r[j[keep]]
+        kk = d.argmin(axis=1)
+        out[a:b] = d[np.arange(b - a), kk]
+        which[a:b] = keep[kk]
+    return out, which
 
 
 _Clearance = tuple[np.ndarray, np.ndarray, np.ndarray]
@@ -681,17 +759,11 @@ def simulate_arm(
     b = arm.spheres.body
     pairs = np.abs(b[:, None] - b[None, :]) >= 2
     iu = np.argwhere(np.triu(pairs))
-    r = arm.spheres.radius
-    ds = (
-        np.linalg.norm(centers[:, iu[:, 0]] - centers[:, iu[:, 1]], axis=-1)
-        - r[iu[:, 0]]
-        - r[iu[:, 1]]
-    )
-    ks = ds.argmin(axis=1)
+    self_d, ks = min_pair_clearance(centers, arm.spheres.radius, iu)
     _record(
         rep,
         "self_clearance",
-        ds[np.arange(len(t)), ks],
+        self_d,
         self_clearance_m,
         t,
         lambda k: f"spheres {iu[ks[k], 0]} ↔ {iu[ks[k], 1]}",

@@ -17,6 +17,8 @@ import tracemalloc
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 import robots
 from planners.cmbot import GaitParams, seed_guardrail
@@ -231,3 +233,65 @@ def test_gate_memory_is_bounded_by_the_chunk(short_climb):
     assert fine < 1.5 * base + 10.0, (base, fine)
     assert fine < dense, (fine, dense)
     assert fine < 120.0, fine
+
+
+@settings(max_examples=40, deadline=None, derandomize=True)
+@given(
+    seed=st.integers(0, 2**31 - 1),
+    speed=st.floats(0.0, 0.2),
+    window=st.integers(1, 70),
+    cap=st.sampled_from([0.05, 0.3, 1.0]),
+    masked=st.booleans(),
+)
+def test_windowed_static_clearance_equals_dense(seed, speed, window, cap, masked):
+    """The arm gate's windowed min_clearance (Lipschitz bounds per window, exact
+    distances of the surviving pairs only) returns the dense reference's
+    clearance at every sample, and the sphere and box that give it wherever
+    the clearance is below the cap (ties aside, the same pair)."""
+    from scipy.spatial.transform import Rotation
+
+    from planners.cmbot.simulate import min_clearance
+    from tests.cmbot._reference_gate import min_clearance_dense
+
+    rng = np.random.default_rng(seed)
+    T, N, M = 150, 9, 7
+    start = rng.uniform(-0.6, 0.6, (N, 3))
+    steps = rng.normal(size=(T, N, 3)) * speed / np.sqrt(3)
+    centers = start + np.cumsum(steps, axis=0)  # random walks, some through the boxes
+    radii = rng.uniform(0.0, 0.08, N)
+    boxes = (
+        rng.uniform(-0.6, 0.6, (M, 3)),
+        rng.uniform(0.02, 0.4, (M, 3)),
+        Rotation.random(M, random_state=seed % 1000).as_matrix(),
+    )
+    mask = rng.random((N, M)) < 0.8 if masked else None
+    got = min_clearance(centers, radii, boxes, mask=mask, cap=cap, window=window)
+    ref = min_clearance_dense(centers, radii, boxes, mask=mask, cap=cap)
+    np.testing.assert_allclose(got[0], ref[0], rtol=0, atol=1e-12)
+    below = ref[0] < cap
+    assert np.array_equal(got[1][below], ref[1][below])
+    assert np.array_equal(got[2][below], ref[2][below])
+
+
+@settings(max_examples=30, deadline=None, derandomize=True)
+@given(seed=st.integers(0, 2**31 - 1), speed=st.floats(0.0, 0.2), window=st.integers(1, 70))
+def test_windowed_self_clearance_equals_dense(seed, speed, window):
+    """min_pair_clearance (the arm gate's self-clearance) equals the dense
+    distance of every listed pair at every sample, and names the same pair."""
+    from planners.cmbot.simulate import min_pair_clearance
+
+    rng = np.random.default_rng(seed)
+    T, N = 120, 10
+    centers = rng.uniform(-0.5, 0.5, (N, 3)) + np.cumsum(
+        rng.normal(size=(T, N, 3)) * speed / np.sqrt(3), axis=0
+    )
+    radii = rng.uniform(0.0, 0.1, N)
+    pairs = np.argwhere(np.triu(rng.random((N, N)) < 0.6, 1))
+    d, k = min_pair_clearance(centers, radii, pairs, window=window)
+    dense = (
+        np.linalg.norm(centers[:, pairs[:, 0]] - centers[:, pairs[:, 1]], axis=-1)
+        - radii[pairs[:, 0]]
+        - radii[pairs[:, 1]]
+    )
+    np.testing.assert_allclose(d, dense.min(axis=1), rtol=0, atol=1e-12)
+    assert np.array_equal(k, dense.argmin(axis=1))
