@@ -125,7 +125,13 @@ def create_app(settings: Settings | None = None, *, start_scene: bool | None = N
         store = Store(settings.data)
         cleanup_leftovers(store)  # crash leftovers (issue #12 §6), before jobs/uploads run
         bus = EventBus()
-        jobs = JobRunner(store, bus, mode=settings.job_mode, workers=settings.job_workers)
+        jobs = JobRunner(
+            store,
+            bus,
+            mode=settings.job_mode,
+            workers=settings.job_workers,
+            preload=settings.job_preload,
+        )
         services = Services(settings=settings, store=store, events=bus, jobs=jobs)
         app.state.services = services
         secret = bootstrap_admin(store, settings.token_file)

@@ -38,6 +38,11 @@ class Settings(BaseSettings):
         "process", description="run planning jobs in worker processes or threads"
     )
     job_workers: int = Field(2, ge=1, le=64, description="concurrent planning jobs")
+    job_preload: bool = Field(
+        True,
+        description="worker processes import every plan kind and load every robot when "
+        "they start, so no operator's first plan waits ~2 s for it",
+    )
     emulators: bool = Field(True, description="start one robot emulator per robot on serve")
     emulator_time_scale: float = Field(
         1.0,

@@ -170,3 +170,30 @@ def test_workers_are_niced_and_die_with_a_killed_server(tmp_path) -> None:
             if _alive(p):
                 with contextlib.suppress(ProcessLookupError):
                     os.kill(p, signal.SIGKILL)
+
+
+@pytest.mark.parametrize("preload", [True, False])
+def test_workers_preload_every_kind_before_their_first_plan(preload: bool) -> None:
+    """With ``preload`` (the default setting) a worker has imported every plan
+    kind's module, and so its planners, before it runs anything; without it, a
+    fresh worker has none of them."""
+    from concurrent.futures import ProcessPoolExecutor
+    from multiprocessing import get_context
+
+    from server.jobs import _worker_init
+    from server.kinds import KIND_MODULES
+    from tests.support.procstat import loaded_modules
+
+    with ProcessPoolExecutor(
+        1,
+        mp_context=get_context("spawn"),
+        initializer=_worker_init,
+        initargs=(os.getpid(), preload),
+    ) as pool:
+        loaded = pool.submit(loaded_modules, ("server.kinds.", "planners.")).result(timeout=120)
+    kinds = set(KIND_MODULES) & set(loaded)
+    if preload:
+        assert kinds == set(KIND_MODULES)
+        assert "planners.switching.switch_result" in loaded
+    else:
+        assert kinds == set()

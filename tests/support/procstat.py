@@ -20,3 +20,10 @@ def proc_stat(pid: int) -> ProcStat | None:
         return None
     fields = raw[raw.rindex(")") + 2 :].split()  # after "pid (comm) ": comm may hold spaces
     return ProcStat(fields[0], int(fields[1]), int(fields[16]))
+
+
+def loaded_modules(prefixes: tuple[str, ...]) -> list[str]:
+    """The modules under ``prefixes`` this (worker) process has imported."""
+    import sys
+
+    return sorted(m for m in sys.modules if m.startswith(prefixes))
