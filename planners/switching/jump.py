@@ -42,6 +42,7 @@ from shapely.geometry.base import BaseGeometry
 
 from planners.errors import InvalidInputError, MotionPlanningError, UnreachableError
 from planners.motion import plan_motion
+from planners.motion.lipschitz import lipschitz_minimum
 from planners.switching.collision import PointObstacles, SphereCover, self_pairs, sphere_cover
 from planners.switching.decide import check_rigid
 
@@ -461,6 +462,42 @@ class _Checker:
             vr[kk] = np.minimum(vr[kk], mins)
             val[rows] = vr.reshape(len(rows), -1)
         return val.min(axis=1)
+
+    def scene_clearances(self, Q: np.ndarray) -> np.ndarray:
+        """:meth:`clearances`' scene part alone."""
+        Q = np.atleast_2d(Q)
+        if len(Q) > _CHUNK:
+            return np.concatenate(
+                [self.scene_clearances(Q[k : k + _CHUNK]) for k in range(0, len(Q), _CHUNK)]
+            )
+        F = self.world(Q)
+        C = self.robot.cover.world(F)
+        scene = self._scene(F, C, self.rest, self.obstacles)
+        obs = self.contact if self.contact is not None else self.obstacles
+        return np.minimum(scene, self._scene(F, C, self.foot, obs))
+
+    def self_clearances(self, Q: np.ndarray) -> np.ndarray:
+        """:meth:`clearances`' self part alone."""
+        Q = np.atleast_2d(Q)
+        if len(Q) > _CHUNK:
+            return np.concatenate(
+                [self.self_clearances(Q[k : k + _CHUNK]) for k in range(0, len(Q), _CHUNK)]
+            )
+        F = self.world(Q)
+        return self._self(F, self.robot.cover.world(F))
+
+    def steps(self, Q: np.ndarray) -> np.ndarray:
+        """How far any sphere centre of either cover moves between consecutive
+        configurations (n−1,), measured (chunks of :data:`_CHUNK`)."""
+        Q = np.atleast_2d(Q)
+        out = np.zeros(max(len(Q) - 1, 0))
+        for k in range(0, len(Q) - 1, _CHUNK):
+            F = self.world(Q[k : k + _CHUNK + 1])
+            for cov in (self.robot.cover, self.robot.self_cover):
+                C = cov.world(F)
+                moved = np.sqrt(((C[1:] - C[:-1]) ** 2).sum(axis=2)).max(axis=1)
+                out[k : k + len(moved)] = np.maximum(out[k : k + len(moved)], moved)
+        return out
 
     def clearances(self, Q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(scene clearance, self clearance) per configuration; values above
@@ -1098,10 +1135,17 @@ def _assemble(
 def _recheck(
     cx: _JumpContext, Q: np.ndarray, anchor: np.ndarray, W1_actual: np.ndarray, T2: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Clearance at every sample, with the contact exemptions used in
+    """Clearance along the whole motion, with the contact exemptions used in
     planning: the moving foot may touch the surface only inside its
     footprint, and only while within lift/standoff of that contact.
-    Returns (scene clearance, self clearance) per sample."""
+    Returns (scene clearance, self clearance) per sample.
+
+    Coarse-then-fine (:func:`planners.motion.lipschitz.lipschitz_minimum`):
+    within a stretch of one anchor and one contact exemption both clearances
+    change between samples by at most how far a sphere moves (twice that for
+    a pair of spheres), so only the samples that can come down to
+    max(margin, minimum) are evaluated; the others hold a lower bound above
+    it.  The minima and every sample at or below the margins are exact."""
     params = cx.params
     clear = np.empty(len(Q))
     selfc = np.empty(len(Q))
@@ -1112,20 +1156,38 @@ def _recheck(
         sel = np.nonzero(anchor == a_val)[0]
         if len(sel) == 0:
             continue
-        Qs = Q[sel]
         chk_full = cx.checker(a_val, W_anchor, None)
-        c_full, s_all = chk_full.clearances(Qs)
-        Wm = chk_full.world(Qs)
-        foot_pos = Wm[:, -1 if a_val == 0 else 0, :3, 3]
-        near_start = np.linalg.norm(foot_pos - start_pose[:3, 3], axis=1) <= params.lift_m + 1e-3
-        near_land = np.linalg.norm(foot_pos - land_pose[:3, 3], axis=1) <= params.standoff_m + 1e-3
-        c = c_full.copy()
-        for near, pose in ((near_land, land_pose), (near_start, start_pose)):
-            if near.any():
-                chk = cx.checker(a_val, W_anchor, cx.zone(pose))
-                c[near] = chk.clearances(Qs[near])[0]
-        clear[sel] = c
-        selfc[sel] = s_all
+        checkers = {0: chk_full}
+        poses = {1: land_pose, 2: start_pose}
+        for run in np.split(sel, np.flatnonzero(np.diff(sel) > 1) + 1):
+            Qs = Q[run]
+            steps = chk_full.steps(Qs)
+            foot_pos = chk_full.world(Qs)[:, -1 if a_val == 0 else 0, :3, 3]
+            near_start = (
+                np.linalg.norm(foot_pos - start_pose[:3, 3], axis=1) <= params.lift_m + 1e-3
+            )
+            near_land = (
+                np.linalg.norm(foot_pos - land_pose[:3, 3], axis=1) <= params.standoff_m + 1e-3
+            )
+            zone = np.where(near_start, 2, np.where(near_land, 1, 0))
+            selfc[run] = lipschitz_minimum(
+                lambda i, Qs=Qs, c=chk_full: c.self_clearances(Qs[i]),
+                2.0 * steps,
+                params.self_margin_m,
+            )[0]
+            # The exemption changes the obstacles: a stretch per exemption state.
+            cuts = np.flatnonzero(np.diff(zone) != 0) + 1
+            for part in np.split(np.arange(len(run)), cuts):
+                z = int(zone[part[0]])
+                if z not in checkers:
+                    checkers[z] = cx.checker(a_val, W_anchor, cx.zone(poses[z]))
+                chk = checkers[z]
+                Qp = Qs[part]
+                clear[run[part]] = lipschitz_minimum(
+                    lambda i, Qp=Qp, chk=chk: chk.scene_clearances(Qp[i]),
+                    steps[part[:-1]],
+                    params.clearance_margin_m,
+                )[0]
     return clear, selfc
 
 

@@ -115,10 +115,12 @@ def test_clearance_matches_brute_force(step_down):
         dist = np.linalg.norm(C[:, None, :] - pts[None], axis=2).min(axis=1) - cov.radius[mask]
         brute = float(dist.min())
         assert brute >= margin - 1e-9
-        if brute < 0.1:  # below the culling cap the planner's value is exact
-            assert plan.clearance[k] == pytest.approx(brute, abs=1e-9)
-        else:
-            assert plan.clearance[k] >= 0.1 - 1e-9
+        # Never clearer than it is; exact (below the 0.1 m culling cap) unless
+        # the coarse-then-fine re-check left the sample out, which it only does
+        # above max(margin, the motion's minimum).
+        assert plan.clearance[k] <= min(brute, 0.1) + 1e-9
+        exact = plan.clearance[k] == pytest.approx(min(brute, 0.1), abs=1e-9)
+        assert exact or plan.clearance[k] > max(margin, plan.clearance.min())
     assert plan.clearance.min() >= margin - 1e-9
     assert plan.self_clearance.min() >= 0.0
 

@@ -138,3 +138,32 @@ def test_landing_configs_equal_reference(cx):
         for (g1, a1), (g0, a0) in zip(new, old, strict=True):
             np.testing.assert_allclose(g1, g0, rtol=0, atol=1e-9)
             np.testing.assert_allclose(a1, a0, rtol=0, atol=1e-9)
+
+
+@pytest.mark.parametrize("anchor", [0, 1])
+def test_steps_bound_every_sphere_displacement(cx, anchor):
+    """The re-check's step bound (:meth:`_Checker.steps`) is how far
+    any sphere centre of either cover moves between consecutive samples, and
+    the scene / self parts equal :meth:`clearances`."""
+    context, _ = cx
+    W = np.eye(4) if anchor == 0 else context.rob.fk_all(ROB.q_conv[None])[0, -1]
+    chk = context.checker(anchor, W, None)
+    rng = np.random.default_rng(anchor)
+    Q = ROB.q_conv + np.cumsum(rng.normal(0.0, 0.03, (300, 6)), axis=0)
+    steps = chk.steps(Q)
+    F = chk.world(Q)
+    for cov in (ROB.cover, ROB.self_cover):
+        C = cov.world(F)
+        moved = np.linalg.norm(np.diff(C, axis=0), axis=2).max(axis=1)
+        assert np.all(steps >= moved - 1e-12)
+    moved_any = np.max(
+        [
+            np.linalg.norm(np.diff(c.world(F), axis=0), axis=2).max(axis=1)
+            for c in (ROB.cover, ROB.self_cover)
+        ],
+        axis=0,
+    )
+    np.testing.assert_allclose(steps, moved_any, rtol=0, atol=1e-12)  # measured, so tight
+    scene, self_c = chk.clearances(Q)
+    np.testing.assert_array_equal(chk.scene_clearances(Q), scene)
+    np.testing.assert_array_equal(chk.self_clearances(Q), self_c)
