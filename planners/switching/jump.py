@@ -1132,6 +1132,13 @@ def _assemble(
     return np.concatenate(times_all), np.vstack(q_all), np.concatenate(anchor_all), phases, magnets
 
 
+def _rows(
+    f: Callable[[np.ndarray], np.ndarray], Q: np.ndarray
+) -> Callable[[np.ndarray], np.ndarray]:
+    """``f`` on the rows of ``Q`` picked by an index array."""
+    return lambda idx: f(Q[idx])
+
+
 def _recheck(
     cx: _JumpContext, Q: np.ndarray, anchor: np.ndarray, W1_actual: np.ndarray, T2: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray]:
@@ -1171,7 +1178,7 @@ def _recheck(
             )
             zone = np.where(near_start, 2, np.where(near_land, 1, 0))
             selfc[run] = lipschitz_minimum(
-                lambda i, Qs=Qs, c=chk_full: c.self_clearances(Qs[i]),
+                _rows(chk_full.self_clearances, Qs),
                 2.0 * steps,
                 params.self_margin_m,
             )[0]
@@ -1184,7 +1191,7 @@ def _recheck(
                 chk = checkers[z]
                 Qp = Qs[part]
                 clear[run[part]] = lipschitz_minimum(
-                    lambda i, Qp=Qp, chk=chk: chk.scene_clearances(Qp[i]),
+                    _rows(chk.scene_clearances, Qp),
                     steps[part[:-1]],
                     params.clearance_margin_m,
                 )[0]
