@@ -1,4 +1,5 @@
-"""Reading uploaded point clouds: PLY, PCD (ascii/binary), XYZ/CSV, NPY — in chunks.
+"""Reading uploaded point clouds: PLY, PCD (ascii/binary), XYZ/CSV, NPY, LAS/LAZ,
+E57 (:mod:`server.survey_io`) — in chunks.
 
 Every reader walks its input in bounded chunks (:data:`CHUNK_BYTES`): binary
 PLY/PCD/NPY records are read with ``os.pread`` (or sliced from bytes) and
@@ -39,8 +40,9 @@ from typing import Any, Protocol
 import numpy as np
 
 from server.lifetime import die_with_parent
+from server.survey_io import read_e57, read_las, survey_of_npy
 
-FORMATS = ("ply", "pcd", "xyz", "csv", "txt", "npy")
+FORMATS = ("ply", "pcd", "xyz", "csv", "txt", "npy", "las", "laz", "e57")
 
 #: Bytes read per step; the parser's memory is a small multiple of this.
 CHUNK_BYTES = 8 << 20
@@ -175,7 +177,13 @@ def _finite_blocks(src: Source, filename: str) -> Iterator[tuple[np.ndarray, int
         raise CloudFormatError("the uploaded file is empty")
     head = src.read_at(0, 8192)
     fmt = detect_format(head, filename)
-    reader = {"ply": _read_ply, "pcd": _read_pcd, "npy": _read_npy}.get(fmt, _read_text)
+    reader = {
+        "ply": _read_ply,
+        "pcd": _read_pcd,
+        "npy": _read_npy,
+        "las": read_las,
+        "e57": read_e57,
+    }.get(fmt, _read_text)
     kept = dropped = 0
     try:
         for raw in reader(src):
@@ -204,10 +212,14 @@ def detect_format(data: bytes, filename: str) -> str:
         return "ply"
     if data.startswith(b"\x93NUMPY"):
         return "npy"
+    if data.startswith(b"LASF"):  # LAS and LAZ share the signature
+        return "las"
+    if data.startswith(b"ASTM-E57"):
+        return "e57"
     head = data[:2048].decode("latin-1")
     if re.search(r"^\s*(VERSION|FIELDS)\s", head, re.M) and "DATA" in data[:8192].decode("latin-1"):
         return "pcd"
-    if ext in ("ply", "pcd", "npy"):
+    if ext in ("ply", "pcd", "npy", "las", "laz", "e57"):
         raise CloudFormatError(f"file {filename!r} does not start like a {ext.upper()} file")
     return "xyz"
 
@@ -555,7 +567,7 @@ def _find_all(src: Source, needle: bytes) -> Iterator[int]:
 def parse_upload(raw: Path, content_type: str, out: Path) -> dict[str, Any]:
     """Parse a spooled multipart upload into ``out``; the JSON-able outcome.
 
-    ``{"ok": true, "n_points", "dropped", "bounds", "filename", "name"}`` or
+    ``{"ok": true, "n_points", "dropped", "bounds", "survey", "filename", "name"}`` or
     ``{"ok": false, "status": 400|422, "detail": "..."}``.
     """
     m = re.search(r'boundary="?([^";]+)"?', content_type)
@@ -580,9 +592,22 @@ def parse_upload(raw: Path, content_type: str, out: Path) -> dict[str, Any]:
         if name_part is not None:
             name_bytes = body.read_at(name_part.start, min(name_part.end - name_part.start, 500))
             name = name_bytes.decode("utf-8", "replace").strip() or None
+        units = "auto"
+        units_part = next((p for p in parts if p.name == "units" and p.filename is None), None)
+        if units_part is not None:
+            raw_units = body.read_at(units_part.start, min(units_part.end - units_part.start, 20))
+            units = raw_units.decode("utf-8", "replace").strip().lower() or "auto"
+        if units not in ("auto", "m", "mm"):
+            return {
+                "ok": False,
+                "status": 422,
+                "detail": f"units must be 'auto', 'm' or 'mm', got {units!r}",
+            }
         filename = file.filename or ""
+        src = FileSource(fd, file.start, file.end)
         try:
-            res = parse_to_npy(FileSource(fd, file.start, file.end), filename, out)
+            res = parse_to_npy(src, filename, out)
+            survey = survey_of_npy(out, detect_format(src.read_at(0, 8192), filename), units)
         except CloudFormatError as exc:
             return {"ok": False, "status": 400, "detail": f"{filename or 'upload'}: {exc}"}
     finally:
@@ -591,7 +616,8 @@ def parse_upload(raw: Path, content_type: str, out: Path) -> dict[str, Any]:
         "ok": True,
         "n_points": res.n_points,
         "dropped": res.dropped,
-        "bounds": res.bounds,
+        "bounds": survey.pop("bounds"),
+        "survey": survey,
         "filename": filename,
         "name": name,
     }

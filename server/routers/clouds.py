@@ -33,6 +33,7 @@ from server.kinds import get_kind, sample_names
 from server.routers.responses import AUTH, errors
 from server.services import Services, get_services
 from server.store import new_id
+from server.survey_io import measure_spacing
 
 log = logging.getLogger(__name__)
 
@@ -66,9 +67,16 @@ _UPLOAD_BODY: dict[str, Any] = {
                         "file": {
                             "type": "string",
                             "format": "binary",
-                            "description": "PLY, PCD (ascii/binary), XYZ/CSV or NPY",
+                            "description": "PLY, PCD (ascii/binary), XYZ/CSV, NPY, LAS/LAZ or E57",
                         },
                         "name": {"type": "string", "description": "display name"},
+                        "units": {
+                            "type": "string",
+                            "enum": ["auto", "m", "mm"],
+                            "description": "unit of the file's coordinates; auto (default) "
+                            "decides from the measured point spacing; millimetres are "
+                            "stored as metres",
+                        },
                     },
                 }
             },
@@ -91,8 +99,11 @@ def list_samples(_: Viewer) -> dict[str, str]:
     openapi_extra=_UPLOAD_BODY,
 )
 async def upload_cloud(request: Request, services: Svc, who: Operator) -> dict[str, Any]:
-    """Store a cloud: multipart ``file`` (PLY, PCD ascii/binary, XYZ/CSV, NPY) or
-    JSON ``{"sample": name}``.  Non-finite rows are dropped and counted."""
+    """Store a cloud: multipart ``file`` (PLY, PCD ascii/binary, XYZ/CSV, NPY,
+    LAS/LAZ, E57) with optional ``name`` and ``units`` (auto | m | mm), or JSON
+    ``{"sample": name}``.  Non-finite rows are dropped and counted.  The
+    response's ``survey`` says how the file was read: format, units and why,
+    the scale applied to reach metres, and the measured point spacing."""
     ctype = request.headers.get("content-type", "")
     if ctype.startswith("application/json"):
         rec = await _store_sample(request, services, who.actor)
@@ -125,12 +136,20 @@ async def _store_sample(request: Request, services: Services, actor: str) -> Any
     def make() -> Any:  # generators can take a while: off the event loop
         points = np.asarray(fn(req.seed), dtype=np.float64)
         finite = np.isfinite(points).all(axis=1)
+        spacing = measure_spacing(points[finite])
         return services.store.add_cloud(
             req.name or req.sample,
             f"sample:{req.sample}:{req.seed}",
             points[finite],
             int((~finite).sum()),
             actor,
+            survey={
+                "format": "sample",
+                "units": "m",
+                "units_reason": "sample generators work in metres",
+                "scale_to_m": 1.0,
+                "spacing_m": spacing,
+            },
         )
 
     return await anyio.to_thread.run_sync(make)
@@ -166,6 +185,7 @@ async def _store_upload(request: Request, services: Services, actor: str, ctype:
                 outcome["bounds"],
                 int(outcome["dropped"]),
                 actor,
+                survey=outcome.get("survey"),
             )
         )
     except BaseException:

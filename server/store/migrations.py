@@ -109,6 +109,11 @@ MIGRATIONS: list[str] = [
     """
     ALTER TABLE tokens ADD COLUMN expires_at TEXT;
     """,
+    # 5: clouds: how an upload was read (format, units and how they were decided,
+    # scale applied, measured spacing), JSON
+    """
+    ALTER TABLE clouds ADD COLUMN survey TEXT NOT NULL DEFAULT '{}';
+    """,
 ]
 
 SCHEMA_VERSION = len(MIGRATIONS)

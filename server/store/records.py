@@ -27,11 +27,13 @@ class CloudRecord:
     array_file: str
     created_at: str
     created_by: str
+    survey: dict[str, Any] = field(default_factory=dict)
 
     @classmethod
     def from_row(cls, row: sqlite3.Row) -> CloudRecord:
         d = dict(row)
         d["bounds"] = json.loads(d["bounds"])
+        d["survey"] = _loads(d.get("survey"), {})
         return cls(**d)
 
     def public(self) -> dict[str, Any]:
@@ -42,6 +44,7 @@ class CloudRecord:
             "n_points": self.n_points,
             "bounds": self.bounds,
             "dropped_nonfinite": self.dropped,
+            "survey": self.survey,
             "created_at": self.created_at,
             "created_by": self.created_by,
         }

@@ -64,6 +64,12 @@ _PLAN_SUMMARY_COLUMNS = (
 )
 
 
+_INSERT_CLOUD = (
+    "INSERT INTO clouds (id, name, source, n_points, bounds, dropped, array_file, created_at,"
+    " created_by, survey) VALUES (?,?,?,?,?,?,?,?,?,?)"
+)
+
+
 class Store:
     """All persistent state under one data directory."""
 
@@ -120,7 +126,13 @@ class Store:
 
     # ----------------------------------------------------------------- clouds
     def add_cloud(
-        self, name: str, source: str, points: np.ndarray, dropped: int, actor: str
+        self,
+        name: str,
+        source: str,
+        points: np.ndarray,
+        dropped: int,
+        actor: str,
+        survey: dict[str, Any] | None = None,
     ) -> CloudRecord:
         cid = new_id("cl")
         relname = self.arrays.save(f"clouds/{cid}.npy", np.ascontiguousarray(points, np.float64))
@@ -128,8 +140,9 @@ class Store:
         bounds = {"min": [float(v) for v in lo], "max": [float(v) for v in hi]}
         with self.db.transaction() as conn:
             conn.execute(
-                "INSERT INTO clouds VALUES (?,?,?,?,?,?,?,?,?)",
-                (cid, name, source, len(points), _json(bounds), dropped, relname, utcnow(), actor),
+                _INSERT_CLOUD,
+                (cid, name, source, len(points), _json(bounds), dropped, relname, utcnow(), actor)
+                + (_json(survey or {}),),
             )
             self._audit(
                 conn, actor, "cloud", cid, "upload", reason=f"{name} ({len(points)} points)"
@@ -145,6 +158,7 @@ class Store:
         bounds: dict[str, list[float]],
         dropped: int,
         actor: str,
+        survey: dict[str, Any] | None = None,
     ) -> CloudRecord:
         """Record a cloud whose array a parser already wrote at ``clouds/{cloud_id}.npy``."""
         relname = f"clouds/{cloud_id}.npy"
@@ -152,8 +166,9 @@ class Store:
             raise FileNotFoundError(f"cloud array {relname} was not written")
         with self.db.transaction() as conn:
             conn.execute(
-                "INSERT INTO clouds VALUES (?,?,?,?,?,?,?,?,?)",
-                (cloud_id, name, source, n_points, _json(bounds), dropped, relname, utcnow(), actor),
+                _INSERT_CLOUD,
+                (cloud_id, name, source, n_points, _json(bounds), dropped, relname, utcnow(), actor)
+                + (_json(survey or {}),),
             )
             self._audit(
                 conn, actor, "cloud", cloud_id, "upload", reason=f"{name} ({n_points} points)"

@@ -1,0 +1,225 @@
+"""Survey formats for uploaded clouds: LAS/LAZ (``laspy`` + ``lazrs``) and E57
+(``pye57``), read in bounded chunks (issue #14 §1).
+
+Both readers are generators of (k,3) float64 blocks over a
+:class:`server.cloud_io.Source` (a byte range of the spooled upload), like
+the PLY/PCD/XYZ readers beside them:
+
+- LAS/LAZ: ``laspy`` reads through a file object over the byte range and
+  yields :data:`CHUNK_POINTS` points at a time, scaled and offset to real
+  coordinates (LAZ decompressed chunk by chunk).
+- E57: libE57 needs a file, so the byte range is copied to a temporary file
+  first (chunk by chunk); every scan is then read :data:`CHUNK_POINTS` at a
+  time with its own buffers, invalid points dropped, spherical coordinates
+  converted and the scan's pose (rotation, translation) applied, so several
+  scanner stations land in one frame.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import io
+import os
+import tempfile
+from collections.abc import Iterator
+from typing import Any, Protocol
+
+import numpy as np
+
+#: Points per block (three float64 columns: 24 MB).
+CHUNK_POINTS = 1 << 20
+#: Bytes copied per step when an E57 byte range goes to a temporary file.
+_COPY_BYTES = 8 << 20
+
+
+class _Source(Protocol):
+    size: int
+
+    def read_at(self, offset: int, n: int) -> bytes: ...
+
+
+class SourceFile(io.RawIOBase):
+    """A read-only, seekable file object over a :class:`Source`."""
+
+    def __init__(self, src: _Source) -> None:
+        self._src = src
+        self._pos = 0
+
+    def readable(self) -> bool:
+        return True
+
+    def seekable(self) -> bool:
+        return True
+
+    def tell(self) -> int:
+        return self._pos
+
+    def seek(self, offset: int, whence: int = io.SEEK_SET) -> int:
+        base = {io.SEEK_SET: 0, io.SEEK_CUR: self._pos, io.SEEK_END: self._src.size}[whence]
+        self._pos = max(0, base + offset)
+        return self._pos
+
+    def readinto(self, buffer: Any) -> int:
+        view = memoryview(buffer).cast("B")
+        data = self._src.read_at(self._pos, len(view))
+        view[: len(data)] = data
+        self._pos += len(data)
+        return len(data)
+
+
+def read_las(src: _Source) -> Iterator[np.ndarray]:
+    """LAS 1.0–1.4 and LAZ points as real coordinates, chunk by chunk."""
+    import laspy
+
+    with laspy.open(io.BufferedReader(SourceFile(src), buffer_size=1 << 20)) as reader:
+        for points in reader.chunk_iterator(CHUNK_POINTS):
+            yield np.column_stack(
+                [np.asarray(points.x), np.asarray(points.y), np.asarray(points.z)]
+            )
+
+
+def read_e57(src: _Source) -> Iterator[np.ndarray]:
+    """Every scan of an E57 file, posed into the file's frame, chunk by chunk."""
+    import pye57
+
+    fd, tmp = tempfile.mkstemp(prefix=".tmp-e57-", suffix=".e57")
+    try:
+        with os.fdopen(fd, "wb") as fh:
+            for off in range(0, src.size, _COPY_BYTES):
+                fh.write(src.read_at(off, _COPY_BYTES))
+        e57 = pye57.E57(tmp)
+        try:
+            for index in range(e57.scan_count):
+                yield from _e57_scan(e57, index)
+        finally:
+            e57.close()
+    finally:
+        with contextlib.suppress(OSError):
+            os.unlink(tmp)
+
+
+def _e57_scan(e57: Any, index: int) -> Iterator[np.ndarray]:
+    header = e57.get_header(index)
+    fields = set(header.point_fields)
+    if {"cartesianX", "cartesianY", "cartesianZ"} <= fields:
+        coords, spherical = ["cartesianX", "cartesianY", "cartesianZ"], False
+        invalid = "cartesianInvalidState"
+    elif {"sphericalRange", "sphericalAzimuth", "sphericalElevation"} <= fields:
+        coords, spherical = ["sphericalRange", "sphericalAzimuth", "sphericalElevation"], True
+        invalid = "sphericalInvalidState"
+    else:
+        raise ValueError(f"scan {index} has neither cartesian nor spherical coordinates")
+    names = coords + ([invalid] if invalid in fields else [])
+    capacity = min(CHUNK_POINTS, max(int(header.point_count), 1))
+    data, buffers = e57.make_buffers(names, capacity)
+    R = header.rotation_matrix if header.has_pose() else np.eye(3)
+    t = np.asarray(header.translation, dtype=float)
+    reader = header.points.reader(buffers)
+    try:
+        while (n := int(reader.read())) > 0:
+            a, b, c = (np.asarray(data[k][:n], dtype=np.float64) for k in coords)
+            if (
+                spherical
+            ):  # libE57's convention: azimuth from x towards y, elevation from the xy-plane
+                rc = a * np.cos(c)
+                a, b, c = rc * np.cos(b), rc * np.sin(b), a * np.sin(c)
+            xyz = np.column_stack([a, b, c])
+            if invalid in data:
+                xyz = xyz[np.asarray(data[invalid][:n]) == 0]
+            yield xyz @ np.asarray(R, dtype=float).T + t
+    finally:
+        reader.close()
+
+
+# ------------------------------------------------------------------ spacing and units
+#: A median point spacing at or above this (in the file's unit) cannot be metres
+#: of a steel scan (crews scan at 5 mm – 15 cm): the file is in millimetres.
+MM_SPACING_FROM = 0.5
+
+
+def measure_spacing(
+    points: np.ndarray, *, n_queries: int = 2000, seed: int = 0, chunk: int = 2_000_000
+) -> float | None:
+    """Median distance from ``n_queries`` random points to their nearest other
+    (distinct) point of the cloud, in the cloud's unit; ``None`` below 2 points.
+
+    The cloud (an array or a read-only memmap) is scanned ``chunk`` rows at a
+    time, a KD-tree per chunk, so memory stays bounded whatever its size."""
+    from scipy.spatial import cKDTree
+
+    n = len(points)
+    if n < 2:
+        return None
+    rng = np.random.default_rng(seed)
+    pick = np.sort(rng.choice(n, size=min(n_queries, n), replace=False))
+    q = np.asarray(points[pick], dtype=np.float64)
+    best = np.full(len(q), np.inf)
+    for a in range(0, n, chunk):
+        block = np.asarray(points[a : a + chunk], dtype=np.float64)
+        d, _ = cKDTree(block).query(q, k=min(4, len(block)))
+        d = np.asarray(d, dtype=float).reshape(len(q), -1)
+        # the query point itself and up to two exact duplicates sit at 0: the
+        # nearest distinct point is the smallest distance above 0
+        np.minimum(best, np.where(d > 0, d, np.inf).min(axis=1), out=best)
+    finite = best[np.isfinite(best)]
+    return float(np.median(finite)) if len(finite) else None
+
+
+#: ... and the cloud spans at least this much (a scan in millimetres of even one
+#: short member spans hundreds of units) ...
+MM_EXTENT_FROM = 100.0
+#: ... with at least this many points (fewer cannot tell a scan's spacing).
+MIN_POINTS_TO_DETECT = 100
+
+
+def decide_units(
+    spacing: float | None, extent: float, n_points: int, override: str = "auto"
+) -> tuple[str, str]:
+    """``("m" | "mm", reason)`` for a cloud of ``n_points`` with median spacing
+    ``spacing`` and largest bounding-box side ``extent``, both in its own
+    unit; ``override`` ``"m"``/``"mm"`` wins over the detection."""
+    if override in ("m", "mm"):
+        return override, f"set by the uploader ({override})"
+    if override != "auto":
+        raise ValueError(f"units must be 'auto', 'm' or 'mm', got {override!r}")
+    if spacing is None or n_points < MIN_POINTS_TO_DETECT:
+        return "m", f"{n_points} points are too few to tell the units: metres assumed"
+    if spacing >= MM_SPACING_FROM and extent >= MM_EXTENT_FROM:
+        return "mm", (
+            f"median point spacing {spacing:.3g} and extent {extent:.4g} in the file's unit: "
+            f"as metres that is a scan sparser than {MM_SPACING_FROM} m over "
+            f"≥ {MM_EXTENT_FROM:.0f} m, not steel, so millimetres"
+        )
+    return "m", f"median point spacing {spacing:.3g}, extent {extent:.4g}: metres"
+
+
+def survey_of_npy(path: str | os.PathLike[str], fmt: str, units: str = "auto") -> dict[str, Any]:
+    """Measure the spacing of the (N,3) float64 ``.npy`` at ``path``, decide its
+    units and, for millimetres, rescale it to metres in place (chunk by
+    chunk).  Returns the survey record: format, units, how they were decided,
+    the scale applied, the spacing in metres, and the bounds in metres."""
+    arr = np.load(path, mmap_mode="r+")
+    lo, hi = np.full(3, np.inf), np.full(3, -np.inf)
+    for a in range(0, len(arr), CHUNK_POINTS):
+        block = arr[a : a + CHUNK_POINTS]
+        if len(block):
+            np.minimum(lo, block.min(axis=0), out=lo)
+            np.maximum(hi, block.max(axis=0), out=hi)
+    spacing = measure_spacing(arr)
+    extent = float((hi - lo).max()) if len(arr) else 0.0
+    unit, reason = decide_units(spacing, extent, len(arr), units)
+    scale = 0.001 if unit == "mm" else 1.0
+    if scale != 1.0:
+        for a in range(0, len(arr), CHUNK_POINTS):
+            arr[a : a + CHUNK_POINTS] *= scale
+        lo, hi = lo * scale, hi * scale
+    arr.flush()
+    del arr
+    return {
+        "format": fmt,
+        "units": unit,
+        "units_reason": reason,
+        "scale_to_m": scale,
+        "spacing_m": None if spacing is None else spacing * scale,
+        "bounds": {"min": lo.tolist(), "max": hi.tolist()},
+    }
