@@ -181,6 +181,13 @@ def _summary(res: NavigationResult) -> dict[str, Any]:
             else None
         ),
         "motion_model": params.motion_model,
+        "preprocess": {
+            "crop_box_m": params.crop_box_m,
+            "passthrough_m": {
+                axis: getattr(params, f"passthrough_{axis}_m") for axis in ("x", "y", "z")
+            },
+            "counts": dict(res.counts),
+        },
         "clusters": [
             {
                 "id": c.id,

@@ -37,7 +37,10 @@ Progress = Callable[[float, str], None]
 class NavigationParams:
     """Every parameter of :func:`plan_navigation`, with units in the names."""
 
-    # Pre-processing (Ch. 4 intro); pass-through limits in the robot frame.
+    # Pre-processing (Ch. 4 intro): a crop box (region of interest, the cloud's
+    # own frame; None: the whole cloud), then pass-through limits in the robot
+    # frame (None on an axis: no window on it).
+    crop_box_m: tuple[tuple[float, float, float], tuple[float, float, float]] | None = None
     passthrough_x_m: tuple[float, float] | None = (-1.0, 6.0)
     passthrough_y_m: tuple[float, float] | None = (-4.0, 4.0)
     passthrough_z_m: tuple[float, float] | None = (-0.5, 0.5)
@@ -111,6 +114,14 @@ class NavigationParams:
             raise InvalidInputError(
                 f"pibc_method must be one of {PIBC_METHODS}, got {self.pibc_method!r}"
             )
+        box = self.crop_box_m
+        if box is not None:
+            lo_hi = np.asarray(box, dtype=float) if _numeric_box(box) else None
+            if lo_hi is None or lo_hi.shape != (2, 3) or not np.all(lo_hi[0] < lo_hi[1]):
+                raise InvalidInputError(
+                    "crop_box_m must be None or ((xmin, ymin, zmin), (xmax, ymax, zmax)) "
+                    f"finite metres with min < max on every axis, got {box!r}"
+                )
         for f in fields(self):
             v = getattr(self, f.name)
             if f.name.startswith("passthrough_"):
@@ -130,6 +141,7 @@ class NavigationParams:
                 and not isinstance(v, tuple)
                 and f.name
                 not in (
+                    "crop_box_m",  # checked above
                     "footprint_center_x_m",
                     "footprint_center_y_m",
                     "footprint_margin_m",
@@ -188,3 +200,12 @@ class NavigationResult:
     @property
     def paths_ok(self) -> bool:
         return all(p.ok for p in self.edge_paths)
+
+
+def _numeric_box(box: object) -> bool:
+    """Two sequences of three finite real numbers."""
+    try:
+        a = np.asarray(box, dtype=float)
+    except (TypeError, ValueError):
+        return False
+    return a.shape == (2, 3) and bool(np.all(np.isfinite(a)))

@@ -283,6 +283,7 @@ def plan_navigation(
     stage(0.0, "preprocess")
     pre = preprocess(
         pts,
+        crop_box_m=p.crop_box_m,
         passthrough_x_m=p.passthrough_x_m,
         passthrough_y_m=p.passthrough_y_m,
         passthrough_z_m=p.passthrough_z_m,

@@ -72,6 +72,7 @@ class Preprocessed:
 def preprocess(
     points: np.ndarray,
     *,
+    crop_box_m: tuple[tuple[float, float, float], tuple[float, float, float]] | None = None,
     passthrough_x_m: tuple[float, float] | None = (-1.0, 6.0),
     passthrough_y_m: tuple[float, float] | None = (-4.0, 4.0),
     passthrough_z_m: tuple[float, float] | None = (-0.5, 0.5),
@@ -85,7 +86,9 @@ def preprocess(
 ) -> Preprocessed:
     """Filter, down-sample, fit the structure plane and project onto it (seed Ch. 4 intro).
 
-    ``points`` must be finite (N, 3) in the robot frame.  After the plane's
+    ``points`` must be finite (N, 3); ``crop_box_m`` keeps the points inside
+    an axis-aligned box of the cloud's frame, the pass-through windows then
+    apply in the robot frame (``None``: none on that axis).  After the plane's
     outliers are removed, in-plane specks (fewer than
     ``speckle_min_neighbours`` neighbours within ``speckle_radius_m``) are
     dropped too: they are clutter that happens to touch the plane.
@@ -94,6 +97,16 @@ def preprocess(
     """
     pts = np.asarray(points, dtype=float)
     counts = {"input": len(pts)}
+    if crop_box_m is not None:
+        lo, hi = np.asarray(crop_box_m, dtype=float)
+        pts = pts[np.all((pts >= lo) & (pts <= hi), axis=1)]
+        counts["crop_box"] = len(pts)
+        if len(pts) < 3:
+            raise EmptyInputError(
+                f"only {len(pts)} point(s) inside the crop box {lo.tolist()} – {hi.tolist()} m "
+                f"(the cloud spans {np.asarray(points).min(axis=0).round(3).tolist()} – "
+                f"{np.asarray(points).max(axis=0).round(3).tolist()} m)"
+            )
     keep = passthrough(pts, x=passthrough_x_m, y=passthrough_y_m, z=passthrough_z_m)
     pts = pts[keep]
     counts["passthrough"] = len(pts)

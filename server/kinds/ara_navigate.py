@@ -35,7 +35,18 @@ class AraNavigateParams(StrictParams):
     """Cloud, route end points and method choices of an ARA navigation plan."""
 
     cloud_id: str | None = Field(
-        None, description="id of a stored cloud (POST /clouds); robot frame, metres"
+        None, description="id of a stored cloud (POST /clouds); metres, any frame"
+    )
+    crop_box_m: tuple[tuple[float, float, float], tuple[float, float, float]] | None = Field(
+        None,
+        description="region of interest ((xmin, ymin, zmin), (xmax, ymax, zmax)) in the "
+        "cloud's frame; None: the whole cloud",
+    )
+    passthrough: Literal["auto", "robot_frame", "off"] = Field(
+        "auto",
+        description="the seed's pass-through window (x −1…6, y −4…4, z −0.5…0.5 m, robot "
+        "frame): 'auto' applies it to the samples (the ARA camera's view) and not to a stored "
+        "cloud, which may be in any frame; the plan's summary says which",
     )
     sample: str = Field(
         "cross", description=f"sample structure when no cloud_id: one of {', '.join(SHAPES)}"
@@ -84,6 +95,8 @@ class AraNavigateParams(StrictParams):
 def validate(p: AraNavigateParams) -> None:
     if p.cloud_id is None and p.sample not in SAMPLES:
         raise InvalidInputError(f"unknown sample {p.sample!r}; samples: {', '.join(SHAPES)}")
+    if p.crop_box_m is not None:
+        NavigationParams(crop_box_m=p.crop_box_m).validated()  # raises for a non-box
 
 
 #: The driving foot's magnetic-wheel contact patch (chosen; see the module doc).
@@ -121,11 +134,33 @@ def _footprint(p: AraNavigateParams) -> _Footprint:
     }
 
 
+class _Passthrough(TypedDict):
+    """The pass-through fields of :class:`NavigationParams` (metres, robot frame)."""
+
+    passthrough_x_m: tuple[float, float] | None
+    passthrough_y_m: tuple[float, float] | None
+    passthrough_z_m: tuple[float, float] | None
+
+
+def _passthrough(p: AraNavigateParams) -> _Passthrough:
+    """The seed's robot-frame window, or none (``auto``: none for a stored
+    cloud, which may be in any frame)."""
+    off = p.passthrough == "off" or (p.passthrough == "auto" and p.cloud_id is not None)
+    seed = NavigationParams()
+    return {
+        "passthrough_x_m": None if off else seed.passthrough_x_m,
+        "passthrough_y_m": None if off else seed.passthrough_y_m,
+        "passthrough_z_m": None if off else seed.passthrough_z_m,
+    }
+
+
 def run(p: AraNavigateParams, ctx: JobContext) -> KindOutput:
     validate(p)
     ctx.progress(0.0, "loading cloud")
     points = ctx.load_cloud(p.cloud_id) if p.cloud_id else SAMPLES[p.sample](p.sample_seed)
     params = NavigationParams(
+        crop_box_m=p.crop_box_m,
+        **_passthrough(p),
         segmentation=p.segmentation,
         route_method=p.route_method,
         pibc_method=p.pibc_method,

@@ -21,8 +21,14 @@ def test_defaults_plan_and_compile_a_wheel_program_on_the_cross_sample(api) -> N
     plan = api.wait(api.submit("ara.navigate")["id"], timeout=240)
     checks = {c["name"]: c for c in plan["checks"]}
     assert plan["state"] == "planned", [c["message"] for c in plan["checks"] if not c["passed"]]
-    for name in ("bars_covered", "route_endpoints", "poses_on_steel", "wheel_motion",
-                 "paths_found", "command_program"):
+    for name in (
+        "bars_covered",
+        "route_endpoints",
+        "poses_on_steel",
+        "wheel_motion",
+        "paths_found",
+        "command_program",
+    ):
         assert checks[name]["passed"], (name, checks[name]["message"])
     m = plan["metrics"]
     assert m["cluster_count"] == 5 and m["bar_count"] == 4 and m["cross_count"] == 1
@@ -34,8 +40,9 @@ def test_defaults_plan_and_compile_a_wheel_program_on_the_cross_sample(api) -> N
     assert res["footprint"]["length_m"] == 0.08 and res["motion_model"] == "differential"
     assert {c["kind"] for c in res["clusters"]} == {"bar", "cross"}
     wheels = [c for c in plan["program"] if c["op"] == "wheels"]
-    assert wheels and all(c["speeds_m_s"][0] in (c["speeds_m_s"][1], -c["speeds_m_s"][1])
-                          for c in wheels)  # straight drive or turn in place, never an arc
+    assert wheels and all(
+        c["speeds_m_s"][0] in (c["speeds_m_s"][1], -c["speeds_m_s"][1]) for c in wheels
+    )  # straight drive or turn in place, never an arc
 
 
 def test_whole_mobile_body_does_not_fit_the_flanges(api) -> None:
@@ -118,3 +125,73 @@ def test_bad_requests(api) -> None:
     r = api.post("/api/v1/clouds", json={"sample": "warren"})
     assert r.status_code in (200, 201), r.text
     assert r.json()["n_points"] > 10_000
+
+
+def test_a_stored_cloud_in_a_survey_frame_plans_without_the_robot_window(api) -> None:
+    """Issue #14 §1: the Cross sample moved into a survey frame (UTM-like
+    easting / northing, 35 m up) and uploaded as LAS plans with the defaults:
+    ``auto`` leaves the robot-frame pass-through off for a stored cloud and the
+    summary says so; the robot window, asked for, empties it with a clear
+    error; a crop box keeps a region, and an empty one says what the cloud spans."""
+    import io
+
+    import laspy
+    import numpy as np
+
+    from planners.navigation.synthetic import SAMPLES
+
+    offset = np.array([512_300.0, 5_401_200.0, 35.0])
+    pts = SAMPLES["cross"](0) + offset
+    header = laspy.LasHeader(point_format=3, version="1.4")
+    header.scales, header.offsets = np.full(3, 1e-4), np.floor(pts.min(axis=0))
+    las = laspy.LasData(header)
+    las.x, las.y, las.z = pts.T
+    buf = io.BytesIO()
+    las.write(buf)
+    r = api.post("/api/v1/clouds", files={"file": ("cross_utm.las", buf.getvalue())})
+    assert r.status_code == 201, r.text
+    cid = r.json()["id"]
+
+    plan = api.wait(api.submit("ara.navigate", {"cloud_id": cid})["id"], timeout=240)
+    assert plan["state"] == "planned", plan.get("error")
+    pre = plan["result"]["preprocess"]
+    assert pre["passthrough_m"] == {"x": None, "y": None, "z": None} and pre["crop_box_m"] is None
+    assert plan["metrics"]["bar_count"] == 4 and plan["metrics"]["cross_count"] == 1
+
+    robot = api.wait(
+        api.submit("ara.navigate", {"cloud_id": cid, "passthrough": "robot_frame"})["id"], 240
+    )
+    assert robot["state"] == "failed" and "pass-through" in robot["error"]
+
+    lo, hi = pts.min(axis=0), pts.max(axis=0)
+    trimmed = [(lo + [0.05, 0.0, 0.0]).tolist(), hi.tolist()]  # 5 cm off one bar's end
+    half = api.wait(
+        api.submit(
+            "ara.navigate",
+            {
+                "cloud_id": cid,
+                "crop_box_m": trimmed,
+                "plan_paths": False,
+            },
+        )["id"],
+        240,
+    )
+    assert half["state"] in ("planned", "rejected"), half.get("error")
+    counts = half["result"]["preprocess"]["counts"]
+    assert 0 < counts["crop_box"] < counts["input"]
+    empty = api.wait(
+        api.submit(
+            "ara.navigate",
+            {"cloud_id": cid, "crop_box_m": [[0, 0, 0], [1, 1, 1]]},
+        )["id"],
+        240,
+    )
+    assert empty["state"] == "failed" and "crop box" in empty["error"] and "spans" in empty["error"]
+
+
+def test_crop_box_must_be_an_ordered_box(api) -> None:
+    r = api.post(
+        "/api/v1/plans",
+        json={"kind": "ara.navigate", "params": {"crop_box_m": [[1, 0, 0], [0, 1, 1]]}},
+    )
+    assert r.status_code == 422 and "crop_box_m" in str(r.json()["detail"])
