@@ -23,11 +23,17 @@ from scipy.interpolate import CubicSpline, PchipInterpolator
 
 from planners.cmbot.arm import ArmKinematics
 from planners.cmbot.balance import arm_mass_points, climber_mass_points, flip_moment, merge
-from planners.cmbot.distance import Cuboid, boxes_arrays, sphere_box_exact, sphere_box_pairs
+from planners.cmbot.distance import (
+    Cuboid,
+    boxes_arrays,
+    point_box_closed_form,
+    sphere_box_exact,
+    sphere_box_pairs,
+)
 from planners.cmbot.experiment import ClearanceFilter, Section4Trajectory
 from planners.cmbot.gait import GaitTrajectory
 from planners.cmbot.guardrail import Guardrail
-from planners.cmbot.scene import CLIMBER_LINKS, arm_base_pose, climber_box_arrays
+from planners.cmbot.scene import arm_base_pose, climber_box_layout
 
 
 @dataclass(frozen=True)
@@ -364,43 +370,95 @@ class CoarseFineClearance:
             self._seen = min(self._seen, float(np.min(d)))
 
 
-def _group_clearance(
-    centers: np.ndarray,
+#: Window [evaluated samples] of :func:`culled_clearance` for the fine samples.
+CULL_WINDOW = 48
+
+#: Window of :func:`culled_clearance` for the coarse samples (``COARSE_STRIDE`` apart).
+CULL_WINDOW_COARSE = 24
+
+#: Slack on the culling comparison [m]: the bounds come from the groups' own
+#: frames, the exact distances from the world frame (rounding apart, equal).
+_CULL_SLACK_M = 1e-9
+
+#: Exact distances (t, P) of the pairs (spheres ``si``, boxes ``bi``) at samples ``rows``.
+_PairDistances = Callable[[np.ndarray, np.ndarray, np.ndarray], np.ndarray]
+
+
+def culled_clearance(
+    local: np.ndarray,
     radii: np.ndarray,
     boxes: tuple[np.ndarray, np.ndarray, np.ndarray],
     group: np.ndarray,
-    n_groups: int,
+    exact: _PairDistances,
     *,
     cap: float,
-    chunk: int = 256,
-) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """:func:`min_clearance`'s (clearance, sphere, box) per time step and, from
-    the same distances, the smallest distance (capped) per box group and
-    sphere, flattened group-major (T, G·S).  Boxes may carry the time axis.
+    window: int,
+    per_group: bool,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray | None]:
+    """Windowed Lipschitz culling of sphere–box clearances (boxes in groups, each
+    group fixed in its own frame).
 
-    The same values as :func:`min_clearance` (which only skips boxes that
-    cannot come below ``cap``); the sphere and box of a sample whose
-    clearance is capped may differ (they name no violation)."""
+    ``local`` (T,G,S,3): the sphere centres in each group's frame; ``boxes``
+    (centres, half extents, rotations) in their group's frame, ``group`` (M,)
+    the group of each box.  Within a window of ``window`` samples sphere i
+    stays, in group g's frame, in a ball (m_gi, ρ_gi); the signed distance to
+    a box being 1-Lipschitz (rigid frames keep distances), every sample's
+    d_ij lies in D_ij(m) − r_i ± ρ (the seed's closed form, §3.2 Fig. 13).
+    A pair whose lower end exceeds min(smallest upper end, cap) can be neither
+    the minimum below the cap nor tie with it, so only the others go to
+    ``exact(rows, si, bi)`` (t,P).  ``per_group`` takes the smallest upper end
+    per (group, sphere), which also gives each group's minimum per sphere.
+
+    Returns, per sample, the clearance capped at ``cap``, its sphere and box
+    (the dense check's first pair on ties: pairs stay sphere-major) and, with
+    ``per_group``, the capped minimum per group and sphere (T, G·S).
+    """
+    T, G, S = local.shape[:3]
     bc, bh, bR = boxes
-    T, S = centers.shape[:2]
-    M = len(bh)
+    r = np.asarray(radii, dtype=float)
     out = np.full(T, cap)
     sph = np.zeros(T, dtype=int)
     box = np.zeros(T, dtype=int)
-    per = np.full((T, n_groups, S), cap)
-    for a in range(0, T if M else 0, chunk):
-        b = min(a + chunk, T)
-        sub = (bc[a:b], bh, bR[a:b]) if bc.ndim == 3 else (bc, bh, bR)
-        d, _ = sphere_box_exact(centers[a:b], radii, sub, directions=False)  # (t, S, M)
-        flat = d.reshape(b - a, -1)
-        kk = flat.argmin(axis=1)
-        out[a:b] = np.minimum(flat[np.arange(b - a), kk], cap)
-        sph[a:b] = kk // M
-        box[a:b] = kk % M
-        for g in range(n_groups):
-            if np.any(group == g):
-                per[a:b, g] = np.minimum(d[:, :, group == g].min(axis=2), cap)
-    return out, sph, box, per.reshape(T, n_groups * S)
+    per = np.full((T, G * S), cap) if per_group else None
+    if not len(bh) or not T:
+        return out, sph, box, per
+    order = np.argsort(group, kind="stable")
+    starts = np.flatnonzero(np.r_[True, np.diff(group[order]) != 0])
+    first = group[order][starts]
+    for a in range(0, T, window):
+        b = min(a + window, T)
+        C = local[a:b]
+        mid = 0.5 * (C.max(axis=0) + C.min(axis=0))  # (G,S,3)
+        dx = C - mid
+        rho = np.sqrt(dx[..., 0] ** 2 + dx[..., 1] ** 2 + dx[..., 2] ** 2).max(axis=0)  # (G,S)
+        rel = np.swapaxes(mid[group], 0, 1) - bc  # (S,M,3): sphere i in box j's frame
+        dm, _ = point_box_closed_form(rel, bh, bR, directions=False)
+        spread = rho[group].T  # (S,M)
+        lo = dm - r[:, None] - spread
+        hi = dm - r[:, None] + spread
+        if per_group:
+            # smallest upper end over each (group, sphere), spread back over its boxes
+            hmin = np.minimum.reduceat(hi[:, order], starts, axis=1)  # (S, groups present)
+            slot = np.searchsorted(first, group)
+            bound = np.minimum(hmin[:, slot], cap)
+        else:
+            bound = np.full_like(hi, min(float(hi.min()), cap))
+        si, bi = np.nonzero(lo <= bound + _CULL_SLACK_M)
+        if not len(si):
+            continue  # every pair stays beyond the cap here
+        rows = np.arange(a, b)
+        d = exact(rows, si, bi)  # (t,P)
+        kk = d.argmin(axis=1)
+        out[a:b] = np.minimum(d[np.arange(b - a), kk], cap)
+        sph[a:b] = si[kk]
+        box[a:b] = bi[kk]
+        if per is not None:
+            key = group[bi] * S + si
+            o = np.argsort(key, kind="stable")
+            ks = key[o]
+            cut = np.flatnonzero(np.r_[True, ks[1:] != ks[:-1]])
+            per[a:b, ks[cut]] = np.minimum(np.minimum.reduceat(d[:, o], cut, axis=1), cap)
+    return out, sph, box, per
 
 
 def _interiors(a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -599,12 +657,11 @@ def simulate_climb(
     n = len(t)
     env_cf = CoarseFineClearance(n, arm_clearance_m, coarse_stride)
     self_cf = CoarseFineClearance(n, 0.0, coarse_stride)
-    bnames: list[str] = []
-    # Link (frame) of each climber box, as climber_box_arrays orders them.
-    box_frame = np.array(
-        [k for k, ln in enumerate(CLIMBER_LINKS) for _ in model.collision_boxes.get(ln, [])]
-    )
+    # The climber's boxes: link frame, origin in it, half extents, names.
+    box_frame, box_origin, box_half, bnames = climber_box_layout(model)
     links, box_link = np.unique(box_frame, return_inverse=True)
+    box_local = (box_origin[:, :3, 3], box_half, box_origin[:, :3, :3])
+    radii_body = radii[body]
     env_group = np.zeros(len(env), dtype=int)
     step = max(1, chunk // env_cf.stride) * env_cf.stride
     s = 0
@@ -622,39 +679,58 @@ def simulate_climb(
             return min_clearance(C[k], radii, env_arr, cap=1.0)
 
         def env_groups(k: np.ndarray, C: np.ndarray = centers) -> _GroupClearance:
-            return _group_clearance(C[k], radii, env_arr, env_group, 1, cap=1.0)
+            Ck = C[k]
+
+            def pairs(rows: np.ndarray, si: np.ndarray, bi: np.ndarray) -> np.ndarray:
+                return sphere_box_pairs(Ck[rows], radii, env_arr, si, bi)
+
+            res = culled_clearance(
+                Ck[:, None], radii, env_arr, env_group, pairs,
+                cap=1.0, window=CULL_WINDOW_COARSE, per_group=True,
+            )  # fmt: skip
+            assert res[3] is not None
+            return res[0], res[1], res[2], res[3]
 
         env_cf.add(s, moved, env_min, env_groups)
         # Self clearance: the boxes ride on the climber's links, so the bound is
         # the spheres' displacement in every link frame.
-        F = T_wr[:, None] @ model.climber.link_frames(q[sl, :5])
+        Fw = T_wr[:, None] @ model.climber.link_frames(q[sl, :5])
         cb = centers[:, body]
-        F = F[:, links]
+        F = Fw[:, links]
         local = (cb[:, None] - F[:, :, None, :3, 3]) @ F[:, :, :3, :3]
         moved_rel = np.linalg.norm(np.diff(local, axis=0), axis=-1).reshape(
             e - s, local[0, ..., 0].size
         )
-        bc, bh, bR, bnames = climber_box_arrays(model, q[sl, :5], T_wr)
 
-        def self_min(
+        def self_eval(
             k: np.ndarray,
+            window: int,
+            per_group: bool,
             C: np.ndarray = cb,
-            c: np.ndarray = bc,
-            h: np.ndarray = bh,
-            R: np.ndarray = bR,
-        ) -> _Clearance:
-            return min_clearance(C[k], radii[body], (c[k], h, R[k]), cap=1.0)
+            L: np.ndarray = local,
+            Fw: np.ndarray = Fw,
+        ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray | None]:
+            # World boxes only at the samples evaluated (climber_box_arrays' arithmetic).
+            Tb = Fw[k][:, box_frame] @ box_origin
+            Ck, bc, bR = C[k], Tb[..., :3, 3], Tb[..., :3, :3]
 
-        def self_groups(
-            k: np.ndarray,
-            C: np.ndarray = cb,
-            c: np.ndarray = bc,
-            h: np.ndarray = bh,
-            R: np.ndarray = bR,
-        ) -> _GroupClearance:
-            return _group_clearance(
-                C[k], radii[body], (c[k], h, R[k]), box_link, len(links), cap=1.0
-            )
+            def pairs(rows: np.ndarray, si: np.ndarray, bi: np.ndarray) -> np.ndarray:
+                rel = Ck[rows][:, si] - bc[rows][:, bi]
+                d, _ = point_box_closed_form(rel, box_half[bi], bR[rows][:, bi], directions=False)
+                return d - radii_body[si]
+
+            return culled_clearance(
+                L[k], radii_body, box_local, box_link, pairs,
+                cap=1.0, window=window, per_group=per_group,
+            )  # fmt: skip
+
+        def self_min(k: np.ndarray, ev: Any = self_eval) -> _Clearance:
+            out, sph, box, _ = ev(k, CULL_WINDOW, False)
+            return out, sph, box
+
+        def self_groups(k: np.ndarray, ev: Any = self_eval) -> _GroupClearance:
+            out, sph, box, per = ev(k, CULL_WINDOW_COARSE, True)
+            return out, sph, box, per
 
         self_cf.add(s, moved_rel, self_min, self_groups)
         if e >= n - 1:
