@@ -22,7 +22,7 @@ import numpy as np
 from scipy.interpolate import CubicSpline, PchipInterpolator
 
 from planners.cmbot.arm import ArmKinematics
-from planners.cmbot.balance import arm_mass_points, climber_mass_points, flip_moment, merge
+from planners.cmbot.balance import arm_mass_points_at, climber_mass_points_at, flip_moment, merge
 from planners.cmbot.distance import (
     Cuboid,
     boxes_arrays,
@@ -33,7 +33,7 @@ from planners.cmbot.distance import (
 from planners.cmbot.experiment import ClearanceFilter, Section4Trajectory
 from planners.cmbot.gait import GaitTrajectory
 from planners.cmbot.guardrail import Guardrail
-from planners.cmbot.scene import arm_base_pose, climber_box_layout
+from planners.cmbot.scene import climber_box_layout
 
 
 @dataclass(frozen=True)
@@ -507,54 +507,22 @@ def _limit_checks(
     )
 
 
-def _world_sphere_centers(arm: ArmKinematics, q_arm: np.ndarray, T_wk: np.ndarray) -> np.ndarray:
-    """World centres (T,S,3) of the arm's spheres: ``T_wk · sphere_centers(frames(q))``
-    regrouped per frame (one (T,3,3) product per frame instead of a (T,S,4,4)
-    gather), equal to rounding."""
+def _world_sphere_centers(arm: ArmKinematics, W: np.ndarray) -> np.ndarray:
+    """World centres (T,S,3) of the arm's spheres from its world frames ``W``
+    (T,9,4,4) = ``T_wk · frames(q)``: regrouped per frame (one (T,3,3) product
+    per frame instead of a (T,S,4,4) gather), equal to rounding."""
     s = arm.spheres
-    W = T_wk[:, None] @ arm.frames(q_arm)
-    out = np.empty((len(q_arm), len(s.frame), 3))
+    out = np.empty((len(W), len(s.frame), 3))
     for f in np.unique(s.frame):
         idx = np.flatnonzero(s.frame == f)
         out[:, idx] = s.local[idx] @ np.swapaxes(W[:, f, :3, :3], -1, -2) + W[:, None, f, :3, 3]
     return out
 
 
-def _flip_moment_chunked(
-    model: Any,
-    arm: ArmKinematics,
-    t: np.ndarray,
-    q: np.ndarray,
-    rear: np.ndarray,
-    front: np.ndarray,
-    sup: np.ndarray,
-    chunk: int,
-) -> np.ndarray:
-    """Eq. 9 about the holding sole, counterweight as planned: the ``M`` of
-    :func:`planners.cmbot.gait.flip_moments` (same step dt, same arithmetic)
-    over chunks.  The accelerations are central differences of central
-    differences, so each chunk is evaluated with two samples of margin on
-    each side and only its own samples are kept: identical values, memory
-    bounded by the chunk instead of the motion."""
-    n = len(t)
-    dt = float(np.median(np.diff(t))) if n > 1 else 1.0
-    if n < 3:
-        dt = 0.0  # accelerations() is zero below three samples
-    out = np.zeros((n, 3))
-    chunk = max(chunk, 3)
-    for s in range(0, n, chunk):
-        e = min(s + chunk, n)
-        lo, hi = max(0, s - 2), min(n, e + 2)
-        T_wr = np.broadcast_to(np.eye(4), (hi - lo, 4, 4)).copy()
-        T_wr[:, :3, 3] = rear[lo:hi]
-        T_wk = arm_base_pose(model, q[lo:hi, :5], T_wr)
-        pts = merge(
-            climber_mass_points(model, q[lo:hi, :5], T_wr),
-            arm_mass_points(arm, q[lo:hi, 5:], T_wk),
-        )
-        pivot = np.where((sup[lo:hi] == 2)[:, None], front[lo:hi], rear[lo:hi])
-        out[s:e] = flip_moment(pts, pivot, dt if dt else None)[s - lo : e - lo]
-    return out
+def _norm3(v: np.ndarray) -> np.ndarray:
+    """Euclidean norm over the last (length-3) axis, written per axis (a
+    reduction over a length-3 axis costs far more than the arithmetic)."""
+    return np.sqrt(v[..., 0] * v[..., 0] + v[..., 1] * v[..., 1] + v[..., 2] * v[..., 2])
 
 
 def simulate_climb(
@@ -631,21 +599,7 @@ def simulate_climb(
         "m",
         upper=False,
     )
-    # Flip moment (Eq. 9) at the fine steps, single support only.
     arm = ArmKinematics.from_model(model)
-    M = _flip_moment_chunked(model, arm, t, q, rear, front, sup, chunk)
-    hold = c["foot_length_m"] / 2 * model.params["magnet"]["holding_force_N"]
-    My = np.where(sup > 0, np.abs(M[:, 1]), 0.0)
-    _record(
-        rep,
-        "flip_torque",
-        My,
-        hold,
-        t,
-        lambda k: f"about the {'rear' if sup[k] == 1 else 'front'} sole",
-        "|flip moment| about the holding sole",
-        "N·m",
-    )
     # Clearance of the folded arm: guardrail (≥ arm_clearance_m) and own climbing
     # links (≥ 0), coarse-then-fine (CoarseFineClearance) over bounded chunks.
     lo = float(min(rear[:, 0].min(), front[:, 0].min())) - 3.0
@@ -664,16 +618,32 @@ def simulate_climb(
     radii_body = radii[body]
     env_group = np.zeros(len(env), dtype=int)
     step = max(1, chunk // env_cf.stride) * env_cf.stride
+    # Eq. 9 with the step dt and arithmetic of gait.flip_moments (accelerations
+    # are zero below three samples).
+    dt = float(np.median(np.diff(t))) if n > 2 else 0.0
+    M = np.zeros((n, 3))
     s = 0
     while n:
         e = min(s + step, n - 1)
-        sl = slice(s, e + 1)
-        T_wr = np.broadcast_to(np.eye(4), (e + 1 - s, 4, 4)).copy()
-        T_wr[:, :3, 3] = rear[sl]
-        T_wk = arm_base_pose(model, q[sl, :5], T_wr)
-        centers = _world_sphere_centers(arm, q[sl, 5:], T_wk)
+        # FK once per chunk for the flip moment and both clearances, with two
+        # samples of margin on each side: the accelerations are central
+        # differences of central differences, so the chunk's own flip moments
+        # equal those of one pass over the motion.
+        lo, hi = max(0, s - 2), min(n, e + 3)
+        T_wr = np.broadcast_to(np.eye(4), (hi - lo, 4, 4)).copy()
+        T_wr[:, :3, 3] = rear[lo:hi]
+        Fc = model.climber.link_frames(q[lo:hi, :5])
+        T_wk = T_wr @ Fc[:, 2] @ model.arm_mount  # arm_base_pose's arithmetic
+        W = T_wk[:, None] @ arm.frames(q[lo:hi, 5:])  # the arm's world frames
+        Fw = T_wr[:, None] @ Fc  # the climber's world frames
+        f_end = n if e >= n - 1 else e  # flip moments of s … e − 1 (… n − 1 at the end)
+        pts = merge(climber_mass_points_at(model, Fw), arm_mass_points_at(arm, W))
+        pivot = np.where((sup[lo:hi] == 2)[:, None], front[lo:hi], rear[lo:hi])
+        M[s:f_end] = flip_moment(pts, pivot, dt if dt else None)[s - lo : f_end - lo]
+        own = slice(s - lo, e + 1 - lo)  # the clearance chunk: samples s … e
+        centers = _world_sphere_centers(arm, W[own])
         # Per sphere: its own displacement bounds its own clearance.
-        moved = np.linalg.norm(np.diff(centers, axis=0), axis=-1)
+        moved = _norm3(np.diff(centers, axis=0))
 
         def env_min(k: np.ndarray, C: np.ndarray = centers) -> _Clearance:
             return min_clearance(C[k], radii, env_arr, cap=1.0)
@@ -694,13 +664,20 @@ def simulate_climb(
         env_cf.add(s, moved, env_min, env_groups)
         # Self clearance: the boxes ride on the climber's links, so the bound is
         # the spheres' displacement in every link frame.
-        Fw = T_wr[:, None] @ model.climber.link_frames(q[sl, :5])
+        Fw = Fw[own]
         cb = centers[:, body]
         F = Fw[:, links]
-        local = (cb[:, None] - F[:, :, None, :3, 3]) @ F[:, :, :3, :3]
-        moved_rel = np.linalg.norm(np.diff(local, axis=0), axis=-1).reshape(
-            e - s, local[0, ..., 0].size
-        )
+        # x_local = Rᵀx − Rᵀo in every link at once: one (S,3)·(3,3L) product
+        # per sample (bounds only: rounding is far within the slack).
+        G = len(links)
+        R = F[:, :, :3, :3]
+        Rcat = np.swapaxes(R, 1, 2).reshape(len(F), 3, 3 * G)  # [R_0 … R_G−1]
+        off = np.einsum("tlj,tljk->tlk", F[:, :, :3, 3], R).reshape(len(F), 1, 3 * G)
+        flat = cb @ Rcat - off  # (T,S,3G)
+        nb = cb.shape[1]
+        local = flat.reshape(len(F), nb, G, 3).transpose(0, 2, 1, 3)  # (T,G,S,3) view
+        dl = np.diff(flat, axis=0).reshape(e - s, nb, G, 3)
+        moved_rel = np.swapaxes(_norm3(dl), 1, 2).reshape(e - s, G * nb)  # group-major (G·S)
 
         def self_eval(
             k: np.ndarray,
@@ -736,6 +713,19 @@ def simulate_climb(
         if e >= n - 1:
             break
         s = e
+    # Flip moment (Eq. 9) at the fine steps, single support only.
+    hold = c["foot_length_m"] / 2 * model.params["magnet"]["holding_force_N"]
+    My = np.where(sup > 0, np.abs(M[:, 1]), 0.0)
+    _record(
+        rep,
+        "flip_torque",
+        My,
+        hold,
+        t,
+        lambda k: f"about the {'rear' if sup[k] == 1 else 'front'} sole",
+        "|flip moment| about the holding sole",
+        "N·m",
+    )
     rep.clearance_samples = {"arm_env": env_cf.evaluated, "self": self_cf.evaluated}
     si, bi = env_cf.sphere, env_cf.box
     _record(
