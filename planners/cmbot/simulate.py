@@ -346,9 +346,11 @@ class CoarseFineClearance:
             dmin, sph, box, d = groups(coarse)
             self._store(start, coarse, (dmin, sph, box))
         thr = max(self.limit, self._seen) + _BOUND_SLACK_M
-        path = np.concatenate([np.zeros((1, steps.shape[1])), np.cumsum(steps, axis=0)])
         a, b = coarse[:-1], coarse[1:]
-        lb = ((d[:-1] + d[1:] - (path[b] - path[a])) / 2.0).min(axis=1)
+        # P(a, b) per coarse interval: its steps summed (a[i+1] = b[i], so the
+        # reduceat segments are exactly the intervals' steps)
+        path = np.add.reduceat(steps, a, axis=0) if len(a) else np.zeros((0, steps.shape[1]))
+        lb = ((d[:-1] + d[1:] - path) / 2.0).min(axis=1)
         gaps = b - a - 1
         refine = (lb <= thr) & (gaps > 0)
         fine = _interiors(a[refine], b[refine])
@@ -630,12 +632,14 @@ def simulate_climb(
         # differences of central differences, so the chunk's own flip moments
         # equal those of one pass over the motion.
         lo, hi = max(0, s - 2), min(n, e + 3)
-        T_wr = np.broadcast_to(np.eye(4), (hi - lo, 4, 4)).copy()
-        T_wr[:, :3, 3] = rear[lo:hi]
-        Fc = model.climber.link_frames(q[lo:hi, :5])
-        T_wk = T_wr @ Fc[:, 2] @ model.arm_mount  # arm_base_pose's arithmetic
-        W = T_wk[:, None] @ arm.frames(q[lo:hi, 5:])  # the arm's world frames
-        Fw = T_wr[:, None] @ Fc  # the climber's world frames
+        # The climber's world frames T_wr·F with T_wr the rear sole's translation:
+        # that product only adds the translation (its other terms are exact
+        # zeros), so the frames are F shifted, the same floats without the
+        # (T,7,4,4) product; then the arm base (6) and the arm's world frames.
+        Fw = model.climber.link_frames(q[lo:hi, :5])
+        Fw[..., :3, 3] += rear[lo:hi, None]
+        T_wk = Fw[:, 2] @ model.arm_mount  # arm_base_pose's arithmetic
+        W = T_wk[:, None] @ arm.frames(q[lo:hi, 5:])
         f_end = n if e >= n - 1 else e  # flip moments of s … e − 1 (… n − 1 at the end)
         pts = merge(climber_mass_points_at(model, Fw), arm_mass_points_at(arm, W))
         pivot = np.where((sup[lo:hi] == 2)[:, None], front[lo:hi], rear[lo:hi])
