@@ -511,14 +511,23 @@ def _limit_checks(
 
 def _world_sphere_centers(arm: ArmKinematics, W: np.ndarray) -> np.ndarray:
     """World centres (T,S,3) of the arm's spheres from its world frames ``W``
-    (T,9,4,4) = ``T_wk · frames(q)``: regrouped per frame (one (T,3,3) product
-    per frame instead of a (T,S,4,4) gather), equal to rounding."""
+    (T,9,4,4) = ``T_wk · frames(q)``: per frame and component, c_k = Σ_j R_kj·l_j
+    + t_k on (T, spheres of the frame) arrays (no per-sample 3×3 products, no
+    length-3 trailing axis in the arithmetic), equal to rounding."""
     s = arm.spheres
-    out = np.empty((len(W), len(s.frame), 3))
+    out = np.empty((3, len(W), len(s.frame)))
     for f in np.unique(s.frame):
         idx = np.flatnonzero(s.frame == f)
-        out[:, idx] = s.local[idx] @ np.swapaxes(W[:, f, :3, :3], -1, -2) + W[:, None, f, :3, 3]
-    return out
+        R = W[:, f, :3, :3]
+        loc = s.local[idx]
+        for k in range(3):
+            out[k][:, idx] = (
+                R[:, k, 0:1] * loc[:, 0]
+                + R[:, k, 1:2] * loc[:, 1]
+                + R[:, k, 2:3] * loc[:, 2]
+                + W[:, f, k, 3:4]
+            )
+    return np.ascontiguousarray(np.moveaxis(out, 0, -1))
 
 
 def _norm3(v: np.ndarray) -> np.ndarray:
@@ -570,13 +579,13 @@ def simulate_climb(
     hold_rear = sup != 2
     hold_front = sup != 1
     bad = np.zeros(len(t))
-    where = ["" for _ in t]
+    where: dict[int, str] = {}  # only the samples with a violation
     for holds, pos, name in ((hold_rear, rear, "rear"), (hold_front, front, "front")):
         ok = guardrail.valid_foothold(pos[:, 0], L) & (np.abs(pos[:, 2]) < 1e-6)
         viol = holds & ~ok
         for k in np.flatnonzero(viol):
             bad[k] = 1.0
-            where[k] = (
+            where[int(k)] = (
                 f"{name} sole at x = {pos[k, 0]:.3f} m: {guardrail.why_invalid(pos[k, 0], L) or 'off the bar top'}"
             )
     _record(
@@ -585,7 +594,7 @@ def simulate_climb(
         bad,
         0.0,
         t,
-        lambda k: where[k],
+        lambda k: where.get(k, ""),
         "holding soles off a valid foothold (count)",
         "",
     )
