@@ -396,6 +396,7 @@ def culled_clearance(
     cap: float,
     window: int,
     per_group: bool,
+    per_group_local: bool = False,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray | None]:
     """Windowed Lipschitz culling of sphere–box clearances (boxes in groups, each
     group fixed in its own frame).
@@ -410,6 +411,10 @@ def culled_clearance(
     the minimum below the cap nor tie with it, so only the others go to
     ``exact(rows, si, bi)`` (t,P).  ``per_group`` takes the smallest upper end
     per (group, sphere), which also gives each group's minimum per sphere.
+    With ``per_group_local`` those per-group minima come from the groups' own
+    frames (boxes static there: no per-sample box transforms), less the
+    slack — lower bounds within ``_CULL_SLACK_M`` of the exact minima — and
+    only the pairs that can hold the overall minimum go to ``exact``.
 
     Returns, per sample, the clearance capped at ``cap``, its sphere and box
     (the dense check's first pair on ties: pairs stay sphere-major) and, with
@@ -445,21 +450,33 @@ def culled_clearance(
             bound = np.minimum(hmin[:, slot], cap)
         else:
             bound = np.full_like(hi, min(float(hi.min()), cap))
-        si, bi = np.nonzero(lo <= bound + _CULL_SLACK_M)
+        keep = lo <= bound + _CULL_SLACK_M
+        si, bi = np.nonzero(keep)
         if not len(si):
             continue  # every pair stays beyond the cap here
         rows = np.arange(a, b)
-        d = exact(rows, si, bi)  # (t,P)
+        if per is not None and per_group_local:
+            # per-group values from the groups' frames; world-frame distances
+            # only for the pairs that can hold the overall minimum
+            dl, _ = point_box_closed_form(
+                C[:, group[bi], si] - bc[bi], bh[bi], bR[bi], directions=False
+            )
+            dper = dl - r[si] - _CULL_SLACK_M
+            ti, tb = np.nonzero(keep & (lo <= min(float(hi.min()), cap) + _CULL_SLACK_M))
+            d = exact(rows, ti, tb)
+        else:
+            ti, tb = si, bi
+            d = dper = exact(rows, si, bi)  # (t,P)
         kk = d.argmin(axis=1)
         out[a:b] = np.minimum(d[np.arange(b - a), kk], cap)
-        sph[a:b] = si[kk]
-        box[a:b] = bi[kk]
+        sph[a:b] = ti[kk]
+        box[a:b] = tb[kk]
         if per is not None:
             key = group[bi] * S + si
             o = np.argsort(key, kind="stable")
             ks = key[o]
             cut = np.flatnonzero(np.r_[True, ks[1:] != ks[:-1]])
-            per[a:b, ks[cut]] = np.minimum(np.minimum.reduceat(d[:, o], cut, axis=1), cap)
+            per[a:b, ks[cut]] = np.minimum(np.minimum.reduceat(dper[:, o], cut, axis=1), cap)
     return out, sph, box, per
 
 
@@ -711,7 +728,7 @@ def simulate_climb(
 
             return culled_clearance(
                 L[k], radii_body, box_local, box_link, pairs,
-                cap=1.0, window=window, per_group=per_group,
+                cap=1.0, window=window, per_group=per_group, per_group_local=True,
             )  # fmt: skip
 
         def self_min(k: np.ndarray, ev: Any = self_eval) -> _Clearance:
