@@ -286,7 +286,7 @@ _GroupClearance = tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]
 COARSE_STRIDE = 16
 
 #: Samples per FK/clearance chunk of :func:`simulate_climb` (bounds every per-sample array).
-GATE_CHUNK = 1024
+GATE_CHUNK = 2048
 
 #: Slack on the coarse-then-fine lower bound against rounding (metres; far below any margin).
 _BOUND_SLACK_M = 1e-9
