@@ -45,10 +45,14 @@ class MassPoints:
 
 def climber_mass_points(model: Any, q_climb: np.ndarray, T_world_rear: np.ndarray) -> MassPoints:
     """Climbing-chain masses (rear foot, links 1–5, front foot) in the world (T,7,3)."""
+    F = np.asarray(T_world_rear)[..., None, :, :] @ model.climber.link_frames(q_climb)
+    return climber_mass_points_at(model, F)
+
+
+def climber_mass_points_at(model: Any, F: np.ndarray) -> MassPoints:
+    """:func:`climber_mass_points` from the world frames (T,7,4,4) of the chain
+    (base, J1…J5, end), for callers that already have them."""
     c = model.climber
-    F = np.asarray(T_world_rear)[..., None, :, :] @ c.link_frames(
-        q_climb
-    )  # (T,7,4,4): base, J1…J5, end
     coms = np.vstack([c.base_mass[1], c.link_coms, c.end_mass[1]])
     masses = np.concatenate([[c.base_mass[0]], c.link_masses, [c.end_mass[0]]])
     pos = np.einsum("tkij,kj->tki", F[..., :3, :3], coms) + F[..., :3, 3]
@@ -61,6 +65,11 @@ def arm_mass_points(
 ) -> MassPoints:
     """Arm masses (base + J6…J12 links, optional payload at Q) in the world (T,K,3)."""
     F = np.asarray(T_world_base)[..., None, :, :] @ arm.frames(q_arm)  # (T,9,4,4)
+    return arm_mass_points_at(arm, F, payload_kg)
+
+
+def arm_mass_points_at(arm: Any, F: np.ndarray, payload_kg: float = 0.0) -> MassPoints:
+    """:func:`arm_mass_points` from the arm's world frames (T,9,4,4)."""
     pos = np.einsum("tkij,kj->tki", F[..., :8, :3, :3], arm.coms) + F[..., :8, :3, 3]
     masses = arm.masses.copy()
     labels = ["arm_base", *[f"link{i}" for i in range(6, 13)]]

@@ -113,6 +113,8 @@ def point_box_closed_form(
     (no reductions over the length-3 axis): numpy's reductions and small
     matmuls over tiny trailing axes cost far more than the arithmetic.
     """
+    if not directions:
+        return _point_box_distance(rel, half, R), None
     r0, r1, r2 = rel[..., 0:1], rel[..., 1:2], rel[..., 2:3]
     # local_i = Σ_j R_ji·rel_j: the point in the box's own axes
     local = r0 * R[..., 0, :] + r1 * R[..., 1, :] + r2 * R[..., 2, :]
@@ -137,6 +139,23 @@ def point_box_closed_form(
     n = np.where(inside[..., None], n_in, n_out)
     u = R[..., :, 0] * n[..., 0:1] + R[..., :, 1] * n[..., 1:2] + R[..., :, 2] * n[..., 2:3]
     return d, u
+
+
+def _point_box_distance(rel: np.ndarray, half: np.ndarray, R: np.ndarray) -> np.ndarray:
+    """:func:`point_box_closed_form`'s distance alone, one array per component
+    (no length-3 trailing axis in any operation: those run numpy's inner
+    loops three elements at a time).  The same operations in the same order
+    per element, so the same floats."""
+    r0, r1, r2 = rel[..., 0], rel[..., 1], rel[..., 2]
+    gaps, ex = [], []
+    for k in range(3):
+        local = r0 * R[..., 0, k] + r1 * R[..., 1, k] + r2 * R[..., 2, k]
+        g = half[..., k] - np.abs(local)
+        gaps.append(g)
+        ex.append(np.maximum(-g, 0.0))
+    dist_out = np.sqrt(ex[0] * ex[0] + ex[1] * ex[1] + ex[2] * ex[2])
+    depth = np.minimum(np.minimum(gaps[0], gaps[1]), gaps[2])
+    return np.where(dist_out <= 0.0, -depth, dist_out)
 
 
 def sphere_box_exact(

@@ -61,12 +61,10 @@ def climber_boxes(model: Any, q_climb: np.ndarray, T_world_rear: np.ndarray) -> 
     return out
 
 
-def climber_box_arrays(
-    model: Any, q_climb: np.ndarray, T_world_rear: np.ndarray
-) -> tuple[np.ndarray, np.ndarray, np.ndarray, list[str]]:
-    """Vectorised :func:`climber_boxes` over time: centres (T,M,3), half
-    extents (M,3), rotations (T,M,3,3) and names (M,)."""
-    F = np.asarray(T_world_rear)[..., None, :, :] @ model.climber.link_frames(q_climb)
+def climber_box_layout(model: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray, list[str]]:
+    """The climbing mechanism's collision boxes in their links: link frame index
+    (into ``link_frames``, CLIMBER_LINKS order) (M,), box origin in that link
+    (M,4,4), half extents (M,3) and names (M,)."""
     frames, origins, halves, names = [], [], [], []
     for k, link in enumerate(CLIMBER_LINKS):
         for i, b in enumerate(model.collision_boxes.get(link, [])):
@@ -74,8 +72,23 @@ def climber_box_arrays(
             origins.append(b.origin)
             halves.append(b.half)
             names.append(f"{link}.{i}")
-    T = F[..., frames, :, :] @ np.array(origins)
-    return T[..., :3, 3], np.array(halves), T[..., :3, :3], names
+    return (
+        np.array(frames, dtype=int),
+        np.array(origins).reshape(-1, 4, 4),
+        np.array(halves).reshape(-1, 3),
+        names,
+    )
+
+
+def climber_box_arrays(
+    model: Any, q_climb: np.ndarray, T_world_rear: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, list[str]]:
+    """Vectorised :func:`climber_boxes` over time: centres (T,M,3), half
+    extents (M,3), rotations (T,M,3,3) and names (M,)."""
+    F = np.asarray(T_world_rear)[..., None, :, :] @ model.climber.link_frames(q_climb)
+    frames, origins, halves, names = climber_box_layout(model)
+    T = F[..., frames, :, :] @ origins
+    return T[..., :3, 3], halves, T[..., :3, :3], names
 
 
 @dataclass(frozen=True)

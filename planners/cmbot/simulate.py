@@ -22,12 +22,18 @@ import numpy as np
 from scipy.interpolate import CubicSpline, PchipInterpolator
 
 from planners.cmbot.arm import ArmKinematics
-from planners.cmbot.balance import arm_mass_points, climber_mass_points, flip_moment, merge
-from planners.cmbot.distance import Cuboid, boxes_arrays, sphere_box_exact, sphere_box_pairs
+from planners.cmbot.balance import arm_mass_points_at, climber_mass_points_at, flip_moment, merge
+from planners.cmbot.distance import (
+    Cuboid,
+    boxes_arrays,
+    point_box_closed_form,
+    sphere_box_exact,
+    sphere_box_pairs,
+)
 from planners.cmbot.experiment import ClearanceFilter, Section4Trajectory
 from planners.cmbot.gait import GaitTrajectory
 from planners.cmbot.guardrail import Guardrail
-from planners.cmbot.scene import CLIMBER_LINKS, arm_base_pose, climber_box_arrays
+from planners.cmbot.scene import climber_box_layout
 
 
 @dataclass(frozen=True)
@@ -280,7 +286,7 @@ _GroupClearance = tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]
 COARSE_STRIDE = 16
 
 #: Samples per FK/clearance chunk of :func:`simulate_climb` (bounds every per-sample array).
-GATE_CHUNK = 1024
+GATE_CHUNK = 2048
 
 #: Slack on the coarse-then-fine lower bound against rounding (metres; far below any margin).
 _BOUND_SLACK_M = 1e-9
@@ -340,9 +346,11 @@ class CoarseFineClearance:
             dmin, sph, box, d = groups(coarse)
             self._store(start, coarse, (dmin, sph, box))
         thr = max(self.limit, self._seen) + _BOUND_SLACK_M
-        path = np.concatenate([np.zeros((1, steps.shape[1])), np.cumsum(steps, axis=0)])
         a, b = coarse[:-1], coarse[1:]
-        lb = ((d[:-1] + d[1:] - (path[b] - path[a])) / 2.0).min(axis=1)
+        # P(a, b) per coarse interval: its steps summed (a[i+1] = b[i], so the
+        # reduceat segments are exactly the intervals' steps)
+        path = np.add.reduceat(steps, a, axis=0) if len(a) else np.zeros((0, steps.shape[1]))
+        lb = ((d[:-1] + d[1:] - path) / 2.0).min(axis=1)
         gaps = b - a - 1
         refine = (lb <= thr) & (gaps > 0)
         fine = _interiors(a[refine], b[refine])
@@ -364,43 +372,112 @@ class CoarseFineClearance:
             self._seen = min(self._seen, float(np.min(d)))
 
 
-def _group_clearance(
-    centers: np.ndarray,
+#: Window [evaluated samples] of :func:`culled_clearance` for the fine samples.
+CULL_WINDOW = 48
+
+#: Window of :func:`culled_clearance` for the coarse samples (``COARSE_STRIDE`` apart).
+CULL_WINDOW_COARSE = 24
+
+#: Slack on the culling comparison [m]: the bounds come from the groups' own
+#: frames, the exact distances from the world frame (rounding apart, equal).
+_CULL_SLACK_M = 1e-9
+
+#: Exact distances (t, P) of the pairs (spheres ``si``, boxes ``bi``) at samples ``rows``.
+_PairDistances = Callable[[np.ndarray, np.ndarray, np.ndarray], np.ndarray]
+
+
+def culled_clearance(
+    local: np.ndarray,
     radii: np.ndarray,
     boxes: tuple[np.ndarray, np.ndarray, np.ndarray],
     group: np.ndarray,
-    n_groups: int,
+    exact: _PairDistances,
     *,
     cap: float,
-    chunk: int = 256,
-) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """:func:`min_clearance`'s (clearance, sphere, box) per time step and, from
-    the same distances, the smallest distance (capped) per box group and
-    sphere, flattened group-major (T, G·S).  Boxes may carry the time axis.
+    window: int,
+    per_group: bool,
+    per_group_local: bool = False,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray | None]:
+    """Windowed Lipschitz culling of sphere–box clearances (boxes in groups, each
+    group fixed in its own frame).
 
-    The same values as :func:`min_clearance` (which only skips boxes that
-    cannot come below ``cap``); the sphere and box of a sample whose
-    clearance is capped may differ (they name no violation)."""
+    ``local`` (T,G,S,3): the sphere centres in each group's frame; ``boxes``
+    (centres, half extents, rotations) in their group's frame, ``group`` (M,)
+    the group of each box.  Within a window of ``window`` samples sphere i
+    stays, in group g's frame, in a ball (m_gi, ρ_gi); the signed distance to
+    a box being 1-Lipschitz (rigid frames keep distances), every sample's
+    d_ij lies in D_ij(m) − r_i ± ρ (the seed's closed form, §3.2 Fig. 13).
+    A pair whose lower end exceeds min(smallest upper end, cap) can be neither
+    the minimum below the cap nor tie with it, so only the others go to
+    ``exact(rows, si, bi)`` (t,P).  ``per_group`` takes the smallest upper end
+    per (group, sphere), which also gives each group's minimum per sphere.
+    With ``per_group_local`` those per-group minima come from the groups' own
+    frames (boxes static there: no per-sample box transforms), less the
+    slack — lower bounds within ``_CULL_SLACK_M`` of the exact minima — and
+    only the pairs that can hold the overall minimum go to ``exact``.
+
+    Returns, per sample, the clearance capped at ``cap``, its sphere and box
+    (the dense check's first pair on ties: pairs stay sphere-major) and, with
+    ``per_group``, the capped minimum per group and sphere (T, G·S).
+    """
+    T, G, S = local.shape[:3]
     bc, bh, bR = boxes
-    T, S = centers.shape[:2]
-    M = len(bh)
+    r = np.asarray(radii, dtype=float)
     out = np.full(T, cap)
     sph = np.zeros(T, dtype=int)
     box = np.zeros(T, dtype=int)
-    per = np.full((T, n_groups, S), cap)
-    for a in range(0, T if M else 0, chunk):
-        b = min(a + chunk, T)
-        sub = (bc[a:b], bh, bR[a:b]) if bc.ndim == 3 else (bc, bh, bR)
-        d, _ = sphere_box_exact(centers[a:b], radii, sub, directions=False)  # (t, S, M)
-        flat = d.reshape(b - a, -1)
-        kk = flat.argmin(axis=1)
-        out[a:b] = np.minimum(flat[np.arange(b - a), kk], cap)
-        sph[a:b] = kk // M
-        box[a:b] = kk % M
-        for g in range(n_groups):
-            if np.any(group == g):
-                per[a:b, g] = np.minimum(d[:, :, group == g].min(axis=2), cap)
-    return out, sph, box, per.reshape(T, n_groups * S)
+    per = np.full((T, G * S), cap) if per_group else None
+    if not len(bh) or not T:
+        return out, sph, box, per
+    order = np.argsort(group, kind="stable")
+    starts = np.flatnonzero(np.r_[True, np.diff(group[order]) != 0])
+    first = group[order][starts]
+    for a in range(0, T, window):
+        b = min(a + window, T)
+        C = local[a:b]
+        mid = 0.5 * (C.max(axis=0) + C.min(axis=0))  # (G,S,3)
+        dx = C - mid
+        rho = np.sqrt(dx[..., 0] ** 2 + dx[..., 1] ** 2 + dx[..., 2] ** 2).max(axis=0)  # (G,S)
+        rel = np.swapaxes(mid[group], 0, 1) - bc  # (S,M,3): sphere i in box j's frame
+        dm, _ = point_box_closed_form(rel, bh, bR, directions=False)
+        spread = rho[group].T  # (S,M)
+        lo = dm - r[:, None] - spread
+        hi = dm - r[:, None] + spread
+        if per_group:
+            # smallest upper end over each (group, sphere), spread back over its boxes
+            hmin = np.minimum.reduceat(hi[:, order], starts, axis=1)  # (S, groups present)
+            slot = np.searchsorted(first, group)
+            bound = np.minimum(hmin[:, slot], cap)
+        else:
+            bound = np.full_like(hi, min(float(hi.min()), cap))
+        keep = lo <= bound + _CULL_SLACK_M
+        si, bi = np.nonzero(keep)
+        if not len(si):
+            continue  # every pair stays beyond the cap here
+        rows = np.arange(a, b)
+        if per is not None and per_group_local:
+            # per-group values from the groups' frames; world-frame distances
+            # only for the pairs that can hold the overall minimum
+            dl, _ = point_box_closed_form(
+                C[:, group[bi], si] - bc[bi], bh[bi], bR[bi], directions=False
+            )
+            dper = dl - r[si] - _CULL_SLACK_M
+            ti, tb = np.nonzero(keep & (lo <= min(float(hi.min()), cap) + _CULL_SLACK_M))
+            d = exact(rows, ti, tb)
+        else:
+            ti, tb = si, bi
+            d = dper = exact(rows, si, bi)  # (t,P)
+        kk = d.argmin(axis=1)
+        out[a:b] = np.minimum(d[np.arange(b - a), kk], cap)
+        sph[a:b] = ti[kk]
+        box[a:b] = tb[kk]
+        if per is not None:
+            key = group[bi] * S + si
+            o = np.argsort(key, kind="stable")
+            ks = key[o]
+            cut = np.flatnonzero(np.r_[True, ks[1:] != ks[:-1]])
+            per[a:b, ks[cut]] = np.minimum(np.minimum.reduceat(dper[:, o], cut, axis=1), cap)
+    return out, sph, box, per
 
 
 def _interiors(a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -449,54 +526,31 @@ def _limit_checks(
     )
 
 
-def _world_sphere_centers(arm: ArmKinematics, q_arm: np.ndarray, T_wk: np.ndarray) -> np.ndarray:
-    """World centres (T,S,3) of the arm's spheres: ``T_wk · sphere_centers(frames(q))``
-    regrouped per frame (one (T,3,3) product per frame instead of a (T,S,4,4)
-    gather), equal to rounding."""
+def _world_sphere_centers(arm: ArmKinematics, W: np.ndarray) -> np.ndarray:
+    """World centres (T,S,3) of the arm's spheres from its world frames ``W``
+    (T,9,4,4) = ``T_wk · frames(q)``: per frame and component, c_k = Σ_j R_kj·l_j
+    + t_k on (T, spheres of the frame) arrays (no per-sample 3×3 products, no
+    length-3 trailing axis in the arithmetic), equal to rounding."""
     s = arm.spheres
-    W = T_wk[:, None] @ arm.frames(q_arm)
-    out = np.empty((len(q_arm), len(s.frame), 3))
+    out = np.empty((3, len(W), len(s.frame)))
     for f in np.unique(s.frame):
         idx = np.flatnonzero(s.frame == f)
-        out[:, idx] = s.local[idx] @ np.swapaxes(W[:, f, :3, :3], -1, -2) + W[:, None, f, :3, 3]
-    return out
+        R = W[:, f, :3, :3]
+        loc = s.local[idx]
+        for k in range(3):
+            out[k][:, idx] = (
+                R[:, k, 0:1] * loc[:, 0]
+                + R[:, k, 1:2] * loc[:, 1]
+                + R[:, k, 2:3] * loc[:, 2]
+                + W[:, f, k, 3:4]
+            )
+    return np.ascontiguousarray(np.moveaxis(out, 0, -1))
 
 
-def _flip_moment_chunked(
-    model: Any,
-    arm: ArmKinematics,
-    t: np.ndarray,
-    q: np.ndarray,
-    rear: np.ndarray,
-    front: np.ndarray,
-    sup: np.ndarray,
-    chunk: int,
-) -> np.ndarray:
-    """Eq. 9 about the holding sole, counterweight as planned: the ``M`` of
-    :func:`planners.cmbot.gait.flip_moments` (same step dt, same arithmetic)
-    over chunks.  The accelerations are central differences of central
-    differences, so each chunk is evaluated with two samples of margin on
-    each side and only its own samples are kept: identical values, memory
-    bounded by the chunk instead of the motion."""
-    n = len(t)
-    dt = float(np.median(np.diff(t))) if n > 1 else 1.0
-    if n < 3:
-        dt = 0.0  # accelerations() is zero below three samples
-    out = np.zeros((n, 3))
-    chunk = max(chunk, 3)
-    for s in range(0, n, chunk):
-        e = min(s + chunk, n)
-        lo, hi = max(0, s - 2), min(n, e + 2)
-        T_wr = np.broadcast_to(np.eye(4), (hi - lo, 4, 4)).copy()
-        T_wr[:, :3, 3] = rear[lo:hi]
-        T_wk = arm_base_pose(model, q[lo:hi, :5], T_wr)
-        pts = merge(
-            climber_mass_points(model, q[lo:hi, :5], T_wr),
-            arm_mass_points(arm, q[lo:hi, 5:], T_wk),
-        )
-        pivot = np.where((sup[lo:hi] == 2)[:, None], front[lo:hi], rear[lo:hi])
-        out[s:e] = flip_moment(pts, pivot, dt if dt else None)[s - lo : e - lo]
-    return out
+def _norm3(v: np.ndarray) -> np.ndarray:
+    """Euclidean norm over the last (length-3) axis, written per axis (a
+    reduction over a length-3 axis costs far more than the arithmetic)."""
+    return np.sqrt(v[..., 0] * v[..., 0] + v[..., 1] * v[..., 1] + v[..., 2] * v[..., 2])
 
 
 def simulate_climb(
@@ -542,13 +596,13 @@ def simulate_climb(
     hold_rear = sup != 2
     hold_front = sup != 1
     bad = np.zeros(len(t))
-    where = ["" for _ in t]
+    where: dict[int, str] = {}  # only the samples with a violation
     for holds, pos, name in ((hold_rear, rear, "rear"), (hold_front, front, "front")):
         ok = guardrail.valid_foothold(pos[:, 0], L) & (np.abs(pos[:, 2]) < 1e-6)
         viol = holds & ~ok
         for k in np.flatnonzero(viol):
             bad[k] = 1.0
-            where[k] = (
+            where[int(k)] = (
                 f"{name} sole at x = {pos[k, 0]:.3f} m: {guardrail.why_invalid(pos[k, 0], L) or 'off the bar top'}"
             )
     _record(
@@ -557,7 +611,7 @@ def simulate_climb(
         bad,
         0.0,
         t,
-        lambda k: where[k],
+        lambda k: where.get(k, ""),
         "holding soles off a valid foothold (count)",
         "",
     )
@@ -573,9 +627,123 @@ def simulate_climb(
         "m",
         upper=False,
     )
-    # Flip moment (Eq. 9) at the fine steps, single support only.
     arm = ArmKinematics.from_model(model)
-    M = _flip_moment_chunked(model, arm, t, q, rear, front, sup, chunk)
+    # Clearance of the folded arm: guardrail (≥ arm_clearance_m) and own climbing
+    # links (≥ 0), coarse-then-fine (CoarseFineClearance) over bounded chunks.
+    lo = float(min(rear[:, 0].min(), front[:, 0].min())) - 3.0
+    hi = float(max(rear[:, 0].max(), front[:, 0].max())) + 3.0
+    env = guardrail.boxes(lo, hi)
+    env_arr = boxes_arrays(env)
+    radii = arm.spheres.radius
+    body = arm.spheres.body >= 1
+    n = len(t)
+    env_cf = CoarseFineClearance(n, arm_clearance_m, coarse_stride)
+    self_cf = CoarseFineClearance(n, 0.0, coarse_stride)
+    # The climber's boxes: link frame, origin in it, half extents, names.
+    box_frame, box_origin, box_half, bnames = climber_box_layout(model)
+    links, box_link = np.unique(box_frame, return_inverse=True)
+    box_local = (box_origin[:, :3, 3], box_half, box_origin[:, :3, :3])
+    radii_body = radii[body]
+    env_group = np.zeros(len(env), dtype=int)
+    step = max(1, chunk // env_cf.stride) * env_cf.stride
+    # Eq. 9 with the step dt and arithmetic of gait.flip_moments (accelerations
+    # are zero below three samples).
+    dt = float(np.median(np.diff(t))) if n > 2 else 0.0
+    M = np.zeros((n, 3))
+    s = 0
+    while n:
+        e = min(s + step, n - 1)
+        # FK once per chunk for the flip moment and both clearances, with two
+        # samples of margin on each side: the accelerations are central
+        # differences of central differences, so the chunk's own flip moments
+        # equal those of one pass over the motion.
+        lo, hi = max(0, s - 2), min(n, e + 3)
+        # The climber's world frames T_wr·F with T_wr the rear sole's translation:
+        # that product only adds the translation (its other terms are exact
+        # zeros), so the frames are F shifted, the same floats without the
+        # (T,7,4,4) product; then the arm base (6) and the arm's world frames.
+        Fw = model.climber.link_frames(q[lo:hi, :5])
+        Fw[..., :3, 3] += rear[lo:hi, None]
+        T_wk = Fw[:, 2] @ model.arm_mount  # arm_base_pose's arithmetic
+        W = T_wk[:, None] @ arm.frames(q[lo:hi, 5:])
+        f_end = n if e >= n - 1 else e  # flip moments of s … e − 1 (… n − 1 at the end)
+        pts = merge(climber_mass_points_at(model, Fw), arm_mass_points_at(arm, W))
+        pivot = np.where((sup[lo:hi] == 2)[:, None], front[lo:hi], rear[lo:hi])
+        M[s:f_end] = flip_moment(pts, pivot, dt if dt else None)[s - lo : f_end - lo]
+        own = slice(s - lo, e + 1 - lo)  # the clearance chunk: samples s … e
+        centers = _world_sphere_centers(arm, W[own])
+        # Per sphere: its own displacement bounds its own clearance.
+        moved = _norm3(np.diff(centers, axis=0))
+
+        def env_min(k: np.ndarray, C: np.ndarray = centers) -> _Clearance:
+            return min_clearance(C[k], radii, env_arr, cap=1.0)
+
+        def env_groups(k: np.ndarray, C: np.ndarray = centers) -> _GroupClearance:
+            Ck = C[k]
+
+            def pairs(rows: np.ndarray, si: np.ndarray, bi: np.ndarray) -> np.ndarray:
+                return sphere_box_pairs(Ck[rows], radii, env_arr, si, bi)
+
+            res = culled_clearance(
+                Ck[:, None], radii, env_arr, env_group, pairs,
+                cap=1.0, window=CULL_WINDOW_COARSE, per_group=True,
+            )  # fmt: skip
+            assert res[3] is not None
+            return res[0], res[1], res[2], res[3]
+
+        env_cf.add(s, moved, env_min, env_groups)
+        # Self clearance: the boxes ride on the climber's links, so the bound is
+        # the spheres' displacement in every link frame.
+        Fw = Fw[own]
+        cb = centers[:, body]
+        F = Fw[:, links]
+        # x_local = Rᵀx − Rᵀo in every link at once: one (S,3)·(3,3L) product
+        # per sample (bounds only: rounding is far within the slack).
+        G = len(links)
+        R = F[:, :, :3, :3]
+        Rcat = np.swapaxes(R, 1, 2).reshape(len(F), 3, 3 * G)  # [R_0 … R_G−1]
+        off = np.einsum("tlj,tljk->tlk", F[:, :, :3, 3], R).reshape(len(F), 1, 3 * G)
+        flat = cb @ Rcat - off  # (T,S,3G)
+        nb = cb.shape[1]
+        local = flat.reshape(len(F), nb, G, 3).transpose(0, 2, 1, 3)  # (T,G,S,3) view
+        dl = np.diff(flat, axis=0).reshape(e - s, nb, G, 3)
+        moved_rel = np.swapaxes(_norm3(dl), 1, 2).reshape(e - s, G * nb)  # group-major (G·S)
+
+        def self_eval(
+            k: np.ndarray,
+            window: int,
+            per_group: bool,
+            C: np.ndarray = cb,
+            L: np.ndarray = local,
+            Fw: np.ndarray = Fw,
+        ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray | None]:
+            # World boxes only at the samples evaluated (climber_box_arrays' arithmetic).
+            Tb = Fw[k][:, box_frame] @ box_origin
+            Ck, bc, bR = C[k], Tb[..., :3, 3], Tb[..., :3, :3]
+
+            def pairs(rows: np.ndarray, si: np.ndarray, bi: np.ndarray) -> np.ndarray:
+                rel = Ck[rows][:, si] - bc[rows][:, bi]
+                d, _ = point_box_closed_form(rel, box_half[bi], bR[rows][:, bi], directions=False)
+                return d - radii_body[si]
+
+            return culled_clearance(
+                L[k], radii_body, box_local, box_link, pairs,
+                cap=1.0, window=window, per_group=per_group, per_group_local=True,
+            )  # fmt: skip
+
+        def self_min(k: np.ndarray, ev: Any = self_eval) -> _Clearance:
+            out, sph, box, _ = ev(k, CULL_WINDOW, False)
+            return out, sph, box
+
+        def self_groups(k: np.ndarray, ev: Any = self_eval) -> _GroupClearance:
+            out, sph, box, per = ev(k, CULL_WINDOW_COARSE, True)
+            return out, sph, box, per
+
+        self_cf.add(s, moved_rel, self_min, self_groups)
+        if e >= n - 1:
+            break
+        s = e
+    # Flip moment (Eq. 9) at the fine steps, single support only.
     hold = c["foot_length_m"] / 2 * model.params["magnet"]["holding_force_N"]
     My = np.where(sup > 0, np.abs(M[:, 1]), 0.0)
     _record(
@@ -588,78 +756,6 @@ def simulate_climb(
         "|flip moment| about the holding sole",
         "N·m",
     )
-    # Clearance of the folded arm: guardrail (≥ arm_clearance_m) and own climbing
-    # links (≥ 0), coarse-then-fine (CoarseFineClearance) over bounded chunks.
-    lo = float(min(rear[:, 0].min(), front[:, 0].min())) - 3.0
-    hi = float(max(rear[:, 0].max(), front[:, 0].max())) + 3.0
-    env = guardrail.boxes(lo, hi)
-    env_arr = boxes_arrays(env)
-    radii = arm.spheres.radius
-    body = arm.spheres.body >= 1
-    n = len(t)
-    env_cf = CoarseFineClearance(n, arm_clearance_m, coarse_stride)
-    self_cf = CoarseFineClearance(n, 0.0, coarse_stride)
-    bnames: list[str] = []
-    # Link (frame) of each climber box, as climber_box_arrays orders them.
-    box_frame = np.array(
-        [k for k, ln in enumerate(CLIMBER_LINKS) for _ in model.collision_boxes.get(ln, [])]
-    )
-    links, box_link = np.unique(box_frame, return_inverse=True)
-    env_group = np.zeros(len(env), dtype=int)
-    step = max(1, chunk // env_cf.stride) * env_cf.stride
-    s = 0
-    while n:
-        e = min(s + step, n - 1)
-        sl = slice(s, e + 1)
-        T_wr = np.broadcast_to(np.eye(4), (e + 1 - s, 4, 4)).copy()
-        T_wr[:, :3, 3] = rear[sl]
-        T_wk = arm_base_pose(model, q[sl, :5], T_wr)
-        centers = _world_sphere_centers(arm, q[sl, 5:], T_wk)
-        # Per sphere: its own displacement bounds its own clearance.
-        moved = np.linalg.norm(np.diff(centers, axis=0), axis=-1)
-
-        def env_min(k: np.ndarray, C: np.ndarray = centers) -> _Clearance:
-            return min_clearance(C[k], radii, env_arr, cap=1.0)
-
-        def env_groups(k: np.ndarray, C: np.ndarray = centers) -> _GroupClearance:
-            return _group_clearance(C[k], radii, env_arr, env_group, 1, cap=1.0)
-
-        env_cf.add(s, moved, env_min, env_groups)
-        # Self clearance: the boxes ride on the climber's links, so the bound is
-        # the spheres' displacement in every link frame.
-        F = T_wr[:, None] @ model.climber.link_frames(q[sl, :5])
-        cb = centers[:, body]
-        F = F[:, links]
-        local = (cb[:, None] - F[:, :, None, :3, 3]) @ F[:, :, :3, :3]
-        moved_rel = np.linalg.norm(np.diff(local, axis=0), axis=-1).reshape(
-            e - s, local[0, ..., 0].size
-        )
-        bc, bh, bR, bnames = climber_box_arrays(model, q[sl, :5], T_wr)
-
-        def self_min(
-            k: np.ndarray,
-            C: np.ndarray = cb,
-            c: np.ndarray = bc,
-            h: np.ndarray = bh,
-            R: np.ndarray = bR,
-        ) -> _Clearance:
-            return min_clearance(C[k], radii[body], (c[k], h, R[k]), cap=1.0)
-
-        def self_groups(
-            k: np.ndarray,
-            C: np.ndarray = cb,
-            c: np.ndarray = bc,
-            h: np.ndarray = bh,
-            R: np.ndarray = bR,
-        ) -> _GroupClearance:
-            return _group_clearance(
-                C[k], radii[body], (c[k], h, R[k]), box_link, len(links), cap=1.0
-            )
-
-        self_cf.add(s, moved_rel, self_min, self_groups)
-        if e >= n - 1:
-            break
-        s = e
     rep.clearance_samples = {"arm_env": env_cf.evaluated, "self": self_cf.evaluated}
     si, bi = env_cf.sphere, env_cf.box
     _record(

@@ -101,3 +101,23 @@ def test_batched_boxes_over_time():
     for t in range(T):
         dt_, _ = sphere_box_exact(C[t], r, (bc[t], bh, bR[t]))
         assert np.allclose(d[t], dt_)
+
+
+@settings(max_examples=30, deadline=None, derandomize=True)
+@given(seed=st.integers(0, 2**31 - 1), moving=st.booleans())
+def test_distance_only_path_equals_the_full_closed_form(seed, moving):
+    """The distance-only path (one array per component) gives exactly the
+    floats of the path with directions, outside and inside the boxes, with
+    the boxes broadcast over time or carrying it."""
+    from planners.cmbot.distance import point_box_closed_form
+
+    rng = np.random.default_rng(seed)
+    T, P = 7, 40
+    rel = rng.normal(size=(T, P, 3)) * rng.uniform(0.05, 0.6)
+    half = rng.uniform(0.02, 0.4, (P, 3))
+    R = Rotation.random(T * P if moving else P, random_state=seed % 997).as_matrix()
+    R = R.reshape((T, P, 3, 3) if moving else (P, 3, 3))
+    fast, none = point_box_closed_form(rel, half, R, directions=False)
+    full, _ = point_box_closed_form(rel, half, R, directions=True)
+    assert none is None
+    assert np.array_equal(fast, full)
