@@ -137,9 +137,14 @@ def test_multipart_ranges(monkeypatch) -> None:
     assert body[parts[1].start : parts[1].end] == payload
 
 
-def _write_multipart(path: Path, name: str, write_body) -> str:
+def _write_multipart(path: Path, name: str, write_body, units: str | None = None) -> str:
     boundary = "----steelpathtestboundary"
     with open(path, "wb") as fh:
+        if units is not None:
+            fh.write(
+                f'--{boundary}\r\nContent-Disposition: form-data; name="units"\r\n\r\n'
+                f"{units}\r\n".encode()
+            )
         fh.write(
             f'--{boundary}\r\nContent-Disposition: form-data; name="file"; filename="{name}"\r\n'
             "Content-Type: application/octet-stream\r\n\r\n".encode()
@@ -199,7 +204,12 @@ def test_parser_memory_xyz_60mb(tmp_path: Path) -> None:
     np.testing.assert_allclose(stored[-3:], np.loadtxt(io.StringIO(block)).reshape(-1, 3)[-3:])
 
 
-def test_parser_memory_binary_ply_60mb(tmp_path: Path) -> None:
+@pytest.mark.parametrize("units", ["m", "auto"])
+def test_parser_memory_binary_ply_60mb(tmp_path: Path, units: str) -> None:
+    """60 MB of binary PLY parse within the memory bound, stated in metres or
+    left to the detection: points 1.41 units apart over 4M units read as
+    millimetres, and rescaling the stored array to metres (in place, chunked)
+    stays within the same bound."""
     n = (60 * 2**20) // 16
     dt = np.dtype([("x", "<f4"), ("y", "<f4"), ("z", "<f4"), ("i", "<u4")])
     chunk = np.zeros(1 << 20, dt)
@@ -216,11 +226,15 @@ def test_parser_memory_binary_ply_60mb(tmp_path: Path) -> None:
             fh.write(chunk[:k].tobytes())
 
     raw = tmp_path / "up.part"
-    ctype = _write_multipart(raw, "big.ply", body)
+    ctype = _write_multipart(raw, "big.ply", body, units)
     size = raw.stat().st_size
     outcome, peak = _parse_in_child(raw, ctype, tmp_path / "out.npy")
     assert outcome["ok"] and outcome["n_points"] == n, outcome
     assert peak <= 2 * size + BOUND_EXTRA, f"peak {peak / 2**20:.0f} MB for {size / 2**20:.0f} MB"
-    assert outcome["bounds"] == {"min": [0.0, -(n - 1.0), 1.5], "max": [n - 1.0, 0.0, 1.5]}
+    scale = 1.0 if units == "m" else 0.001
+    assert outcome["survey"]["units"] == ("m" if units == "m" else "mm")
+    want = np.array([[0, 0, 1.5], [n - 1, -(n - 1), 1.5]]) * scale
+    np.testing.assert_allclose(outcome["bounds"]["min"], [0.0, want[1, 1], want[0, 2]], rtol=1e-15)
+    np.testing.assert_allclose(outcome["bounds"]["max"], [want[1, 0], 0.0, want[0, 2]], rtol=1e-15)
     stored = np.load(tmp_path / "out.npy", mmap_mode="r")
-    np.testing.assert_array_equal(stored[[0, n - 1]], [[0, 0, 1.5], [n - 1, -(n - 1), 1.5]])
+    np.testing.assert_allclose(stored[[0, n - 1]], want, rtol=1e-15)
