@@ -34,6 +34,7 @@ from planners.cmbot.experiment import ClearanceFilter, Section4Trajectory
 from planners.cmbot.gait import GaitTrajectory
 from planners.cmbot.guardrail import Guardrail
 from planners.cmbot.scene import climber_box_layout
+from planners.motion.lipschitz import interiors
 
 
 @dataclass(frozen=True)
@@ -353,11 +354,11 @@ class CoarseFineClearance:
         lb = ((d[:-1] + d[1:] - path) / 2.0).min(axis=1)
         gaps = b - a - 1
         refine = (lb <= thr) & (gaps > 0)
-        fine = _interiors(a[refine], b[refine])
+        fine = interiors(a[refine], b[refine])
         if len(fine):
             self._store(start, fine, evaluate(fine))
         skip = ~refine & (gaps > 0)
-        left = _interiors(a[skip], b[skip])
+        left = interiors(a[skip], b[skip])
         self.value[start + left] = np.repeat(lb[skip], gaps[skip])
 
     def _store(
@@ -478,15 +479,6 @@ def culled_clearance(
             cut = np.flatnonzero(np.r_[True, ks[1:] != ks[:-1]])
             per[a:b, ks[cut]] = np.minimum(np.minimum.reduceat(dper[:, o], cut, axis=1), cap)
     return out, sph, box, per
-
-
-def _interiors(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """All integers strictly between a[i] and b[i], concatenated (a < b)."""
-    lens = b - a - 1
-    if not len(a) or lens.sum() <= 0:
-        return np.zeros(0, dtype=int)
-    offs = np.arange(int(lens.sum())) - np.repeat(np.cumsum(lens) - lens, lens)
-    return np.repeat(a + 1, lens) + offs
 
 
 def _limit_checks(
