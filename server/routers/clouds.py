@@ -28,12 +28,12 @@ from fastapi import APIRouter, Depends, HTTPException, Query, Request, Response,
 from fastapi.responses import FileResponse
 from pydantic import BaseModel, Field, ValidationError
 
+from planners.pointcloud.spacing import measure_spacing
 from server.auth import Operator, Viewer
 from server.kinds import get_kind, sample_names
 from server.routers.responses import AUTH, errors
 from server.services import Services, get_services
 from server.store import new_id
-from server.survey_io import measure_spacing
 
 log = logging.getLogger(__name__)
 

@@ -13,6 +13,7 @@ import pye57
 import pytest
 from scipy.spatial import cKDTree
 
+from planners.pointcloud.spacing import measure_spacing
 from server import survey_io
 
 
@@ -124,7 +125,7 @@ def test_measured_spacing_equals_the_brute_force_median_in_any_chunking() -> Non
     d, _ = cKDTree(pts).query(pts, k=3)
     nearest = np.where(d[:, 1] > 0, d[:, 1], d[:, 2])
     for chunk in (7, 500, 10_000):
-        got = survey_io.measure_spacing(pts, n_queries=len(pts), chunk=chunk)
+        got = measure_spacing(pts, n_queries=len(pts), chunk=chunk)
         assert got == pytest.approx(float(np.median(nearest)), rel=1e-12)
 
 
