@@ -1,0 +1,213 @@
+"""Faces and section of a member from its points.
+
+The faces of a prismatic member are planes containing its axis direction,
+so in the cross-section (the points projected on the plane normal to the
+axis) each face is a line.  Sequential RANSAC (Fischler & Bolles 1981 — the
+seed's plane detection, §3.1 Eq. 3.2, one dimension down) finds up to
+``max_faces`` such lines; each becomes a :class:`Face` whose boundary is the
+rectangle spanned by its inliers along the axis and across the face.
+
+The section's depth and width are the extents of the cross-section in its
+own principal frame, and the profile is read off which sides of that box
+carry a face and whether a face runs through the middle (a web).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from planners.structure.model import Face
+
+
+@dataclass
+class CrossSection:
+    """Points of one member in its axis frame: ``t`` along the axis, ``uv``
+    in the cross-section (basis ``u``, ``v``), about ``centre``."""
+
+    centre: np.ndarray
+    direction: np.ndarray
+    u: np.ndarray
+    v: np.ndarray
+    t: np.ndarray
+    uv: np.ndarray
+
+
+def cross_section(points: np.ndarray, centre: np.ndarray, direction: np.ndarray) -> CrossSection:
+    d = direction / np.linalg.norm(direction)
+    ref = np.array([0.0, 0.0, 1.0]) if abs(d[2]) < 0.9 else np.array([1.0, 0.0, 0.0])
+    u = np.cross(d, ref)
+    u /= np.linalg.norm(u)
+    v = np.cross(d, u)
+    rel = points - centre
+    return CrossSection(centre, d, u, v, rel @ d, np.column_stack([rel @ u, rel @ v]))
+
+
+def ransac_lines(
+    uv: np.ndarray,
+    tol: float,
+    min_inliers: int,
+    max_lines: int,
+    rng: np.random.Generator,
+    trials: int = 200,
+) -> list[tuple[np.ndarray, float, np.ndarray]]:
+    """Up to ``max_lines`` 2D lines ``(unit normal n, offset c, inlier mask)``
+    with ``n·x = c``, each the line with most inliers within ``tol`` among
+    ``trials`` random point pairs of what earlier lines left."""
+    left = np.ones(len(uv), dtype=bool)
+    out: list[tuple[np.ndarray, float, np.ndarray]] = []
+    for _ in range(max_lines):
+        idx = np.flatnonzero(left)
+        if len(idx) < max(min_inliers, 2):
+            break
+        a = idx[rng.integers(0, len(idx), trials)]
+        b = idx[rng.integers(0, len(idx), trials)]
+        dvec = uv[b] - uv[a]
+        ln = np.hypot(dvec[:, 0], dvec[:, 1])
+        ok = ln > tol
+        if not ok.any():
+            break
+        n = np.column_stack([-dvec[ok, 1], dvec[ok, 0]]) / ln[ok, None]
+        c = np.einsum("ij,ij->i", n, uv[a[ok]])
+        best, best_count = -1, 0
+        pts = uv[idx]
+        for s in range(0, len(n), 32):  # trials × points in bounded blocks
+            cnt = (np.abs(pts @ n[s : s + 32].T - c[s : s + 32]) <= tol).sum(axis=0)
+            k = int(np.argmax(cnt))
+            if cnt[k] > best_count:
+                best, best_count = s + k, int(cnt[k])
+        if best_count < min_inliers:
+            break
+        nn, cc = n[best], c[best]
+        inl = np.zeros(len(uv), dtype=bool)
+        inl[idx] = np.abs(pts @ nn - cc) <= tol
+        # least-squares refit on the inliers
+        q = uv[inl]
+        mu = q.mean(axis=0)
+        _, _, vt = np.linalg.svd(q - mu, full_matrices=False)
+        nn = vt[1]
+        cc = float(nn @ mu)
+        inl = np.zeros(len(uv), dtype=bool)
+        inl[idx] = np.abs(pts @ nn - cc) <= tol
+        out.append((nn, cc, inl))
+        left &= ~inl
+    return out
+
+
+def member_faces(
+    cs: CrossSection,
+    member: int,
+    first_id: int,
+    tol: float,
+    min_inliers: int,
+    rng: np.random.Generator,
+    max_faces: int = 4,
+) -> list[Face]:
+    """Planar faces of a member (outward normals: away from the section's middle)."""
+    lines = ransac_lines(cs.uv, tol, min_inliers, max_faces, rng)
+    mid = 0.5 * (cs.uv.min(axis=0) + cs.uv.max(axis=0)) if len(cs.uv) else np.zeros(2)
+    faces: list[Face] = []
+    for nn, cc, inl in lines:
+        q = cs.uv[inl]
+        ts = cs.t[inl]
+        along = np.array([-nn[1], nn[0]])
+        s = q @ along
+        s0, s1 = np.percentile(s, [1, 99])
+        t0, t1 = np.percentile(ts, [0.5, 99.5])
+        if (cc - nn @ mid) < 0:  # outward: the side away from the section's middle
+            nn, cc, along = -nn, -cc, -along
+            s0, s1 = -s1, -s0
+        normal = nn[0] * cs.u + nn[1] * cs.v
+        x_axis = cs.direction
+        y_axis = np.cross(normal, x_axis)
+        # in-plane y must match ``along`` up to sign
+        sign = 1.0 if float(y_axis @ (along[0] * cs.u + along[1] * cs.v)) >= 0 else -1.0
+        ys = (s0, s1) if sign > 0 else (-s1, -s0)
+        origin = cs.centre + cc * normal
+        boundary = np.array([[t0, ys[0]], [t1, ys[0]], [t1, ys[1]], [t0, ys[1]]])
+        faces.append(
+            Face(
+                id=first_id + len(faces),
+                member=member,
+                kind="face",
+                origin=origin,
+                normal=normal,
+                x_axis=x_axis.copy(),
+                boundary=boundary,
+                area_m2=float((t1 - t0) * (ys[1] - ys[0])),
+                n_points=int(inl.sum()),
+            )
+        )
+    return faces
+
+
+def section_box(uv: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Principal frame (2×2, rows = depth axis, width axis) of the cross-section,
+    the box's low and high corners in it (robust 1–99 % extents)."""
+    mu = uv.mean(axis=0)
+    vt = np.linalg.svd(uv - mu, full_matrices=False)[2]
+    q = (uv - mu) @ vt.T
+    lo, hi = np.percentile(q, [1, 99], axis=0)
+    return vt, mu, np.vstack([lo, hi])
+
+
+def classify_profile(
+    uv: np.ndarray, faces: list[Face], cs: CrossSection, spacing: float
+) -> tuple[str, float, float]:
+    """``(profile, depth_m, width_m)`` from the cross-section's occupancy."""
+    if len(uv) < 12:
+        return "unknown", 0.0, 0.0
+    vt, mu, box = section_box(uv)
+    q = (uv - mu) @ vt.T
+    ext = box[1] - box[0]
+    depth, width = float(max(ext)), float(min(ext))
+    if depth <= 0:
+        return "unknown", 0.0, 0.0
+    # circle fit (Kåsa): a tube's points lie on one circle
+    A = np.column_stack([2 * uv, np.ones(len(uv))])
+    b = (uv**2).sum(axis=1)
+    sol, *_ = np.linalg.lstsq(A, b, rcond=None)
+    r = float(np.sqrt(max(sol[2] + sol[0] ** 2 + sol[1] ** 2, 0.0)))
+    res = np.abs(np.hypot(uv[:, 0] - sol[0], uv[:, 1] - sol[1]) - r)
+    if r > 0 and np.percentile(res, 90) < max(0.08 * r, 1.5 * spacing) and r < depth:
+        ang = np.arctan2(uv[:, 1] - sol[1], uv[:, 0] - sol[0])
+        if np.ptp(ang) > np.pi / 2:
+            return "tube", 2 * r, 2 * r
+    tol = max(2.0 * spacing, 0.05 * depth)
+    if width < max(3 * spacing, 0.12 * depth):
+        return "plate", depth, width
+
+    # occupancy of the four box sides and the two middle lines
+    def occ(mask: np.ndarray, coord: np.ndarray, lo: float, hi: float) -> float:
+        if not mask.any():
+            return 0.0
+        bins = np.clip(((coord[mask] - lo) / max(hi - lo, 1e-9) * 8).astype(int), 0, 7)
+        return len(np.unique(bins)) / 8.0
+
+    x, y = q[:, 0], q[:, 1]
+    (x0, y0), (x1, y1) = box
+    sides = {
+        "x0": occ(np.abs(x - x0) <= tol, y, y0, y1),
+        "x1": occ(np.abs(x - x1) <= tol, y, y0, y1),
+        "y0": occ(np.abs(y - y0) <= tol, x, x0, x1),
+        "y1": occ(np.abs(y - y1) <= tol, x, x0, x1),
+    }
+    xm, ym = 0.5 * (x0 + x1), 0.5 * (y0 + y1)
+    mid_x = occ(np.abs(x - xm) <= tol, y, y0, y1)  # a web across y
+    mid_y = occ(np.abs(y - ym) <= tol, x, x0, x1)
+    full = {k: v >= 0.6 for k, v in sides.items()}
+    n_full = sum(full.values())
+    if n_full == 4:
+        return "box", depth, width
+    if (full["x0"] and full["x1"] and mid_x >= 0.6) or (full["y0"] and full["y1"] and mid_y >= 0.6):
+        return "I", depth, width
+    if (full["x0"] and full["x1"] and (full["y0"] or full["y1"])) or (
+        full["y0"] and full["y1"] and (full["x0"] or full["x1"])
+    ):
+        return "channel", depth, width
+    if n_full == 2 and not (full["x0"] and full["x1"]) and not (full["y0"] and full["y1"]):
+        return "angle", depth, width
+    if n_full == 1 and max(mid_x, mid_y) >= 0.6:
+        return "tee", depth, width
+    return "unknown", depth, width

@@ -1,0 +1,201 @@
+"""Member lines from line features: region growing, line fit, fragment joining.
+
+Linear voxels whose principal directions agree are linked to their touching
+neighbours (region growing on the voxel adjacency); each connected region
+is one member candidate and gets a least-squares 3D line (PCA of its voxel
+centroids, unweighted so that range-dependent density does not bias it).
+Candidates that are collinear and separated by an occlusion gap, or
+parallel and overlapping within one section depth (the two flanges of a
+girder), are then joined by union-find.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import connected_components
+from scipy.spatial import cKDTree
+
+from planners.structure.features import LineFeatures
+
+
+@dataclass
+class LineCandidate:
+    """A member candidate: voxels ``voxels`` of the finest grid, the line
+    through ``centre`` along unit ``direction`` from parameter ``t0`` to ``t1``,
+    and ``radius`` the 95th percentile distance of its voxels from the line."""
+
+    voxels: np.ndarray
+    centre: np.ndarray
+    direction: np.ndarray
+    t0: float
+    t1: float
+    radius: float
+    fragments: int = 1
+
+    @property
+    def length(self) -> float:
+        return self.t1 - self.t0
+
+    @property
+    def ends(self) -> np.ndarray:
+        return self.centre + np.outer([self.t0, self.t1], self.direction)
+
+
+def fit_line(
+    pts: np.ndarray, lo_pct: float = 1.0, hi_pct: float = 99.0
+) -> tuple[np.ndarray, np.ndarray, float, float, float]:
+    """PCA line of ``pts``: centre, direction, trimmed extent and 95th-percentile radius."""
+    c = pts.mean(axis=0)
+    r = pts - c
+    _, _, vt = np.linalg.svd(r, full_matrices=False)
+    d = vt[0]
+    # a sign convention makes results independent of the voxel order
+    d = d if d[np.argmax(np.abs(d))] > 0 else -d
+    t = r @ d
+    perp = np.linalg.norm(r - np.outer(t, d), axis=1)
+    t0, t1 = np.percentile(t, [lo_pct, hi_pct])
+    return c, d, float(t0), float(t1), float(np.percentile(perp, 95))
+
+
+def grow_regions(
+    feat: LineFeatures, linearity_min: float, angle_deg: float, keep: np.ndarray
+) -> np.ndarray:
+    """(V,) region id per finest voxel (−1: not on a line).  Voxels closer
+    than 1.8 cells are neighbours; a link needs both ends linear and their
+    directions within ``angle_deg``."""
+    grid = feat.grid
+    lin = (feat.linearity >= linearity_min) & keep
+    ids = np.flatnonzero(lin)
+    out = np.full(len(grid.centres), -1, dtype=np.int64)
+    if len(ids) == 0:
+        return out
+    tree = cKDTree(grid.centres[ids])
+    pairs = tree.query_pairs(1.8 * grid.size, output_type="ndarray")
+    if len(pairs):
+        d = feat.direction[ids]
+        cos = np.abs(np.einsum("ij,ij->i", d[pairs[:, 0]], d[pairs[:, 1]]))
+        pairs = pairs[cos >= np.cos(np.radians(angle_deg))]
+    m = len(ids)
+    adj = coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(m, m))
+    _, comp = connected_components(adj, directed=False)
+    out[ids] = comp
+    return out
+
+
+def candidates_from_regions(
+    feat: LineFeatures, region: np.ndarray, min_length: float, min_voxels: int = 6
+) -> list[LineCandidate]:
+    out: list[LineCandidate] = []
+    order = np.argsort(region, kind="stable")
+    r_sorted = region[order]
+    starts = np.searchsorted(r_sorted, np.arange(r_sorted.max() + 2 if len(r_sorted) else 1))
+    for k in range(len(starts) - 1):
+        vox = order[starts[k] : starts[k + 1]]
+        if len(vox) < min_voxels or region[vox[0]] < 0:
+            continue
+        c, d, t0, t1, rad = fit_line(feat.grid.centres[vox])
+        if t1 - t0 < min_length:
+            continue
+        out.append(LineCandidate(vox, c, d, t0, t1, rad))
+    return out
+
+
+class _UnionFind:
+    def __init__(self, n: int) -> None:
+        self.p = list(range(n))
+
+    def find(self, a: int) -> int:
+        while self.p[a] != a:
+            self.p[a] = self.p[self.p[a]]
+            a = self.p[a]
+        return a
+
+    def union(self, a: int, b: int) -> None:
+        ra, rb = self.find(a), self.find(b)
+        if ra != rb:
+            self.p[max(ra, rb)] = min(ra, rb)
+
+
+def _should_join(
+    a: LineCandidate,
+    b: LineCandidate,
+    cos_min: float,
+    cos_side: float,
+    max_gap: float,
+    max_section: float,
+) -> bool:
+    cos = abs(float(a.direction @ b.direction))
+    if cos < cos_side:
+        return False
+    # b's end points in a's line frame
+    rel = b.ends - a.centre
+    t = rel @ a.direction
+    perp = np.linalg.norm(rel - np.outer(t, a.direction), axis=1)
+    lo, hi = float(t.min()), float(t.max())
+    overlap = min(hi, a.t1) - max(lo, a.t0)
+    shorter = min(a.length, b.length)
+    if overlap > 0.5 * shorter:
+        # side by side: two faces of one member when within one section (the
+        # direction of a short face is less certain: the linking tolerance)
+        return bool(perp.max() <= max_section)
+    if cos < cos_min:
+        return False
+    gap = max(lo - a.t1, a.t0 - hi)
+    if gap > max_gap:
+        return False
+    # collinear fragments: the lines must be as close as the sections are wide
+    tol = max(a.radius, b.radius, 0.05)
+    return bool(perp.max() <= tol)
+
+
+def join_fragments(
+    cands: list[LineCandidate],
+    feat: LineFeatures,
+    angle_deg: float,
+    max_gap: float,
+    max_section: float,
+    side_angle_deg: float | None = None,
+) -> list[LineCandidate]:
+    """Union-find over candidate pairs near each other (KD-tree on their
+    sampled axes: no all-pairs array), refitting each joined group."""
+    if len(cands) < 2:
+        return cands
+    step = max(0.25, max_gap / 4)
+    samples, owner = [], []
+    for i, c in enumerate(cands):
+        n = max(2, int(np.ceil(c.length / step)) + 1)
+        ts = np.linspace(c.t0, c.t1, n)
+        samples.append(c.centre + np.outer(ts, c.direction))
+        owner.append(np.full(n, i))
+    pts = np.vstack(samples)
+    own = np.concatenate(owner)
+    tree = cKDTree(pts)
+    pairs = tree.query_pairs(max(max_gap, max_section) + step, output_type="ndarray")
+    cand_pairs = (
+        np.unique(np.sort(np.column_stack([own[pairs[:, 0]], own[pairs[:, 1]]]), axis=1), axis=0)
+        if len(pairs)
+        else np.zeros((0, 2), int)
+    )
+    uf = _UnionFind(len(cands))
+    cos_min = float(np.cos(np.radians(angle_deg)))
+    cos_side = float(np.cos(np.radians(max(angle_deg, side_angle_deg or angle_deg))))
+    for i, j in cand_pairs:
+        if i != j and _should_join(cands[i], cands[j], cos_min, cos_side, max_gap, max_section):
+            uf.union(int(i), int(j))
+    groups: dict[int, list[int]] = {}
+    for i in range(len(cands)):
+        groups.setdefault(uf.find(i), []).append(i)
+    out: list[LineCandidate] = []
+    for group in groups.values():
+        if len(group) == 1:
+            out.append(cands[group[0]])
+            continue
+        vox = np.concatenate([cands[i].voxels for i in group])
+        centre, d, t0, t1, rad = fit_line(feat.grid.centres[vox])
+        out.append(
+            LineCandidate(vox, centre, d, t0, t1, rad, sum(cands[i].fragments for i in group))
+        )
+    return out

@@ -1,0 +1,83 @@
+"""Parameters of :func:`planners.structure.model_structure`.
+
+Every length left ``None`` is derived from the measured point spacing ``s``
+(:func:`planners.pointcloud.spacing.measure_spacing`) by
+:meth:`StructureParams.resolve`, so the same defaults serve a 5 mm
+terrestrial scan and a 15 cm photogrammetry cloud.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import asdict, dataclass, replace
+
+from planners.errors import InvalidInputError
+
+
+@dataclass(frozen=True)
+class StructureParams:
+    #: point spacing (m); None: measured
+    spacing_m: float | None = None
+    #: neighbourhood radii of the multi-scale line analysis (m); None: from
+    #: max(0.1 m, 5 s) doubling up to ``max_section_m`` × 1.5
+    scales_m: tuple[float, ...] | None = None
+    #: a voxel is "on a member" when (λ1 − λ2)/λ1 of its neighbourhood is at least this
+    linearity_min: float = 0.6
+    #: neighbouring linear voxels are linked when their directions differ by less
+    link_angle_deg: float = 12.0
+    #: fragments / parallel faces are joined into one member within this angle
+    merge_angle_deg: float = 5.0
+    #: the largest section depth expected (m): parallel lines closer than this
+    #: and overlapping along their length are faces of one member
+    max_section_m: float = 1.2
+    #: collinear fragments separated by an occlusion gap up to this are joined (m)
+    max_gap_m: float = 2.0
+    #: shortest member kept (m); None: max(0.4 m, 8 s)
+    min_member_length_m: float | None = None
+    #: a member meeting no other one and shorter than this is clutter (m)
+    min_free_length_m: float = 2.0
+    #: working voxels at the finest scale at most (bounds time and memory)
+    max_voxels: int = 300_000
+    #: neighbours per voxel in the local analysis
+    k_neighbours: int = 40
+    seed: int = 0
+
+    def resolve(self, spacing: float) -> StructureParams:
+        """These parameters with every derived length filled in from ``spacing``."""
+        for name in (
+            "linearity_min",
+            "link_angle_deg",
+            "merge_angle_deg",
+            "max_section_m",
+            "max_gap_m",
+        ):
+            v = getattr(self, name)
+            if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
+                raise InvalidInputError(
+                    f"StructureParams.{name} must be a positive number, got {v!r}"
+                )
+        if not 0 < self.linearity_min < 1:
+            raise InvalidInputError(f"linearity_min must lie in (0, 1), got {self.linearity_min}")
+        if self.max_voxels < 1000 or self.k_neighbours < 8:
+            raise InvalidInputError("max_voxels must be ≥ 1000 and k_neighbours ≥ 8")
+        s = float(spacing)
+        scales = self.scales_m
+        if scales is None:
+            r = max(0.1, 5.0 * s)
+            out = [r]
+            while out[-1] * 2 <= 1.5 * self.max_section_m:
+                out.append(out[-1] * 2)
+            scales = tuple(out)
+        elif not scales or any(not (math.isfinite(r) and r > 0) for r in scales):
+            raise InvalidInputError(f"scales_m must be positive radii in metres, got {scales!r}")
+        min_len = self.min_member_length_m
+        if min_len is None:
+            min_len = max(0.4, 8.0 * s)
+        return replace(
+            self, spacing_m=s, scales_m=tuple(sorted(scales)), min_member_length_m=min_len
+        )
+
+    def as_dict(self) -> dict[str, float]:
+        d = asdict(self)
+        d["scales_m"] = list(d["scales_m"] or [])
+        return d

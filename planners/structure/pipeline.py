@@ -1,0 +1,264 @@
+"""The structure model chain: field scan → members, faces, joints, graph.
+
+Stages (each timed in ``StructureModel.timings_s``):
+
+1. spacing — measured (:func:`planners.pointcloud.spacing.measure_spacing`);
+   every default length derives from it (:class:`.params.StructureParams`);
+2. features — multi-scale linearity on a voxel pyramid (:mod:`.features`);
+3. lines — region growing of linear voxels, PCA lines, occlusion fragments
+   and parallel faces joined (:mod:`.lines`);
+4. assign — a member label per point by its nearest axis within the
+   member's envelope (:mod:`.assign`); each member's axis is then refitted
+   through the centre of its cross-section box (the mean of the visible
+   surface is biased towards the scanner, the box centre much less);
+5. faces — planar faces by RANSAC in each cross-section, the profile from
+   which box sides carry faces (:mod:`.faces`); points inside two envelopes
+   (joint zones) go to the member one of whose faces they lie on;
+6. joints and graph (:mod:`.joints`); members meeting nothing and shorter
+   than ``min_free_length_m`` are clutter and are dropped.
+
+What is not a member (ground, slabs, vegetation, people) stays labelled −1:
+it is not linear at any scale, or too short and alone.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+
+import numpy as np
+
+from planners.errors import EmptyInputError, InvalidInputError
+from planners.pointcloud._validate import as_points
+from planners.pointcloud.spacing import measure_spacing
+from planners.structure.assign import assign_points, relabel_by_faces
+from planners.structure.faces import classify_profile, cross_section, member_faces, section_box
+from planners.structure.features import line_features
+from planners.structure.joints import find_joints, member_graph
+from planners.structure.lines import (
+    LineCandidate,
+    candidates_from_regions,
+    grow_regions,
+    join_fragments,
+)
+from planners.structure.model import Face, Member, StructureModel
+from planners.structure.params import StructureParams
+
+#: fewest points a member keeps after assignment
+MIN_MEMBER_POINTS = 20
+#: assign → refit rounds before the final assignment
+REFITS = 1
+
+Progress = Callable[[float, str], None]
+
+
+def _face_kinds(profile: str, faces: list[Face], depth_axis: np.ndarray) -> None:
+    """Name each face: a face whose normal lies along the depth axis is a flange
+    (I, channel, tee), otherwise a web; box and tube faces are sides, a plate's is a plate."""
+    for f in faces:
+        if profile == "plate":
+            f.kind = "plate"
+        elif profile in ("I", "channel", "tee"):
+            f.kind = "flange" if abs(float(f.normal @ depth_axis)) > 0.7 else "web"
+        else:
+            f.kind = "side"
+
+
+def _refit(
+    points: np.ndarray, spacing: float
+) -> tuple[np.ndarray, np.ndarray, float, float, float] | None:
+    """Axis through the cross-section box centre: centre, direction, t-range, radius."""
+    from planners.structure.lines import fit_line
+
+    c, d, _, _, _ = fit_line(points)
+    cs = cross_section(points, c, d)
+    if len(cs.uv) < 3:
+        return None
+    vt, mu, box = section_box(cs.uv)
+    mid2 = mu + (0.5 * (box[0] + box[1])) @ vt
+    centre = c + mid2[0] * cs.u + mid2[1] * cs.v
+    t0, t1 = np.percentile(cs.t, [0.5, 99.5])
+    half_diag = 0.5 * float(np.hypot(*(box[1] - box[0])))
+    return centre, d, float(t0), float(t1), half_diag + 2 * spacing
+
+
+def model_structure(
+    points: np.ndarray,
+    *,
+    params: StructureParams | None = None,
+    progress: Progress | None = None,
+) -> StructureModel:
+    """Members, faces, joints and member graph of a scanned steel structure.
+
+    ``points`` (N, 3), any frame, metres (convert millimetre scans first).
+    Raises :class:`planners.errors.InvalidInputError` for a malformed cloud
+    and :class:`planners.errors.EmptyInputError` for one too small to measure.
+    A cloud with no member in it gives a model with no members (not an error).
+    """
+    prm = params or StructureParams()
+    if not isinstance(prm, StructureParams):
+        raise InvalidInputError(f"params must be a StructureParams, got {type(prm).__name__}")
+    raw = as_points(points, "points", dims=3)
+    if len(raw) < 10:
+        raise EmptyInputError(f"points has {len(raw)} rows; a structure model needs at least 10")
+    timings: dict[str, float] = {}
+    clock = time.perf_counter()
+
+    def stage(name: str, fraction: float) -> None:
+        nonlocal clock
+        now = time.perf_counter()
+        timings[name] = round(now - clock, 4)
+        clock = now
+        if progress is not None:
+            progress(fraction, name)
+
+    # survey coordinates (1e5–1e6 m) lose precision in squared sums: work relative
+    origin = raw.min(axis=0)
+    pts = raw - origin
+    spacing = prm.spacing_m if prm.spacing_m is not None else measure_spacing(pts)
+    if spacing is None or not np.isfinite(spacing) or spacing <= 0:
+        raise EmptyInputError("the cloud's point spacing cannot be measured (all points coincide?)")
+    prm = prm.resolve(spacing)
+    assert prm.scales_m is not None and prm.min_member_length_m is not None
+    stage("spacing", 0.05)
+
+    feat = line_features(pts, spacing, prm.scales_m, prm.k_neighbours, prm.max_voxels)
+    stage("features", 0.35)
+
+    region = grow_regions(
+        feat, prm.linearity_min, prm.link_angle_deg, np.ones(len(feat.linearity), bool)
+    )
+    cands = candidates_from_regions(feat, region, prm.min_member_length_m)
+    cands = join_fragments(
+        cands, feat, prm.merge_angle_deg, prm.max_gap_m, prm.max_section_m, prm.link_angle_deg
+    )
+    stage("lines", 0.5)
+
+    labels, shared, members, radii = _assign_and_refit(pts, cands, spacing, prm)
+    stage("assign", 0.7)
+
+    rng = np.random.default_rng(prm.seed)
+    tol = max(1.5 * spacing, 0.004)
+    _fit_faces(pts, labels, members, spacing, tol, rng)
+    # joint zones: a point inside two envelopes belongs to the member it lies
+    # on a face of; the members' sections are then measured again without
+    # the points they had borrowed
+    faces = [f for m in members for f in m.faces]
+    relabelled = relabel_by_faces(pts, labels, shared, faces, 2 * tol)
+    if np.any(relabelled != labels):
+        labels = relabelled
+        _fit_faces(pts, labels, members, spacing, tol, rng)
+    stage("faces", 0.85)
+
+    joints = find_joints(members, radii, reach=max(3 * spacing, 0.05))
+    joined = {mid for j in joints for mid in j.members}
+    keep = [
+        m
+        for m in members
+        if m.id in joined or m.length_m >= prm.min_free_length_m or len(members) == 1
+    ]
+    if len(keep) < len(members):
+        labels, members, radii, joints = _renumber(labels, members, radii, keep, spacing)
+    graph = member_graph(members, joints, end_tol=float(radii.max()) if len(radii) else 0.0)
+    stage("graph", 1.0)
+
+    for m in members:
+        m.axis = m.axis + origin
+        for f in m.faces:
+            f.origin = f.origin + origin
+    for j in joints:
+        j.pos = j.pos + origin
+    for _, data in graph.nodes(data=True):
+        data["pos"] = data["pos"] + origin
+    used = prm.as_dict()
+    return StructureModel(members, joints, graph, labels, float(spacing), timings, used)
+
+
+def _assign_and_refit(
+    pts: np.ndarray, cands: list[LineCandidate], spacing: float, prm: StructureParams
+) -> tuple[np.ndarray, np.ndarray, list[Member], np.ndarray]:
+    """Labels per point and the members with refitted axes (two rounds: the
+    refitted axes and radii assign the points again)."""
+    none = np.full(len(pts), -1, dtype=np.int64)
+    if not cands:
+        return none, np.zeros(len(pts), bool), [], np.zeros(0)
+    C = np.array([c.centre for c in cands])
+    D = np.array([c.direction for c in cands])
+    T0 = np.array([c.t0 for c in cands])
+    T1 = np.array([c.t1 for c in cands])
+    R = np.array([max(c.radius, 2 * spacing) for c in cands])
+    frags = [c.fragments for c in cands]
+    min_len = float(prm.min_member_length_m or 0.0)
+    margin = 3.0 * spacing
+    labels = np.full(len(pts), -1, dtype=np.int64)
+    for _ in range(REFITS):
+        labels, _ = assign_points(pts, C, D, T0, T1, R, margin)
+        fits = []
+        for i in range(len(C)):
+            mp = pts[labels == i]
+            fit = _refit(mp, spacing) if len(mp) >= MIN_MEMBER_POINTS else None
+            fits.append(fit)
+        ok = [i for i, f in enumerate(fits) if f is not None and f[3] - f[2] >= min_len]
+        if not ok:
+            return none, np.zeros(len(pts), bool), [], np.zeros(0)
+        C = np.array([fits[i][0] for i in ok])  # type: ignore[index]
+        D = np.array([fits[i][1] for i in ok])  # type: ignore[index]
+        T0 = np.array([fits[i][2] for i in ok])  # type: ignore[index]
+        T1 = np.array([fits[i][3] for i in ok])  # type: ignore[index]
+        R = np.array([min(fits[i][4], prm.max_section_m) for i in ok])  # type: ignore[index]
+        frags = [frags[i] for i in ok]
+    labels, shared = assign_points(pts, C, D, T0, T1, R, margin)
+    members = [
+        Member(
+            id=i,
+            axis=np.array([C[i] + T0[i] * D[i], C[i] + T1[i] * D[i]]),
+            profile="unknown",
+            depth_m=0.0,
+            width_m=0.0,
+            n_points=int((labels == i).sum()),
+            fragments=int(frags[i]),
+        )
+        for i in range(len(C))
+    ]
+    return labels, shared, members, R
+
+
+def _fit_faces(
+    pts: np.ndarray,
+    labels: np.ndarray,
+    members: list[Member],
+    spacing: float,
+    tol: float,
+    rng: np.random.Generator,
+) -> None:
+    """Faces, profile, depth and width of every member from its labelled points."""
+    face_id = 0
+    for m in members:
+        mp = pts[labels == m.id]
+        m.n_points = len(mp)
+        cs = cross_section(mp, m.axis[0], m.direction)
+        faces = member_faces(cs, m.id, face_id, tol, max(12, len(mp) // 20), rng)
+        profile, depth, width = classify_profile(cs.uv, faces, cs, spacing)
+        if len(cs.uv) >= 3:
+            vt = section_box(cs.uv)[0]
+            _face_kinds(profile, faces, vt[0, 0] * cs.u + vt[0, 1] * cs.v)
+        m.profile, m.depth_m, m.width_m, m.faces = profile, depth, width, faces
+        face_id += len(faces)
+
+
+def _renumber(
+    labels: np.ndarray, members: list[Member], radii: np.ndarray, keep: list[Member], spacing: float
+) -> tuple[np.ndarray, list[Member], np.ndarray, list]:
+    old = np.array([m.id for m in keep])
+    remap = np.full(len(members) + 1, -1, dtype=np.int64)
+    remap[old] = np.arange(len(keep))
+    new_labels = remap[labels]  # −1 indexes the last slot, which is −1
+    new_radii = radii[old]
+    face_id = 0
+    for i, m in enumerate(keep):
+        m.id = i
+        for f in m.faces:
+            f.member, f.id = i, face_id
+            face_id += 1
+    joints = find_joints(keep, new_radii, reach=max(3 * spacing, 0.05))
+    return new_labels, keep, new_radii, joints
