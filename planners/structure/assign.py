@@ -1,6 +1,9 @@
-"""Member label per input point: the member with the nearest axis segment
-among those whose envelope (axis thickened by the member's radius plus a
-margin) holds the point, or −1.  Points inside two envelopes are flagged
+"""Member label per input point: among the members whose envelope (axis
+segment thickened by the member's radius plus a margin) holds the point,
+the one it is deepest inside relative to the envelope's radius
+(distance / radius), or −1.  Relative depth, not distance: a wide beam's
+flange lies closer to a slender diagonal's axis than to its own, but deep
+in the beam's envelope and at the rim of the diagonal's.  Points inside two envelopes are flagged
 as joint-zone points for the face test of :mod:`.pipeline`.
 
 Distances are computed point × member in row chunks bounded by ``BUDGET``
@@ -45,8 +48,8 @@ def assign_points(
     for a in range(0, n, step):
         d = segment_distances(points[a : a + step], centres, dirs, t0, t1)
         inside = d <= reach
-        d = np.where(inside, d, np.inf)
-        best = np.argmin(d, axis=1)
+        depth = np.where(inside, d / radius[None], np.inf)
+        best = np.argmin(depth, axis=1)
         ok = inside.any(axis=1)
         out[a : a + step] = np.where(ok, best, -1)
         shared[a : a + step] = inside.sum(axis=1) >= 2

@@ -142,28 +142,45 @@ def member_faces(
     return faces
 
 
-def section_box(uv: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Principal frame (2×2, rows = depth axis, width axis) of the cross-section,
-    the box's low and high corners in it (robust 1–99 % extents)."""
+def section_box(
+    uv: np.ndarray, axis0: np.ndarray | None = None
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Frame (2×2, rows = the box axes) of the cross-section, its mean and the
+    box's low and high corners in it (robust 1–99 % extents).  ``axis0``
+    (a face's 2D normal) fixes the first axis; otherwise the principal axes."""
     mu = uv.mean(axis=0)
-    vt = np.linalg.svd(uv - mu, full_matrices=False)[2]
+    if axis0 is not None and np.linalg.norm(axis0) > 1e-9:
+        a = axis0 / np.linalg.norm(axis0)
+        vt = np.array([a, [-a[1], a[0]]])
+    else:
+        vt = np.linalg.svd(uv - mu, full_matrices=False)[2]
     q = (uv - mu) @ vt.T
     lo, hi = np.percentile(q, [1, 99], axis=0)
     return vt, mu, np.vstack([lo, hi])
 
 
+def face_axis(faces: list[Face], cs: CrossSection) -> np.ndarray | None:
+    """2D normal, in the cross-section, of the face with the most points."""
+    if not faces:
+        return None
+    f = max(faces, key=lambda f: f.n_points)
+    return np.array([f.normal @ cs.u, f.normal @ cs.v])
+
+
 def classify_profile(
     uv: np.ndarray, faces: list[Face], cs: CrossSection, spacing: float
-) -> tuple[str, float, float]:
-    """``(profile, depth_m, width_m)`` from the cross-section's occupancy."""
+) -> tuple[str, float, float, np.ndarray]:
+    """``(profile, depth_m, width_m, depth axis)`` from the cross-section's
+    occupancy; the depth axis (2D, in the cross-section) runs along the web."""
     if len(uv) < 12:
-        return "unknown", 0.0, 0.0
-    vt, mu, box = section_box(uv)
+        return "unknown", 0.0, 0.0, np.array([1.0, 0.0])
+    vt, mu, box = section_box(uv, face_axis(faces, cs))
     q = (uv - mu) @ vt.T
     ext = box[1] - box[0]
     depth, width = float(max(ext)), float(min(ext))
+    big = vt[int(np.argmax(ext))]
     if depth <= 0:
-        return "unknown", 0.0, 0.0
+        return "unknown", 0.0, 0.0, np.array([1.0, 0.0])
     # circle fit (Kåsa): a tube's points lie on one circle
     A = np.column_stack([2 * uv, np.ones(len(uv))])
     b = (uv**2).sum(axis=1)
@@ -173,10 +190,10 @@ def classify_profile(
     if r > 0 and np.percentile(res, 90) < max(0.08 * r, 1.5 * spacing) and r < depth:
         ang = np.arctan2(uv[:, 1] - sol[1], uv[:, 0] - sol[0])
         if np.ptp(ang) > np.pi / 2:
-            return "tube", 2 * r, 2 * r
+            return "tube", 2 * r, 2 * r, big
     tol = max(2.0 * spacing, 0.05 * depth)
     if width < max(3 * spacing, 0.12 * depth):
-        return "plate", depth, width
+        return "plate", depth, width, big
 
     # occupancy of the four box sides and the two middle lines
     def occ(mask: np.ndarray, coord: np.ndarray, lo: float, hi: float) -> float:
@@ -198,16 +215,24 @@ def classify_profile(
     mid_y = occ(np.abs(y - ym) <= tol, x, x0, x1)
     full = {k: v >= 0.6 for k, v in sides.items()}
     n_full = sum(full.values())
+    # flanges along x (sides y0, y1) carry a web across y at mid-x, and the other way round
+    flanges_y = full["y0"] and full["y1"]
+    flanges_x = full["x0"] and full["x1"]
+    ey, ex = float(ext[1]), float(ext[0])
     if n_full == 4:
-        return "box", depth, width
-    if (full["x0"] and full["x1"] and mid_x >= 0.6) or (full["y0"] and full["y1"] and mid_y >= 0.6):
-        return "I", depth, width
-    if (full["x0"] and full["x1"] and (full["y0"] or full["y1"])) or (
-        full["y0"] and full["y1"] and (full["x0"] or full["x1"])
-    ):
-        return "channel", depth, width
-    if n_full == 2 and not (full["x0"] and full["x1"]) and not (full["y0"] and full["y1"]):
-        return "angle", depth, width
-    if n_full == 1 and max(mid_x, mid_y) >= 0.6:
-        return "tee", depth, width
-    return "unknown", depth, width
+        return "box", depth, width, big
+    if flanges_y and mid_x >= 0.6:
+        return "I", ey, ex, vt[1]
+    if flanges_x and mid_y >= 0.6:
+        return "I", ex, ey, vt[0]
+    if flanges_y and (full["x0"] or full["x1"]):
+        return "channel", ey, ex, vt[1]
+    if flanges_x and (full["y0"] or full["y1"]):
+        return "channel", ex, ey, vt[0]
+    if n_full == 2 and not flanges_x and not flanges_y:
+        return "angle", depth, width, big
+    if n_full == 1 and (full["y0"] or full["y1"]) and mid_x >= 0.6:
+        return "tee", ey, ex, vt[1]
+    if n_full == 1 and (full["x0"] or full["x1"]) and mid_y >= 0.6:
+        return "tee", ex, ey, vt[0]
+    return "unknown", depth, width, big

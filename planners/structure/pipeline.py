@@ -32,7 +32,12 @@ from planners.errors import EmptyInputError, InvalidInputError
 from planners.pointcloud._validate import as_points
 from planners.pointcloud.spacing import measure_spacing
 from planners.structure.assign import assign_points, relabel_by_faces
-from planners.structure.faces import classify_profile, cross_section, member_faces, section_box
+from planners.structure.faces import (
+    classify_profile,
+    cross_section,
+    member_faces,
+    section_box,
+)
 from planners.structure.features import line_features
 from planners.structure.joints import find_joints, member_graph
 from planners.structure.lines import (
@@ -47,7 +52,7 @@ from planners.structure.params import StructureParams
 #: fewest points a member keeps after assignment
 MIN_MEMBER_POINTS = 20
 #: assign → refit rounds before the final assignment
-REFITS = 1
+REFITS = 2
 
 Progress = Callable[[float, str], None]
 
@@ -65,19 +70,20 @@ def _face_kinds(profile: str, faces: list[Face], depth_axis: np.ndarray) -> None
 
 
 def _refit(
-    points: np.ndarray, spacing: float
+    core: np.ndarray, points: np.ndarray, spacing: float
 ) -> tuple[np.ndarray, np.ndarray, float, float, float] | None:
-    """Axis through the cross-section box centre: centre, direction, t-range, radius."""
+    """Axis through the cross-section box centre of ``core``, extent of
+    ``points``: centre, direction, t-range, radius."""
     from planners.structure.lines import fit_line
 
-    c, d, _, _, _ = fit_line(points)
-    cs = cross_section(points, c, d)
+    c, d, _, _, _ = fit_line(core)
+    cs = cross_section(core, c, d)
     if len(cs.uv) < 3:
         return None
     vt, mu, box = section_box(cs.uv)
     mid2 = mu + (0.5 * (box[0] + box[1])) @ vt
     centre = c + mid2[0] * cs.u + mid2[1] * cs.v
-    t0, t1 = np.percentile(cs.t, [0.5, 99.5])
+    t0, t1 = np.percentile((points - centre) @ d, [0.5, 99.5])
     half_diag = 0.5 * float(np.hypot(*(box[1] - box[0])))
     return centre, d, float(t0), float(t1), half_diag + 2 * spacing
 
@@ -192,11 +198,14 @@ def _assign_and_refit(
     margin = 3.0 * spacing
     labels = np.full(len(pts), -1, dtype=np.int64)
     for _ in range(REFITS):
-        labels, _ = assign_points(pts, C, D, T0, T1, R, margin)
+        labels, shared = assign_points(pts, C, D, T0, T1, R, margin)
         fits = []
         for i in range(len(C)):
-            mp = pts[labels == i]
-            fit = _refit(mp, spacing) if len(mp) >= MIN_MEMBER_POINTS else None
+            mine = labels == i
+            core = mine & ~shared
+            # the section from the points no other member competes for; the
+            # extent from all, so that members reach into their joints
+            fit = _refit(pts[core], pts[mine], spacing) if core.sum() >= MIN_MEMBER_POINTS else None
             fits.append(fit)
         ok = [i for i, f in enumerate(fits) if f is not None and f[3] - f[2] >= min_len]
         if not ok:
@@ -238,10 +247,8 @@ def _fit_faces(
         m.n_points = len(mp)
         cs = cross_section(mp, m.axis[0], m.direction)
         faces = member_faces(cs, m.id, face_id, tol, max(12, len(mp) // 20), rng)
-        profile, depth, width = classify_profile(cs.uv, faces, cs, spacing)
-        if len(cs.uv) >= 3:
-            vt = section_box(cs.uv)[0]
-            _face_kinds(profile, faces, vt[0, 0] * cs.u + vt[0, 1] * cs.v)
+        profile, depth, width, axis2 = classify_profile(cs.uv, faces, cs, spacing)
+        _face_kinds(profile, faces, axis2[0] * cs.u + axis2[1] * cs.v)
         m.profile, m.depth_m, m.width_m, m.faces = profile, depth, width, faces
         face_id += len(faces)
 
