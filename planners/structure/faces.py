@@ -187,7 +187,14 @@ def classify_profile(
     sol, *_ = np.linalg.lstsq(A, b, rcond=None)
     r = float(np.sqrt(max(sol[2] + sol[0] ** 2 + sol[1] ** 2, 0.0)))
     res = np.abs(np.hypot(uv[:, 0] - sol[0], uv[:, 1] - sol[1]) - r)
-    if r > 0 and np.percentile(res, 90) < max(0.08 * r, 1.5 * spacing) and r < depth:
+    biggest = max((f.n_points for f in faces), default=0)
+    # an arc is also close to a line: a tube is a circle no face explains
+    if (
+        r > 0
+        and r < depth
+        and np.percentile(res, 90) < max(0.05 * r, 1.5 * spacing)
+        and biggest < 0.4 * len(uv)
+    ):
         ang = np.arctan2(uv[:, 1] - sol[1], uv[:, 0] - sol[0])
         if np.ptp(ang) > np.pi / 2:
             return "tube", 2 * r, 2 * r, big

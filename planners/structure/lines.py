@@ -85,9 +85,56 @@ def grow_regions(
     return out
 
 
+def region_lines(
+    feat: LineFeatures,
+    vox: np.ndarray,
+    angle_deg: float,
+    min_voxels: int,
+    rng: np.random.Generator,
+    hypotheses: int = 48,
+    max_lines: int = 16,
+) -> list[np.ndarray]:
+    """Split one grown region into straight lines by sequential voting: each
+    of ``hypotheses`` random voxels proposes the line through its
+    neighbourhood mean along its direction; the line with most voxels whose
+    means lie within half its scale and whose directions agree wins, its
+    voxels are removed, and so on.  Region growing alone chains a chord into
+    a diagonal through the joint, where neighbourhood directions turn
+    gradually; voting keeps the straight parts and drops the turn."""
+    left = vox.copy()
+    out: list[np.ndarray] = []
+    cos_min = float(np.cos(np.radians(angle_deg)))
+    means, dirs, rad = feat.mean, feat.direction, feat.radius
+    for _ in range(max_lines):
+        if len(left) < min_voxels:
+            break
+        hyp = left[rng.choice(len(left), size=min(hypotheses, len(left)), replace=False)]
+        best: np.ndarray | None = None
+        for h in hyp:
+            rel = means[left] - means[h]
+            t = rel @ dirs[h]
+            perp = np.linalg.norm(rel - np.outer(t, dirs[h]), axis=1)
+            ok = (perp <= 0.5 * rad[h]) & (np.abs(dirs[left] @ dirs[h]) >= cos_min)
+            if best is None or ok.sum() > best.sum():
+                best = ok
+        if best is None or best.sum() < min_voxels:
+            break
+        out.append(left[best])
+        left = left[~best]
+    return out
+
+
 def candidates_from_regions(
-    feat: LineFeatures, region: np.ndarray, min_length: float, min_voxels: int = 6
+    feat: LineFeatures,
+    region: np.ndarray,
+    min_length: float,
+    angle_deg: float,
+    seed: int = 0,
+    min_voxels: int = 6,
 ) -> list[LineCandidate]:
+    """Straight line candidates (:func:`region_lines`) of every region, kept
+    when at least ``min_length`` long."""
+    rng = np.random.default_rng(seed)
     out: list[LineCandidate] = []
     order = np.argsort(region, kind="stable")
     r_sorted = region[order]
@@ -96,10 +143,10 @@ def candidates_from_regions(
         vox = order[starts[k] : starts[k + 1]]
         if len(vox) < min_voxels or region[vox[0]] < 0:
             continue
-        c, d, t0, t1, rad = fit_line(feat.grid.centres[vox])
-        if t1 - t0 < min_length:
-            continue
-        out.append(LineCandidate(vox, c, d, t0, t1, rad))
+        for part in region_lines(feat, vox, angle_deg, min_voxels, rng):
+            c, d, t0, t1, rad = fit_line(feat.grid.centres[part])
+            if t1 - t0 >= min_length:
+                out.append(LineCandidate(part, c, d, t0, t1, rad))
     return out
 
 
@@ -151,18 +198,18 @@ def _should_join(
     return bool(perp.max() <= tol)
 
 
-def join_fragments(
+def join_groups(
     cands: list[LineCandidate],
-    feat: LineFeatures,
     angle_deg: float,
     max_gap: float,
     max_section: float,
     side_angle_deg: float | None = None,
-) -> list[LineCandidate]:
-    """Union-find over candidate pairs near each other (KD-tree on their
-    sampled axes: no all-pairs array), refitting each joined group."""
+) -> list[list[int]]:
+    """Groups of candidate indices to join: union-find over the pairs near each
+    other (KD-tree on their sampled axes: no all-pairs array) that are
+    collinear across a gap up to ``max_gap`` or side by side within ``max_section``."""
     if len(cands) < 2:
-        return cands
+        return [[i] for i in range(len(cands))]
     step = max(0.25, max_gap / 4)
     samples, owner = [], []
     for i, c in enumerate(cands):
@@ -172,8 +219,7 @@ def join_fragments(
         owner.append(np.full(n, i))
     pts = np.vstack(samples)
     own = np.concatenate(owner)
-    tree = cKDTree(pts)
-    pairs = tree.query_pairs(max(max_gap, max_section) + step, output_type="ndarray")
+    pairs = cKDTree(pts).query_pairs(max(max_gap, max_section) + step, output_type="ndarray")
     cand_pairs = (
         np.unique(np.sort(np.column_stack([own[pairs[:, 0]], own[pairs[:, 1]]]), axis=1), axis=0)
         if len(pairs)
@@ -188,8 +234,20 @@ def join_fragments(
     groups: dict[int, list[int]] = {}
     for i in range(len(cands)):
         groups.setdefault(uf.find(i), []).append(i)
+    return list(groups.values())
+
+
+def join_fragments(
+    cands: list[LineCandidate],
+    feat: LineFeatures,
+    angle_deg: float,
+    max_gap: float,
+    max_section: float,
+    side_angle_deg: float | None = None,
+) -> list[LineCandidate]:
+    """Candidates with each :func:`join_groups` group refitted as one line."""
     out: list[LineCandidate] = []
-    for group in groups.values():
+    for group in join_groups(cands, angle_deg, max_gap, max_section, side_angle_deg):
         if len(group) == 1:
             out.append(cands[group[0]])
             continue

@@ -27,11 +27,13 @@ import time
 from collections.abc import Callable
 
 import numpy as np
+from scipy.spatial import cKDTree
 
 from planners.errors import EmptyInputError, InvalidInputError
 from planners.pointcloud._validate import as_points
 from planners.pointcloud.spacing import measure_spacing
 from planners.structure.assign import assign_points, relabel_by_faces
+from planners.structure.clutter import plane_continuation
 from planners.structure.faces import (
     classify_profile,
     cross_section,
@@ -45,12 +47,16 @@ from planners.structure.lines import (
     candidates_from_regions,
     grow_regions,
     join_fragments,
+    join_groups,
 )
 from planners.structure.model import Face, Member, StructureModel
 from planners.structure.params import StructureParams
 
 #: fewest points a member keeps after assignment
 MIN_MEMBER_POINTS = 20
+#: a candidate whose largest face's plane goes on beside it at this fraction
+#: of the face's point density or more is a piece of a larger surface
+CONTINUATION_MAX = 0.25
 #: assign → refit rounds before the final assignment
 REFITS = 2
 
@@ -134,7 +140,9 @@ def model_structure(
     region = grow_regions(
         feat, prm.linearity_min, prm.link_angle_deg, np.ones(len(feat.linearity), bool)
     )
-    cands = candidates_from_regions(feat, region, prm.min_member_length_m)
+    cands = candidates_from_regions(
+        feat, region, prm.min_member_length_m, prm.link_angle_deg, prm.seed
+    )
     cands = join_fragments(
         cands, feat, prm.merge_angle_deg, prm.max_gap_m, prm.max_section_m, prm.link_angle_deg
     )
@@ -155,6 +163,18 @@ def model_structure(
         labels = relabelled
         _fit_faces(pts, labels, members, spacing, tol, rng)
     stage("faces", 0.85)
+
+    # pieces of larger planes (ground, slabs, walls) are not members
+    tree = cKDTree(pts)
+    not_clutter = []
+    for m in members:
+        big = max(m.faces, key=lambda f: f.n_points, default=None)
+        band = max(0.3, 2.0 * m.width_m, 10 * spacing)
+        if big is None or plane_continuation(tree, pts, big, band, 2 * tol) < CONTINUATION_MAX:
+            not_clutter.append(m)
+    if len(not_clutter) < len(members):
+        labels, members, radii, _ = _renumber(labels, members, radii, not_clutter, spacing)
+    stage("clutter", 0.9)
 
     joints = find_joints(members, radii, reach=max(3 * spacing, 0.05))
     joined = {mid for j in joints for mid in j.members}
@@ -183,53 +203,82 @@ def model_structure(
 def _assign_and_refit(
     pts: np.ndarray, cands: list[LineCandidate], spacing: float, prm: StructureParams
 ) -> tuple[np.ndarray, np.ndarray, list[Member], np.ndarray]:
-    """Labels per point and the members with refitted axes (two rounds: the
-    refitted axes and radii assign the points again)."""
+    """Labels per point and the members with refitted axes.
+
+    ``REFITS`` rounds of: assign the points, refit every axis from its
+    points, join refitted lines that are collinear across a gap or side by
+    side (short candidates' directions are too uncertain for the first join
+    to catch every occlusion fragment), then a final assignment."""
     none = np.full(len(pts), -1, dtype=np.int64)
     if not cands:
         return none, np.zeros(len(pts), bool), [], np.zeros(0)
-    C = np.array([c.centre for c in cands])
-    D = np.array([c.direction for c in cands])
-    T0 = np.array([c.t0 for c in cands])
-    T1 = np.array([c.t1 for c in cands])
-    R = np.array([max(c.radius, 2 * spacing) for c in cands])
-    frags = [c.fragments for c in cands]
+    lines = [
+        LineCandidate(
+            np.zeros(0, np.int64),
+            c.centre,
+            c.direction,
+            c.t0,
+            c.t1,
+            max(c.radius, 2 * spacing),
+            c.fragments,
+        )
+        for c in cands
+    ]
     min_len = float(prm.min_member_length_m or 0.0)
     margin = 3.0 * spacing
-    labels = np.full(len(pts), -1, dtype=np.int64)
+    shared = np.zeros(len(pts), bool)
     for _ in range(REFITS):
-        labels, shared = assign_points(pts, C, D, T0, T1, R, margin)
-        fits = []
-        for i in range(len(C)):
-            mine = labels == i
+        labels, shared = assign_points(pts, *_arrays(lines), margin)
+        groups = join_groups(
+            lines, prm.merge_angle_deg, prm.max_gap_m, prm.max_section_m, prm.link_angle_deg
+        )
+        refitted: list[LineCandidate] = []
+        for group in groups:
+            mine = np.isin(labels, group)
             core = mine & ~shared
             # the section from the points no other member competes for; the
             # extent from all, so that members reach into their joints
-            fit = _refit(pts[core], pts[mine], spacing) if core.sum() >= MIN_MEMBER_POINTS else None
-            fits.append(fit)
-        ok = [i for i, f in enumerate(fits) if f is not None and f[3] - f[2] >= min_len]
-        if not ok:
-            return none, np.zeros(len(pts), bool), [], np.zeros(0)
-        C = np.array([fits[i][0] for i in ok])  # type: ignore[index]
-        D = np.array([fits[i][1] for i in ok])  # type: ignore[index]
-        T0 = np.array([fits[i][2] for i in ok])  # type: ignore[index]
-        T1 = np.array([fits[i][3] for i in ok])  # type: ignore[index]
-        R = np.array([min(fits[i][4], prm.max_section_m) for i in ok])  # type: ignore[index]
-        frags = [frags[i] for i in ok]
-    labels, shared = assign_points(pts, C, D, T0, T1, R, margin)
+            if core.sum() < MIN_MEMBER_POINTS:
+                continue
+            fit = _refit(pts[core], pts[mine], spacing)
+            if fit is None or fit[3] - fit[2] < min_len:
+                continue
+            c, d, t0, t1, rad = fit
+            frags = sum(lines[i].fragments for i in group)
+            refitted.append(
+                LineCandidate(
+                    np.zeros(0, np.int64), c, d, t0, t1, min(rad, prm.max_section_m), frags
+                )
+            )
+        lines = refitted
+        if not lines:
+            return none, shared, [], np.zeros(0)
+    labels, shared = assign_points(pts, *_arrays(lines), margin)
     members = [
         Member(
             id=i,
-            axis=np.array([C[i] + T0[i] * D[i], C[i] + T1[i] * D[i]]),
+            axis=ln.ends,
             profile="unknown",
             depth_m=0.0,
             width_m=0.0,
             n_points=int((labels == i).sum()),
-            fragments=int(frags[i]),
+            fragments=ln.fragments,
         )
-        for i in range(len(C))
+        for i, ln in enumerate(lines)
     ]
-    return labels, shared, members, R
+    return labels, shared, members, np.array([ln.radius for ln in lines])
+
+
+def _arrays(
+    lines: list[LineCandidate],
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    return (
+        np.array([ln.centre for ln in lines]),
+        np.array([ln.direction for ln in lines]),
+        np.array([ln.t0 for ln in lines]),
+        np.array([ln.t1 for ln in lines]),
+        np.array([ln.radius for ln in lines]),
+    )
 
 
 def _fit_faces(
