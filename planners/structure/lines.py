@@ -20,6 +20,9 @@ from scipy.spatial import cKDTree
 
 from planners.structure.features import LineFeatures
 
+#: linear voxels each voxel may link to (its nearest ones)
+LINK_K = 8
+
 
 @dataclass
 class LineCandidate:
@@ -72,8 +75,19 @@ def grow_regions(
     out = np.full(len(grid.centres), -1, dtype=np.int64)
     if len(ids) == 0:
         return out
-    tree = cKDTree(grid.centres[ids])
-    pairs = tree.query_pairs(1.8 * grid.size, output_type="ndarray")
+    # k nearest linear voxels, not a fixed radius: density falls with range
+    # in a scan, and a far member's voxels do not touch; the cap (a quarter
+    # of the voxel's scale) keeps links local
+    sub = grid.centres[ids]
+    kk = min(LINK_K + 1, len(ids))
+    dist, nb = cKDTree(sub).query(sub, k=kk)
+    dist = np.asarray(dist).reshape(len(ids), kk)
+    nb = np.asarray(nb).reshape(len(ids), kk)
+    cap = np.maximum(0.25 * feat.radius[ids], 1.8 * grid.size)
+    rows = np.repeat(np.arange(len(ids)), kk)
+    cols = nb.ravel()
+    ok = (cols != rows) & (cols < len(ids)) & (dist.ravel() <= np.repeat(cap, kk))
+    pairs = np.column_stack([rows[ok], cols[ok]])
     if len(pairs):
         d = feat.direction[ids]
         cos = np.abs(np.einsum("ij,ij->i", d[pairs[:, 0]], d[pairs[:, 1]]))
