@@ -30,9 +30,6 @@ from planners.structure.model import Face, Member
 
 __all__ = ["FaceGeom", "driving_face", "face_continuity", "foot_centres"]
 
-#: Largest number of foot rectangles handed to one vectorised shapely call.
-_CHUNK = 8192
-
 
 def driving_face(member: Member) -> Face | None:
     """The face the robot drives on along ``member``, or ``None`` without faces.
@@ -158,8 +155,17 @@ def foot_centres(
     ``placement_spacing_m`` grid, ``placement_headings`` headings evenly over
     180° starting along ``heading`` projected into the plane (the member axis:
     the foot is aligned with the member it drives along), a centre kept when
-    any heading fits.  At most ``(2·reach/spacing + 1)²`` centres, tested in
-    chunks of 8192 rectangles, so memory does not grow with the structure."""
+    any heading fits.
+
+    Containment by erosion rather than one polygon per rectangle: for a
+    heading θ with foot rectangle K (symmetric about its centre), ``c + K``
+    lies inside the region P iff ``c ∈ P`` and ``c + K`` meets no boundary
+    edge of P, i.e. ``c ∉ ∂P ⊕ K``; ``∂P ⊕ K`` is the union of the convex
+    hulls of each boundary segment swept by K.  So the valid centres are
+    ``P − ⋃ hull(e ⊕ K)``, tested on the grid with one vectorised call.
+    Strict containment: a foot touching the face's edge does not count.  At
+    most ``(2·reach/spacing + 1)²`` grid centres, so memory does not grow with
+    the structure."""
     region = g.near(p, params.jump_reach_m)
     if region.is_empty or region.area <= 0:
         return np.zeros((0, 3))
@@ -177,19 +183,22 @@ def foot_centres(
         hu = g.to_plane(g.origin + np.asarray(heading, float))
         if float(np.hypot(hu[0], hu[1])) > 1e-9:
             base = math.atan2(float(hu[1]), float(hu[0]))
-    ang = base + np.arange(params.placement_headings) * math.pi / params.placement_headings
+    # Boundary segments of the region (every ring of every part).
+    segs = []
+    for line in shapely.get_parts(shapely.boundary(region)):
+        xy = shapely.get_coordinates(line)
+        segs.append(np.stack([xy[:-1], xy[1:]], axis=1))
+    seg = np.concatenate(segs)  # (S, 2, 2)
     hl, hw = params.foot_length_m / 2, params.foot_width_m / 2
-    local = np.array([[hl, hw], [-hl, hw], [-hl, -hw], [hl, -hw], [hl, hw]])
-    c, si = np.cos(ang), np.sin(ang)
-    rot = np.stack([np.stack([c, -si], -1), np.stack([si, c], -1)], -2)  # (A, 2, 2)
-    corners = np.einsum("aij,kj->aki", rot, local)  # (A, 5, 2)
-    shapely.prepare(region)
+    local = np.array([[hl, hw], [-hl, hw], [-hl, -hw], [hl, -hw]])
     fits = np.zeros(len(centres), bool)
-    step = max(1, _CHUNK // len(ang))
-    for lo in range(0, len(centres), step):
-        block = centres[lo : lo + step]
-        rings = block[:, None, None, :] + corners[None]  # (B, A, 5, 2)
-        polys = shapely.polygons(rings.reshape(-1, 5, 2))
-        ok = np.asarray(shapely.covers(region, polys)).reshape(len(block), len(ang))
-        fits[lo : lo + step] = ok.any(axis=1)
+    for k in range(params.placement_headings):
+        a = base + k * math.pi / params.placement_headings
+        rot = np.array([[math.cos(a), -math.sin(a)], [math.sin(a), math.cos(a)]])
+        corners = local @ rot.T  # (4, 2)
+        swept = (seg[:, :, None, :] + corners[None, None]).reshape(len(seg), 8, 2)
+        band = shapely.union_all(shapely.convex_hull(shapely.multipoints(swept)))
+        ok = shapely.difference(region, band)
+        if not ok.is_empty:
+            fits |= shapely.contains_xy(ok, centres[:, 0], centres[:, 1])
     return np.asarray(g.to_world(centres[fits]))

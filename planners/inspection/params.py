@@ -50,9 +50,8 @@ class InspectionParams:
       and the number of headings (evenly over 180°, the first along the member
       axis) at which foot rectangles are tried on a face; the grid covers a
       disc of radius ``jump_reach_m`` about the vertex, so at most
-      ``(2·jump_reach_m / placement_spacing_m + 1)² · placement_headings``
-      rectangles are tested per (face, vertex): a bound independent of the
-      structure's size.
+      ``(2·jump_reach_m / placement_spacing_m + 1)²`` centres are tested per
+      (face, vertex) and heading: a bound independent of the structure's size.
 
     Route:
 

@@ -404,3 +404,51 @@ def test_closest_segment_points_match_dense_sampling(a0, a1, b0, b1, flat):
     cb = b0 + t[0, 0] * (b1 - b0)
     assert np.linalg.norm(ca - cb) == pytest.approx(d[0, 0], abs=1e-9)
     assert 0 <= s[0, 0] <= 1 and 0 <= t[0, 0] <= 1
+
+
+@settings(max_examples=30, deadline=None)
+@given(
+    radii=st.lists(st.floats(0.05, 0.6), min_size=5, max_size=12),
+    heading=st.floats(-math.pi, math.pi),
+)
+def test_foot_centres_by_erosion_match_rectangle_containment(radii, heading):
+    """S_am's erosion shortcut against the direct test: every centre it accepts
+    has a foot rectangle (at one of the headings) inside the face, and every
+    centre whose rectangle fits with 0.1 mm to spare is accepted."""
+    import shapely
+
+    from planners.inspection.faces import FaceGeom, foot_centres
+    from planners.structure.model import Face
+
+    ang = np.linspace(0, 2 * np.pi, len(radii), endpoint=False)
+    star = np.column_stack([np.cos(ang), np.sin(ang)]) * np.asarray(radii)[:, None]
+    face = Face(
+        0, 0, "flange", np.zeros(3), np.array([0, 0, 1.0]), np.array([1.0, 0, 0]), star, 1.0, 0
+    )
+    g = FaceGeom.of(face)
+    params = InspectionParams(placement_spacing_m=0.03)
+    direction = np.array([math.cos(heading), math.sin(heading), 0.0])
+    got = foot_centres(g, np.zeros(3), direction, params)[:, :2]
+    region = g.near(np.zeros(3), params.jump_reach_m)
+    if region.is_empty:
+        assert len(got) == 0
+        return
+    x0, y0, x1, y1 = region.bounds
+    gx, gy = np.meshgrid(np.arange(x0, x1 + 1e-12, 0.03), np.arange(y0, y1 + 1e-12, 0.03))
+    grid = np.column_stack([gx.ravel(), gy.ravel()])
+    hl, hw = 0.09, 0.06
+    local = np.array([[hl, hw], [-hl, hw], [-hl, -hw], [hl, -hw], [hl, hw]])
+    loose, tight = np.zeros(len(grid), bool), np.zeros(len(grid), bool)
+    for k in range(params.placement_headings):
+        a = heading + k * math.pi / params.placement_headings
+        rot = np.array([[math.cos(a), -math.sin(a)], [math.sin(a), math.cos(a)]])
+        polys = shapely.polygons(grid[:, None, :] + (local @ rot.T)[None])
+        loose |= np.asarray(shapely.covers(region, polys))
+        tight |= np.asarray(shapely.covers(region, shapely.buffer(polys, 1e-4, join_style="mitre")))
+    accepted = {tuple(np.round(c, 9)) for c in got}
+    for c, lo, ti in zip(grid, loose, tight, strict=True):
+        key = tuple(np.round(c, 9))
+        if key in accepted:
+            assert lo, c
+        elif ti:
+            pytest.fail(f"centre {c} fits with margin but was rejected")
