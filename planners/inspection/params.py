@@ -1,0 +1,101 @@
+"""Parameters of :func:`planners.inspection.plan_inspection` (issue #14 §3).
+
+Planners read no files: every robot number is a plain default equal to the
+ARA's value in ``robots/ara/params.toml``, repeated here with its derivation.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+from planners.errors import InvalidInputError
+
+__all__ = ["ARA_JUMP_REACH_M", "InspectionParams"]
+
+#: The ARA's largest sole-to-sole distance (metres).  ``robots/ara/params.toml``
+#: [arm]: joint 2 sits j1_above_sole + j2_above_j1 = 0.05 + 0.05 = 0.10 m above
+#: the standing sole, joints 2 → 5 are link2 + link3 + link4 = 0.15 + 0.20 +
+#: 0.15 = 0.50 m apart at most (straight arm), and the moving sole is
+#: j6_below_j5 + sole_below_j6 = 0.05 + 0.05 = 0.10 m beyond joint 5.  By the
+#: triangle inequality no pose puts the soles further apart than
+#: 0.10 + 0.50 + 0.10 = 0.70 m, and the straight arm pitched in line with both
+#: offsets attains it.  It is an upper bound on the reach, not a guarantee
+#: that every landing closer than it is kinematically reachable (that is the
+#: inch-worm motion planner's job, :mod:`planners.switching.jump`).
+ARA_JUMP_REACH_M = 0.10 + 0.50 + 0.10
+
+
+@dataclass(frozen=True)
+class InspectionParams:
+    """Tunables of the inspection route, units in the names.
+
+    Robot (ARA defaults, ``robots/ara/params.toml`` [foot]):
+
+    - ``foot_length_m`` × ``foot_width_m``: the sole rectangle the area check
+      (S_am) must fit on a face (0.18 × 0.12 m);
+    - ``jump_reach_m``: the largest sole-to-sole distance of an inch-worm jump
+      (:data:`ARA_JUMP_REACH_M`, 0.70 m); the adapted height check S_hc and
+      the gap joining both use it.
+
+    Transition decision:
+
+    - ``coplanar_angle_deg``: two driving faces continue (mobile transition)
+      when their outward normals are within this angle, ...
+    - ``contact_tolerance_m``: ... their planes are within this step of each
+      other at the vertex and their outlines (projected into the first face's
+      plane, clipped to the disc of radius ``jump_reach_m`` about the vertex)
+      come within this distance of each other;
+    - ``placement_spacing_m``, ``placement_headings``: the grid of foot centres
+      and the number of headings (evenly over 180°, the first along the member
+      axis) at which foot rectangles are tried on a face; the grid covers a
+      disc of radius ``jump_reach_m`` about the vertex, so at most
+      ``(2·jump_reach_m / placement_spacing_m + 1)²`` centres are tested per
+      (face, vertex) and heading: a bound independent of the structure's size.
+
+    Route:
+
+    - ``jump_cost_m``: what one inch-worm jump is worth in metres of driving
+      when the route is chosen (see :mod:`planners.inspection.transitions`
+      for how it enters the edge weights); lengths are still reported in
+      metres of steel and jumps counted separately.
+    """
+
+    foot_length_m: float = 0.18
+    foot_width_m: float = 0.12
+    jump_reach_m: float = ARA_JUMP_REACH_M
+    coplanar_angle_deg: float = 10.0
+    contact_tolerance_m: float = 0.02
+    jump_cost_m: float = 0.5
+    placement_spacing_m: float = 0.02
+    placement_headings: int = 4
+
+    def __post_init__(self) -> None:
+        positive = {
+            "foot_length_m": self.foot_length_m,
+            "foot_width_m": self.foot_width_m,
+            "jump_reach_m": self.jump_reach_m,
+            "placement_spacing_m": self.placement_spacing_m,
+        }
+        for name, value in positive.items():
+            if not (isinstance(value, int | float) and math.isfinite(value) and value > 0):
+                raise InvalidInputError(f"{name} must be a finite number > 0, got {value!r}")
+        non_negative = {
+            "contact_tolerance_m": self.contact_tolerance_m,
+            "jump_cost_m": self.jump_cost_m,
+        }
+        for name, value in non_negative.items():
+            if not (isinstance(value, int | float) and math.isfinite(value) and value >= 0):
+                raise InvalidInputError(f"{name} must be a finite number ≥ 0, got {value!r}")
+        a = self.coplanar_angle_deg
+        if not (isinstance(a, int | float) and math.isfinite(a) and 0 <= a < 90):
+            raise InvalidInputError(f"coplanar_angle_deg must be in [0, 90), got {a!r}")
+        h = self.placement_headings
+        if not (isinstance(h, int) and not isinstance(h, bool) and 1 <= h <= 36):
+            raise InvalidInputError(f"placement_headings must be an int in [1, 36], got {h!r}")
+        # The placement grid is sized by reach / spacing: keep it bounded.
+        if self.jump_reach_m / self.placement_spacing_m > 500:
+            raise InvalidInputError(
+                "jump_reach_m / placement_spacing_m must be ≤ 500 (the foot placement grid "
+                f"would have more than 1e6 cells), got {self.jump_reach_m / self.placement_spacing_m:.0f}"
+            )

@@ -1,0 +1,325 @@
+"""The ARA inspection route over a 3D structure model (issue #14 §3).
+
+:func:`plan_inspection` chains:
+
+1. validation of the :class:`~planners.structure.model.StructureModel`;
+2. gaps (:mod:`.gaps`): the pieces of a disconnected member graph, the
+   minimum spanning tree of their span-to-span distances, and jump edges
+   across the gaps within the jump reach;
+3. routing weights: span length + the jump-cost estimate of
+   :mod:`.transitions` (jump edges: gap width + one jump cost);
+4. per piece still disconnected, the exact VOCPP route
+   (:func:`planners.vocpp.plan_route`, the seed's Alg. 5 solved exactly as a
+   minimum T-join + Euler trail) between two far-apart free ends unless the
+   caller fixes ``start``/``end``;
+5. the transitions along every route (:mod:`.transitions`: seed §3.1,
+   Eq. 3.1–3.4, the mode and S_pa/S_am/S_hc at each vertex).
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Hashable
+from dataclasses import dataclass, field, replace
+
+import networkx as nx
+import numpy as np
+
+from planners.errors import (
+    DisconnectedGraphError,
+    EmptyInputError,
+    InvalidInputError,
+    InvalidWeightError,
+    UnknownVertexError,
+)
+from planners.inspection.gaps import Gap, component_gaps, join_gaps
+from planners.inspection.params import InspectionParams
+from planners.inspection.transitions import Transition, TransitionContext, route_transitions
+from planners.structure.model import Member, StructureModel
+from planners.vocpp import Route, plan_route
+
+__all__ = ["InspectionPlan", "plan_inspection"]
+
+
+@dataclass
+class InspectionPlan:
+    """Result of :func:`plan_inspection`.
+
+    - ``route``: the main route, ``routes[0]`` — the piece holding ``start``
+      / ``end`` when given, else the piece with the most steel.  Its edges
+      are ``(u, v, key)`` of ``graph``; ``length``, ``deadhead`` and
+      ``lower_bound`` are metres of steel (jump edges count 0), while
+      ``optimality_gap`` refers to the routing weights (steel + jump cost
+      estimate) it was optimised for.
+    - ``routes``: one route per piece left disconnected after joining the
+      gaps, main first, the rest by decreasing steel; the robot has to be
+      carried between them.
+    - ``transitions``: every transition along every route, in order.
+    - ``gaps``: the k − 1 gaps of the minimum spanning tree between the k
+      pieces of the model graph (empty when connected).
+    - ``components``: member ids of each piece of the *model* graph, most
+      steel first; ``Gap.component_a``/``_b`` index this list.
+    - ``jumps``: inch-worm transitions over all routes; ``length_m``: steel
+      driven over all routes; ``lower_bound_m``: the sum of all span
+      lengths (every span once).
+    - ``covered_members``: members the main route drives;
+      ``uncovered_members``: every other member of the model (driven only by
+      another route, or without any span in the graph).
+    - ``graph``: the routing graph — the model graph plus ``"split"``
+      vertices and ``kind="jump"`` edges; ``timings_s``: seconds per stage.
+    """
+
+    route: Route
+    routes: list[Route]
+    transitions: list[Transition]
+    gaps: list[Gap]
+    components: list[tuple[int, ...]]
+    jumps: int
+    length_m: float
+    lower_bound_m: float
+    covered_members: list[int]
+    uncovered_members: list[int]
+    graph: nx.MultiGraph
+    params: InspectionParams
+    timings_s: dict[str, float] = field(default_factory=dict)
+
+    @property
+    def infeasible(self) -> list[Transition]:
+        """Transitions whose availability checks fail (Eq. 3.1 false for the mode)."""
+        return [t for t in self.transitions if not t.feasible]
+
+
+def plan_inspection(
+    model: StructureModel,
+    *,
+    start: Hashable | None = None,
+    end: Hashable | None = None,
+    params: InspectionParams | None = None,
+) -> InspectionPlan:
+    """Inspection route over every member span of ``model`` with the ARA's
+    mobile / inch-worm transitions (seed §3.1 Eq. 3.1–3.4, Alg. 2, Alg. 5).
+
+    ``start``/``end``: vertices of ``model.graph``; ``None`` picks, in each
+    piece, the two ``"end"`` vertices furthest apart (any two vertices
+    furthest apart when a piece has fewer than two free ends); one given, the
+    other is the free end furthest from it.
+
+    Raises (``planners.errors``, all ``ValueError``): ``InvalidInputError``
+    (not a StructureModel / InspectionParams, a directed graph, a vertex
+    without a finite (3,) ``pos``, a span whose ``member`` is not a member
+    id), ``InvalidWeightError`` (a span ``weight`` missing, negative or not
+    finite), ``EmptyInputError`` (no member spans), ``UnknownVertexError``
+    (``start``/``end`` not a vertex), ``DisconnectedGraphError`` (``start``
+    and ``end`` in pieces no jump joins, or on a vertex without spans).
+    Structures themselves — disconnected, faceless members, unreachable
+    landings — never raise: they are reported in the plan.
+    """
+    t0 = time.perf_counter()
+    timings: dict[str, float] = {}
+    if params is None:
+        params = InspectionParams()
+    if not isinstance(params, InspectionParams):
+        raise InvalidInputError(f"params must be an InspectionParams, got {type(params).__name__}")
+    members = _validate(model)
+    for name, v in (("start", start), ("end", end)):
+        if v is not None and not _has_node(model.graph, v):
+            raise UnknownVertexError(f"{name} vertex {v!r} is not a vertex of the model graph")
+    graph = _routing_graph(model.graph)
+    timings["validate"] = time.perf_counter() - t0
+
+    t = time.perf_counter()
+    pieces = _pieces(graph)
+    components = [
+        tuple(sorted({int(d["member"]) for _, _, d in graph.subgraph(p).edges(data=True)}))
+        for p in pieces
+    ]
+    gaps = _gaps(graph, pieces, params)  # splits spans and adds jump edges in ``graph``
+    timings["gaps"] = time.perf_counter() - t
+
+    t = time.perf_counter()
+    ctx = TransitionContext(members, graph, params)
+    half = params.jump_cost_m / 2
+    for u, v, d in graph.edges(data=True):
+        if d["kind"] == "jump":
+            d["route_weight"] = float(d["weight"]) + params.jump_cost_m
+        else:
+            m = int(d["member"])
+            forced = int(ctx.forced_jump(u, m)) + int(ctx.forced_jump(v, m))
+            d["route_weight"] = float(d["steel_m"]) + half * forced
+    timings["weights"] = time.perf_counter() - t
+
+    t = time.perf_counter()
+    parts = _pieces(graph)  # after joining
+    fixed = [x for x in (start, end) if x is not None]
+    homes = {i for i, p in enumerate(parts) for x in fixed if x in p}
+    if fixed and len(homes) != 1:
+        raise DisconnectedGraphError(
+            f"start {start!r} and end {end!r} are not on spans of one piece of the structure "
+            "(pieces no jump within reach joins, or a vertex without spans); "
+            "give vertices of one piece or None"
+        )
+    steel = [
+        math.fsum(float(d["steel_m"]) for _, _, d in graph.subgraph(p).edges(data=True))
+        for p in parts
+    ]
+    order = sorted(range(len(parts)), key=lambda i: (-steel[i], _min_member(graph, parts[i])))
+    if fixed:
+        main = homes.pop()
+        order.remove(main)
+        order.insert(0, main)
+    routes: list[Route] = []
+    for rank, i in enumerate(order):
+        sub: nx.MultiGraph = nx.MultiGraph(graph.subgraph(parts[i]))
+        s, e = _ends(sub, start if rank == 0 else None, end if rank == 0 else None)
+        r = plan_route(sub, s, e, weight="route_weight")
+        driven = math.fsum(float(graph.edges[x]["steel_m"]) for x in r.edges)
+        routes.append(replace(r, length=driven, deadhead=driven - steel[i], lower_bound=steel[i]))
+    timings["route"] = time.perf_counter() - t
+
+    t = time.perf_counter()
+    transitions = [tr for i, r in enumerate(routes) for tr in route_transitions(ctx, r, i)]
+    timings["transitions"] = time.perf_counter() - t
+
+    covered = sorted(
+        {int(graph.edges[x]["member"]) for x in routes[0].edges if graph.edges[x]["kind"] == "span"}
+    )
+    timings["total"] = time.perf_counter() - t0
+    return InspectionPlan(
+        route=routes[0],
+        routes=routes,
+        transitions=transitions,
+        gaps=gaps,
+        components=components,
+        jumps=sum(tr.mode == "inchworm" for tr in transitions),
+        length_m=math.fsum(r.length for r in routes),
+        lower_bound_m=math.fsum(float(d["weight"]) for _, _, d in model.graph.edges(data=True)),
+        covered_members=covered,
+        uncovered_members=sorted(set(members) - set(covered)),
+        graph=graph,
+        params=params,
+        timings_s=timings,
+    )
+
+
+def _has_node(g: nx.MultiGraph, v: object) -> bool:
+    try:
+        return v in g
+    except TypeError:  # unhashable: cannot be a vertex
+        return False
+
+
+def _validate(model: StructureModel) -> dict[int, Member]:
+    """Check the model against the StructureModel contract; members by id."""
+    if not isinstance(model, StructureModel):
+        raise InvalidInputError(f"model must be a StructureModel, got {type(model).__name__}")
+    g = model.graph
+    if not isinstance(g, nx.Graph) or g.is_directed():
+        raise InvalidInputError("model.graph must be an undirected networkx (Multi)Graph")
+    if g.number_of_edges() == 0:
+        raise EmptyInputError("the model has no member spans to inspect (model.graph has no edges)")
+    members = {int(m.id): m for m in model.members}
+    for n, d in g.nodes(data=True):
+        pos = np.asarray(d.get("pos", np.full(3, np.nan)), float)
+        if pos.shape != (3,) or not np.isfinite(pos).all():
+            raise InvalidInputError(f"vertex {n!r} needs a finite (3,) pos, got {d.get('pos')!r}")
+    for u, v, d in g.edges(data=True):
+        if d.get("member") not in members:
+            raise InvalidInputError(
+                f"span {u!r}–{v!r} has member {d.get('member')!r}, not one of the model's member ids"
+            )
+        w = d.get("weight")
+        if not (isinstance(w, int | float | np.floating) and math.isfinite(w) and w >= 0):
+            raise InvalidWeightError(f"span {u!r}–{v!r} needs a finite weight ≥ 0 m, got {w!r}")
+    return members
+
+
+def _routing_graph(g: nx.Graph) -> nx.MultiGraph:
+    """A MultiGraph copy (new attribute dicts; a MultiGraph keeps its keys, a
+    Graph's edges get key 0) whose spans carry ``kind="span"`` and ``steel_m``."""
+    out: nx.MultiGraph = nx.MultiGraph(g)
+    for _, _, d in out.edges(data=True):
+        d.update(kind="span", steel_m=float(d["weight"]), member=int(d["member"]))
+    return out
+
+
+def _pieces(g: nx.MultiGraph) -> list[set[Hashable]]:
+    """Connected components of the spans (isolated vertices left out)."""
+    with_edges = g.edge_subgraph(list(g.edges(keys=True)))
+    comps = [set(c) for c in nx.connected_components(with_edges)]
+    steel = [
+        math.fsum(float(d["steel_m"]) for _, _, d in g.subgraph(c).edges(data=True)) for c in comps
+    ]
+    order = sorted(range(len(comps)), key=lambda i: (-steel[i], _min_member(g, comps[i])))
+    return [comps[i] for i in order]
+
+
+def _min_member(g: nx.MultiGraph, nodes: set[Hashable]) -> int:
+    ids = [
+        int(d["member"])
+        for _, _, d in g.subgraph(nodes).edges(data=True)
+        if d["member"] is not None
+    ]
+    return min(ids, default=-1)
+
+
+def _gaps(g: nx.MultiGraph, pieces: list[set[Hashable]], params: InspectionParams) -> list[Gap]:
+    """MST gaps between the pieces; the ones within reach joined in ``g``."""
+    if len(pieces) <= 1:
+        return []
+    where = {n: i for i, p in enumerate(pieces) for n in p}
+    spans = list(g.edges(keys=True))
+    p0 = np.array([g.nodes[u]["pos"] for u, _, _ in spans], float)
+    p1 = np.array([g.nodes[v]["pos"] for _, v, _ in spans], float)
+    comp = np.array([where[u] for u, _, _ in spans])
+    found = component_gaps(p0, p1, comp, len(pieces))
+    gaps, at = [], []
+    for d, i, j, s, t in found:
+        ca, cb = int(comp[i]), int(comp[j])
+        if ca > cb:  # report the larger piece (lower index) first
+            ca, cb, i, j, s, t = cb, ca, j, i, t, s
+        gaps.append(
+            Gap(
+                component_a=ca,
+                component_b=cb,
+                point_a=p0[i] + s * (p1[i] - p0[i]),
+                point_b=p0[j] + t * (p1[j] - p0[j]),
+                width_m=d,
+                joined=d <= params.jump_reach_m,
+                member_a=int(g.edges[spans[i]]["member"]),
+                member_b=int(g.edges[spans[j]]["member"]),
+            )
+        )
+        at.append((i, s, j, t))
+    _, joined = join_gaps(g, spans, gaps, at)
+    return joined
+
+
+def _ends(
+    g: nx.MultiGraph, start: Hashable | None, end: Hashable | None
+) -> tuple[Hashable, Hashable]:
+    """Start and end of a piece's route: the given ones, else far-apart free ends."""
+    if start is not None and end is not None:
+        return start, end
+    nodes = [n for n in g.nodes if g.degree(n) > 0]
+    free = [n for n in nodes if g.nodes[n].get("kind") == "end"]
+    fixed = start if start is not None else end
+    pool = free if len(free) >= (1 if fixed is not None else 2) else nodes
+    pos = np.array([g.nodes[n]["pos"] for n in pool], float)
+    if fixed is not None:
+        others = [i for i, n in enumerate(pool) if n != fixed]
+        if not others:
+            return fixed, fixed
+        p = np.asarray(g.nodes[fixed]["pos"], float)
+        dist = np.linalg.norm(pos[others] - p, axis=1)
+        far = pool[others[int(np.argmax(dist))]]
+        return (fixed, far) if start is not None else (far, fixed)
+    if len(pool) < 2:
+        return pool[0], pool[0]
+    best, pair = -1.0, (0, 1)
+    for i in range(len(pool) - 1):  # O(n) memory: one row of distances at a time
+        dist = np.linalg.norm(pos[i + 1 :] - pos[i], axis=1)
+        j = int(np.argmax(dist))
+        if float(dist[j]) > best:
+            best, pair = float(dist[j]), (i, i + 1 + j)
+    return pool[pair[0]], pool[pair[1]]
