@@ -64,6 +64,7 @@ from dataclasses import dataclass, field
 from typing import NamedTuple
 
 import numpy as np
+import numpy.typing as npt
 
 from planners.errors import InvalidInputError
 from planners.structure.sections import (
@@ -421,20 +422,22 @@ def _on_rim(g: np.ndarray, inset: float, rng: np.random.Generator) -> np.ndarray
 
 
 def _scanners(fp: np.ndarray, n: int, rng: np.random.Generator) -> np.ndarray:
-    """``n`` scanner positions round the footprint, 5–12 m out, 1.5–2 m high."""
+    """``n`` scanner positions round the footprint, 5–12 m clear of it, 1.5–2 m high."""
     half = (fp[1] - fp[0]) / 2
     a0 = rng.uniform(0, 2 * np.pi)
     out = []
     for k in range(n):
         a = a0 + 2 * np.pi * k / n + rng.uniform(-0.3, 0.3)
-        c, s = np.cos(a), np.sin(a)
-        edge = min(half[0] / max(abs(c), 1e-9), half[1] / max(abs(s), 1e-9))
-        d = edge + rng.uniform(5.0, 12.0)
-        out.append([d * c, d * s, rng.uniform(1.5, 2.0)])
+        u = np.array([np.cos(a), np.sin(a)])
+        clear = rng.uniform(5.0, 12.0)
+        lo, hi = 0.0, float(np.linalg.norm(half)) + clear
+        # the clearance grows monotonically along the ray: bisect for the distance
+        for _ in range(60):
+            mid = (lo + hi) / 2
+            gap = np.linalg.norm(np.maximum(np.abs(mid * u) - half, 0.0))
+            lo, hi = (mid, hi) if gap < clear else (lo, mid)
+        out.append([hi * u[0], hi * u[1], rng.uniform(1.5, 2.0)])
     return np.asarray(out)
-
-
-# --------------------------------------------------------------------------- scanning
 
 
 class _Grid:
@@ -570,12 +573,16 @@ def _scene_candidates(
 
 
 def first_returns(
-    grid_origin: np.ndarray, dtheta: float, chunks: Iterator[_Candidates]
+    grid_origin: np.ndarray,
+    dtheta: float,
+    chunks: Iterator[_Candidates],
+    *,
+    merge_at: int = _MERGE_AT,
 ) -> _Candidates:
     """The nearest candidate per angular bin over all chunks, merged a buffer at a time.
 
     Memory holds the current winners (one per occupied bin) plus one buffer of
-    at most ~``_MERGE_AT`` candidates, never all candidates at once.
+    about ``merge_at`` candidates, never all candidates at once.
     """
     grid = _Grid(grid_origin, dtheta)
     best = _Candidates(np.zeros((0, 3)), np.zeros((0, 3)), np.zeros(0, dtype=np.int64))
@@ -594,7 +601,7 @@ def first_returns(
     for ch in chunks:
         buf.append(ch)
         size += len(ch.pts)
-        if size >= _MERGE_AT:
+        if size >= merge_at:
             best, buf, size = merge(), [], 0
     return merge() if buf else best
 
@@ -800,9 +807,9 @@ def _angles_deg(a: np.ndarray, b: np.ndarray) -> np.ndarray:
 
 
 def match_members(
-    true_axes: np.ndarray,
-    true_depths: np.ndarray,
-    found_axes: np.ndarray,
+    true_axes: npt.ArrayLike,
+    true_depths: npt.ArrayLike,
+    found_axes: npt.ArrayLike,
     *,
     min_tol_m: float = 0.05,
     depth_factor: float = 0.6,
