@@ -165,6 +165,10 @@ class ScanStructure:
         """(T,) section depth ``h`` per member, metres."""
         return np.array([m.section.h for m in self.members], dtype=float)
 
+    def match(self, found_axes: npt.ArrayLike) -> MemberMatch:
+        """:func:`match_members` of found axes (F, 2, 3), metres in the survey frame."""
+        return match_members(self.true_axes(), self.true_depths(), found_axes)
+
 
 # --------------------------------------------------------------------------- layout
 
@@ -641,15 +645,19 @@ def _check_args(
 
 def _outliers(
     pts: np.ndarray, idx: np.ndarray, scanners: np.ndarray, rng: np.random.Generator
-) -> _Candidates:
-    """Mixed-pixel style outliers: copies of scan points moved 0.3–2 m along their beam."""
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Mixed-pixel style outliers: copies of scan points moved 0.3–2 m along their beam.
+
+    Returns the points, their "normals" (towards the scanner) and the indices
+    of the scan points they were copied from.
+    """
     n = round(OUTLIER_FRACTION * len(pts))
     pick = rng.integers(len(pts), size=n)
     s = scanners[idx[pick]]
     v = pts[pick] - s
     u = v / np.linalg.norm(v, axis=1, keepdims=True)
     shift = rng.uniform(0.3, 2.0, n) * rng.choice([-1.0, 1.0], n)
-    return _Candidates(pts[pick] + u * shift[:, None], -u, idx[pick])
+    return pts[pick] + u * shift[:, None], -u, pick
 
 
 def make_scan(
@@ -694,11 +702,11 @@ def make_scan(
     lab = np.concatenate([p.lab for p in parts]).astype(np.int64)
     idx = np.concatenate(which).astype(np.int64)
     if clutter and len(pts):
-        out = _outliers(pts, idx, scanners, rng)
-        pts = np.concatenate([pts, out.pts])
-        nrm = np.concatenate([nrm, out.nrm])
-        lab = np.concatenate([lab, np.full(len(out.pts), -1)])
-        idx = np.concatenate([idx, out.lab])
+        o_pts, o_nrm, pick = _outliers(pts, idx, scanners, rng)
+        pts = np.concatenate([pts, o_pts])
+        nrm = np.concatenate([nrm, o_nrm])
+        lab = np.concatenate([lab, np.full(len(o_pts), -1)])
+        idx = np.concatenate([idx, idx[pick]])
     if max_points is not None and len(pts) > max_points:
         keep = np.sort(rng.choice(len(pts), size=max_points, replace=False))
         pts, nrm, lab, idx = pts[keep], nrm[keep], lab[keep], idx[keep]

@@ -450,3 +450,18 @@ def test_match_against_brute_force(seed: int, n_t: int, n_f: int) -> None:
     fa[wild] = rng.uniform(-3, 3, (int(wild.sum()), 2, 3))
     res = match_members(ta, depth, fa)
     assert (res.recall, res.precision) == pytest.approx(brute_match(ta, depth, fa))
+
+
+def test_scan_match_on_its_own_truth() -> None:
+    sc = scan("frame", 2)
+    ax = sc.true_axes()
+    d = ax[:, 1:] - ax[:, :1]
+    assert sc.match(ax) == (1.0, 1.0, [(i, i) for i in range(len(ax))])
+    cut = np.concatenate([ax[:, :1] + 0.08 * d, ax[:, 1:] - 0.08 * d], axis=1)
+    assert sc.match(cut).recall == 1.0
+    # distances are to the found *segment*: a cut end still covers tol past it
+    tol = np.maximum(0.05, 0.6 * sc.true_depths())[:, None, None]
+    u = d / np.linalg.norm(d, axis=2, keepdims=True)
+    short = np.concatenate([ax[:, :1] + 0.15 * d + tol * u, ax[:, 1:] - 0.15 * d - tol * u], axis=1)
+    res = sc.match(short)
+    assert res.recall == 0.0 and res.precision == 1.0
