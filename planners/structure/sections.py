@@ -239,7 +239,27 @@ def iter_member_surface(
         arc = (np.tile(np.arange(n_per), r1 - r0) + rng.random(m)) * (per.length / n_per)
         ax = (np.repeat(np.arange(r0, r1), n_per) + rng.random(m)) * (length / n_ax)
         uv, nuv = per.at(arc)
-        yield p0 + uv @ frame[:2] + ax[:, None] * frame[2], nuv @ frame[:2]
+        yield _lift(uv, frame, p0, ax), _lift(nuv, frame, None, None)
+
+
+def _lift(
+    uv: np.ndarray, frame: np.ndarray, origin: np.ndarray | None, ax: np.ndarray | None
+) -> np.ndarray:
+    """(n, 2) section coordinates (+ axial offsets) → (n, 3), one column at a time.
+
+    Three 1-D multiply-adds per column beat ``uv @ frame[:2]`` several times
+    over: numpy's matmul with an inner size of 2 does not go to BLAS.
+    """
+    out = np.empty((len(uv), 3))
+    u, v = uv[:, 0], uv[:, 1]
+    for j in range(3):
+        col = u * frame[0, j] + v * frame[1, j]
+        if ax is not None:
+            col += ax * frame[2, j]
+        if origin is not None:
+            col += origin[j]
+        out[:, j] = col
+    return out
 
 
 def member_surface_points(

@@ -11,7 +11,8 @@ Structures (``SCAN_KINDS``), dimensions drawn per seed:
 * ``"frame"``: a 1–3 × 1–2 bay, 1–3 storey frame, HEB columns continuous
   from the ground, IPE beams between column faces, a few braced bays;
 * ``"grillage"``: a horizontal deck grillage, 2–4 main girders (IPE/HEB,
-  8–20 m) and cross girders between them, tops flush, 1–3 m above ground.
+  8–20 m) and cross girders between them, tops flush, main girder soffits
+  1–3 m above the ground.
 
 Members are prismatic (:mod:`.sections`): a section swept along the
 centroid line, rolled about it.  Secondary members stop short of the
@@ -21,14 +22,16 @@ primary member's envelope as steel does at gusset and end plates.
 TLS model, per scanner (2–4, at 1.5–2 m height, 5–12 m out from the
 structure's footprint):
 
-* a constant angular step ``dθ`` in azimuth and elevation, set so the
-  point spacing at the scanner's distance to the structure centre is the
-  requested ``spacing_m`` (times a calibration factor, see
-  :data:`BIN_CALIBRATION`), so the density falls as 1/range² and the
-  horizontal step shrinks with cos(elevation) as on a real scanner;
-* first return: candidate points on every surface (members at half the
-  bin footprint at their nearest range, so no bin on a facing surface is
-  left empty; the ground plane ray-cast one ray per bin) and the nearest
+* a constant angular step ``dθ`` in azimuth and elevation, set from the
+  requested ``spacing_m`` at the scanner's distance to the structure centre
+  (times √scanners and a calibration factor, :data:`BIN_CALIBRATION`, so
+  the median nearest-neighbour spacing of the merged member points is near
+  ``spacing_m``); the density falls as 1/range² and the horizontal step
+  shrinks with cos(elevation) as on a real scanner;
+* first return: candidate points on every surface (members on a jittered
+  grid at half the bin footprint at their nearest range, so a facing
+  surface leaves no bin empty; the ground plane ray-cast, one ray per
+  bin; vegetation volume-filled) and the nearest
   candidate per angular bin is kept, which casts occlusion shadows; back
   faces are dropped before binning (a closed prism always shows its
   front face first);
