@@ -285,14 +285,17 @@ def test_max_points_and_samples() -> None:
 @given(
     bins=st.lists(st.integers(0, 30), min_size=1, max_size=200),
     seed=st.integers(0, 2**16),
+    ties=st.booleans(),
 )
-def test_nearest_per_bin_against_brute_force(bins: list[int], seed: int) -> None:
+def test_nearest_per_bin_against_brute_force(bins: list[int], seed: int, ties: bool) -> None:
     b = np.array(bins, dtype=np.int64)
-    r = np.random.default_rng(seed).random(len(b))
+    rng = np.random.default_rng(seed)
+    r = rng.integers(0, 3, len(b)).astype(float) if ties else rng.random(len(b))
     keep = nearest_per_bin(b, r)
-    assert sorted(b[keep]) == sorted(set(bins))
+    assert list(b[keep]) == sorted(set(bins))
     for i in keep:
-        assert r[i] == r[b == b[i]].min()
+        same = np.flatnonzero(b == b[i])
+        assert i == same[np.argmin(r[same])]  # nearest, lowest index on a tie
 
 
 def test_first_returns_chunked_equals_whole() -> None:
