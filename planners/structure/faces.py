@@ -109,8 +109,11 @@ def member_faces(
     mid = 0.5 * (cs.uv.min(axis=0) + cs.uv.max(axis=0)) if len(cs.uv) else np.zeros(2)
     faces: list[Face] = []
     for nn, cc, inl in lines:
-        q = cs.uv[inl]
-        ts = cs.t[inl]
+        # the extent from every point in the plane, also those an earlier face
+        # took: corners belong to both faces that meet there
+        on = np.abs(cs.uv @ nn - cc) <= tol
+        q = cs.uv[on]
+        ts = cs.t[on]
         along = np.array([-nn[1], nn[0]])
         s = q @ along
         s0, s1 = np.percentile(s, [1, 99])

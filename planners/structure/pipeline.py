@@ -57,6 +57,8 @@ MIN_MEMBER_POINTS = 20
 #: a candidate whose largest face's plane goes on beside it at this fraction
 #: of the face's point density or more is a piece of a larger surface
 CONTINUATION_MAX = 0.25
+#: a candidate with fewer of its points on its faces is not steel (vegetation, rubble)
+FACE_FRACTION_MIN = 0.8
 #: assign → refit rounds before the final assignment
 REFITS = 2
 
@@ -83,6 +85,13 @@ def _refit(
     from planners.structure.lines import fit_line
 
     c, d, _, _, _ = fit_line(core)
+    # the direction again from the middle 80 %: the ends sit in joints, where
+    # the neighbour's steel pulls a least-squares line
+    t = (core - c) @ d
+    lo, hi = np.percentile(t, [10, 90])
+    middle = core[(t >= lo) & (t <= hi)]
+    if len(middle) >= MIN_MEMBER_POINTS:
+        c, d, _, _, _ = fit_line(middle)
     cs = cross_section(core, c, d)
     if len(cs.uv) < 3:
         return None
@@ -164,12 +173,17 @@ def model_structure(
         _fit_faces(pts, labels, members, spacing, tol, rng)
     stage("faces", 0.85)
 
-    # pieces of larger planes (ground, slabs, walls) are not members
+    # pieces of larger planes (ground, slabs, walls) and of things that are
+    # not a few planes (vegetation) are not members
     tree = cKDTree(pts)
     not_clutter = []
     for m in members:
         big = max(m.faces, key=lambda f: f.n_points, default=None)
         band = max(0.3, 2.0 * m.width_m, 10 * spacing)
+        on_faces = sum(f.n_points for f in m.faces) / max(m.n_points, 1)
+        # steel is a few planes (or a tube); vegetation and rubble are not
+        if m.profile != "tube" and on_faces < FACE_FRACTION_MIN:
+            continue
         if big is None or plane_continuation(tree, pts, big, band, 2 * tol) < CONTINUATION_MAX:
             not_clutter.append(m)
     if len(not_clutter) < len(members):
@@ -305,7 +319,7 @@ def _fit_faces(
 def _renumber(
     labels: np.ndarray, members: list[Member], radii: np.ndarray, keep: list[Member], spacing: float
 ) -> tuple[np.ndarray, list[Member], np.ndarray, list]:
-    old = np.array([m.id for m in keep])
+    old = np.array([m.id for m in keep], dtype=np.int64)
     remap = np.full(len(members) + 1, -1, dtype=np.int64)
     remap[old] = np.arange(len(keep))
     new_labels = remap[labels]  # −1 indexes the last slot, which is −1

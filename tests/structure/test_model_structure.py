@@ -1,0 +1,271 @@
+"""planners.structure.model_structure: geometry primitives against brute
+force, hand-built members with known axes, clutter, frames, bad input, and
+the real pc2beam crop against its own instance labels."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import networkx as nx
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from sklearn.metrics import adjusted_rand_score
+
+from planners.blasting.surface import Surface
+from planners.errors import EmptyInputError, InvalidInputError
+from planners.structure import StructureParams, model_structure
+from planners.structure.assign import segment_distances
+from planners.structure.joints import closest_points
+
+PC2BEAM = (
+    Path(__file__).resolve().parents[2]
+    / ".."
+    / "shared"
+    / "data"
+    / "pointclouds"
+    / "pc2beam_test_points.txt"
+)
+
+coord = st.floats(-5, 5, allow_nan=False)
+vec3 = st.tuples(coord, coord, coord).map(np.array)
+
+
+def _brute_segment(p: np.ndarray, a: np.ndarray, b: np.ndarray, n: int = 4001) -> np.ndarray:
+    s = np.linspace(0, 1, n)
+    return a + np.outer(s, b - a) if p is None else a + np.outer(s, b - a)
+
+
+@settings(max_examples=60, deadline=None)
+@given(vec3, vec3, vec3, vec3)
+def test_closest_points_of_segments_match_dense_sampling(p0, p1, q0, q1) -> None:
+    if np.linalg.norm(p1 - p0) < 1e-3 or np.linalg.norm(q1 - q0) < 1e-3:
+        return
+    pa, pb, _, _ = closest_points(p0, p1, q0, q1)
+    got = float(np.linalg.norm(pa - pb))
+    sp = _brute_segment(None, p0, p1, 1500)
+    sq = _brute_segment(None, q0, q1, 1500)
+    # the segment-to-segment minimum by sampling both segments densely
+    best = min(float(np.min(np.linalg.norm(sq - x, axis=1))) for x in sp[::3])
+    step = max(np.linalg.norm(p1 - p0), np.linalg.norm(q1 - q0)) / 500
+    assert got <= best + 1e-9
+    assert got >= best - 2 * step
+
+
+@settings(max_examples=60, deadline=None)
+@given(vec3, vec3, vec3)
+def test_segment_distance_matches_dense_sampling(p, a, b) -> None:
+    if np.linalg.norm(b - a) < 1e-3:
+        return
+    d = b - a
+    length = float(np.linalg.norm(d))
+    u = d / length
+    got = segment_distances(p[None], a[None], u[None], np.array([0.0]), np.array([length]))[0, 0]
+    samples = _brute_segment(None, a, b)
+    brute = float(np.min(np.linalg.norm(samples - p, axis=1)))
+    assert brute - length / 4000 <= got <= brute + 1e-9
+
+
+def _box_member(a, b, width, depth, spacing, rng, noise=0.002):
+    """Surface points of a closed rectangular hollow section from a to b."""
+    a, b = np.asarray(a, float), np.asarray(b, float)
+    d = (b - a) / np.linalg.norm(b - a)
+    ref = np.array([0.0, 0.0, 1.0]) if abs(d[2]) < 0.9 else np.array([1.0, 0.0, 0.0])
+    u = np.cross(d, ref)
+    u /= np.linalg.norm(u)
+    v = np.cross(d, u)
+    length = float(np.linalg.norm(b - a))
+    ts = np.arange(0, length, spacing)
+    pts = []
+    for side, (w, h) in enumerate(((width, depth), (depth, width))):
+        for sign in (-1, 1):
+            ss = np.arange(-w / 2, w / 2, spacing)
+            T, S = np.meshgrid(ts, ss, indexing="ij")
+            T, S = T.ravel(), S.ravel()
+            if side == 0:
+                p = a + np.outer(T, d) + np.outer(S, u) + np.outer(np.full_like(S, sign * h / 2), v)
+            else:
+                p = a + np.outer(T, d) + np.outer(S, v) + np.outer(np.full_like(S, sign * h / 2), u)
+            pts.append(p)
+    out = np.vstack(pts)
+    return out + rng.normal(0, noise, out.shape)
+
+
+def _t_structure(spacing: float = 0.02, seed: int = 0):
+    """A 6 m chord along x and a 3 m member rising from its middle at 60°."""
+    rng = np.random.default_rng(seed)
+    chord = _box_member([0, 0, 0], [6, 0, 0], 0.2, 0.3, spacing, rng)
+    top = np.array([3 + 3 * np.cos(np.radians(60)), 0, 3 * np.sin(np.radians(60))])
+    # the branch starts at the chord's surface, as a welded member does
+    start = np.array([3, 0, 0.15]) + 0.1 * (top - np.array([3, 0, 0])) / 3
+    branch = _box_member(start, top, 0.12, 0.12, spacing, rng)
+    pts = np.vstack([chord, branch])
+    labels = np.concatenate([np.zeros(len(chord), int), np.ones(len(branch), int)])
+    axes = np.array([[[0, 0, 0], [6, 0, 0]], [start, top]], dtype=float)
+    return pts, labels, axes
+
+
+def _axis_error(found: np.ndarray, true: np.ndarray) -> tuple[float, float]:
+    """(angle in degrees, largest distance of the true axis' middle 80 % from the found line)."""
+    df = found[1] - found[0]
+    df /= np.linalg.norm(df)
+    dt = true[1] - true[0]
+    dt /= np.linalg.norm(dt)
+    ang = float(np.degrees(np.arccos(min(1.0, abs(df @ dt)))))
+    s = np.linspace(0.1, 0.9, 20)
+    pts = true[0] + np.outer(s, true[1] - true[0])
+    rel = pts - found[0]
+    perp = np.linalg.norm(rel - np.outer(rel @ df, df), axis=1)
+    return ang, float(perp.max())
+
+
+def _match(model, axes):
+    out = []
+    for true in axes:
+        errs = [(_axis_error(m.axis, true), m) for m in model.members]
+        (ang, dist), m = min(errs, key=lambda e: e[0][0] + 10 * e[0][1])
+        out.append((ang, dist, m))
+    return out
+
+
+def test_two_members_meeting_are_found_with_their_joint_and_spans() -> None:
+    pts, labels, axes = _t_structure()
+    model = model_structure(pts)
+    assert len(model.members) == 2
+    for ang, dist, _ in _match(model, axes):
+        assert ang < 3.0
+        assert dist < 0.05
+    assert len(model.joints) == 1
+    assert np.linalg.norm(model.joints[0].pos - np.array([3, 0, 0])) < 0.3
+    assert sorted(model.joints[0].members) == [0, 1]
+    # the chord is split at the joint: three spans, one connected graph
+    assert model.graph.number_of_edges() == 3
+    assert nx.is_connected(model.graph)
+    spans = sorted(d["weight"] for _, _, d in model.graph.edges(data=True))
+    assert spans[-1] == pytest.approx(3.0, abs=0.35)
+    assert adjusted_rand_score(labels, model.labels) > 0.9
+    assert model.spacing_m == pytest.approx(0.02, rel=0.5)
+    assert set(model.timings_s) >= {"spacing", "features", "lines", "assign", "faces", "graph"}
+
+
+def test_box_member_gets_four_faces_usable_as_blasting_surfaces() -> None:
+    rng = np.random.default_rng(3)
+    pts = _box_member([0, 0, 0], [4, 0, 0], 0.2, 0.3, 0.015, rng)
+    model = model_structure(pts)
+    assert len(model.members) == 1
+    m = model.members[0]
+    assert m.profile == "box"
+    assert sorted([round(m.depth_m, 2), round(m.width_m, 2)]) == pytest.approx([0.2, 0.3], abs=0.03)
+    assert len(m.faces) == 4
+    for f in m.faces:
+        s = f.surface()
+        assert isinstance(s, Surface)
+        # the face's points lie in its plane, and its normal points away from the axis
+        mid = m.axis.mean(axis=0)
+        assert float((f.origin - mid) @ f.normal) > 0
+        on = np.abs((pts - f.origin) @ f.normal) < 0.01
+        assert on.sum() >= 0.8 * f.n_points
+        side = 0.2 if f.area_m2 < 1.0 else 0.3
+        assert f.area_m2 == pytest.approx(4.0 * side, rel=0.05)
+
+
+def test_survey_frame_far_from_origin_gives_the_same_model() -> None:
+    pts, _, _ = _t_structure()
+    offset = np.array([443_670.0, 5_349_620.0, 104.5])
+    a = model_structure(pts)
+    b = model_structure(pts + offset)
+    assert len(a.members) == len(b.members)
+    for ma, mb in zip(a.members, b.members, strict=True):
+        assert np.allclose(ma.axis + offset, mb.axis, atol=1e-6)
+    assert np.array_equal(a.labels, b.labels)
+    assert np.allclose(b.graph.nodes[0]["pos"], a.graph.nodes[0]["pos"] + offset)
+
+
+def test_ground_plane_is_left_unlabelled() -> None:
+    pts, labels, axes = _t_structure()
+    rng = np.random.default_rng(5)
+    g = rng.uniform([-2, -3], [8, 3], size=(60_000, 2))
+    ground = np.column_stack([g, np.full(len(g), -1.0) + rng.normal(0, 0.003, len(g))])
+    model = model_structure(np.vstack([pts, ground]))
+    assert len(model.members) == 2
+    ground_labels = model.labels[len(pts) :]
+    assert (ground_labels == -1).mean() > 0.98
+    for ang, dist, _ in _match(model, axes):
+        assert ang < 3.0 and dist < 0.05
+
+
+def test_noise_alone_gives_no_members_not_an_error() -> None:
+    rng = np.random.default_rng(1)
+    model = model_structure(rng.uniform(0, 3, size=(20_000, 3)))
+    assert model.members == []
+    assert (model.labels == -1).all()
+    assert model.graph.number_of_nodes() == 0
+
+
+def test_the_same_structure_is_found_at_fine_and_coarse_spacing() -> None:
+    for spacing in (0.01, 0.05):
+        pts, _, axes = _t_structure(spacing)
+        model = model_structure(pts)
+        assert len(model.members) == 2, spacing
+        for ang, dist, _ in _match(model, axes):
+            assert ang < 3.0 and dist < 0.08, spacing
+
+
+@pytest.mark.parametrize(
+    ("points", "error"),
+    [
+        (np.zeros((5, 3)), EmptyInputError),
+        (np.zeros((100, 2)), InvalidInputError),
+        (np.full((100, 3), np.nan), InvalidInputError),
+        (np.zeros((100, 3)), EmptyInputError),  # spacing cannot be measured
+    ],
+)
+def test_bad_clouds_raise_typed_errors(points, error) -> None:
+    with pytest.raises(error):
+        model_structure(points)
+
+
+@pytest.mark.parametrize(
+    "params",
+    [
+        StructureParams(linearity_min=1.5),
+        StructureParams(max_section_m=-1.0),
+        StructureParams(scales_m=(0.1, -0.2)),
+        StructureParams(max_voxels=10),
+    ],
+)
+def test_bad_params_raise_invalid_input(params) -> None:
+    pts, _, _ = _t_structure()
+    with pytest.raises(InvalidInputError):
+        model_structure(pts, params=params)
+
+
+def test_progress_is_reported_in_order() -> None:
+    pts, _, _ = _t_structure()
+    seen: list[tuple[float, str]] = []
+    model_structure(pts, progress=lambda f, s: seen.append((f, s)))
+    fractions = [f for f, _ in seen]
+    assert fractions == sorted(fractions) and fractions[-1] == 1.0
+    assert [s for _, s in seen][:2] == ["spacing", "features"]
+
+
+@pytest.mark.skipif(not PC2BEAM.exists(), reason="shared data not present")
+def test_pc2beam_crop_two_members_connected_and_routed() -> None:
+    from planners.inspection import plan_inspection
+
+    data = np.loadtxt(PC2BEAM)
+    model = model_structure(data[:, :3])
+    assert len(model.members) == 2
+    assert len(model.joints) == 1 and nx.is_connected(model.graph)
+    ari = adjusted_rand_score(data[:, 6].astype(int), model.labels)
+    assert ari >= 0.9, ari
+    # both are I sections; the wide beam is recognised as one (the diagonal,
+    # seen from one side and 0.14 m wide, is not reliably: see docs)
+    beam = max(model.members, key=lambda m: m.length_m)
+    assert beam.profile == "I"
+    assert beam.depth_m == pytest.approx(0.39, abs=0.03)
+    plan = plan_inspection(model)
+    assert plan.uncovered_members == []
+    covered = {model.graph.edges[e]["member"] for e in plan.route.edges}
+    assert covered == {0, 1}
