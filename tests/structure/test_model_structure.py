@@ -32,9 +32,9 @@ coord = st.floats(-5, 5, allow_nan=False)
 vec3 = st.tuples(coord, coord, coord).map(np.array)
 
 
-def _brute_segment(p: np.ndarray, a: np.ndarray, b: np.ndarray, n: int = 4001) -> np.ndarray:
-    s = np.linspace(0, 1, n)
-    return a + np.outer(s, b - a) if p is None else a + np.outer(s, b - a)
+def _samples(a: np.ndarray, b: np.ndarray, n: int = 4001) -> np.ndarray:
+    """n points evenly along segment ab."""
+    return a + np.outer(np.linspace(0, 1, n), b - a)
 
 
 @settings(max_examples=60, deadline=None)
@@ -44,8 +44,8 @@ def test_closest_points_of_segments_match_dense_sampling(p0, p1, q0, q1) -> None
         return
     pa, pb, _, _ = closest_points(p0, p1, q0, q1)
     got = float(np.linalg.norm(pa - pb))
-    sp = _brute_segment(None, p0, p1, 1500)
-    sq = _brute_segment(None, q0, q1, 1500)
+    sp = _samples(p0, p1, 1500)
+    sq = _samples(q0, q1, 1500)
     # the segment-to-segment minimum by sampling both segments densely
     best = min(float(np.min(np.linalg.norm(sq - x, axis=1))) for x in sp[::3])
     step = max(np.linalg.norm(p1 - p0), np.linalg.norm(q1 - q0)) / 500
@@ -62,7 +62,7 @@ def test_segment_distance_matches_dense_sampling(p, a, b) -> None:
     length = float(np.linalg.norm(d))
     u = d / length
     got = segment_distances(p[None], a[None], u[None], np.array([0.0]), np.array([length]))[0, 0]
-    samples = _brute_segment(None, a, b)
+    samples = _samples(a, b)
     brute = float(np.min(np.linalg.norm(samples - p, axis=1)))
     assert brute - length / 4000 <= got <= brute + 1e-9
 
@@ -183,7 +183,7 @@ def test_survey_frame_far_from_origin_gives_the_same_model() -> None:
 
 
 def test_ground_plane_is_left_unlabelled() -> None:
-    pts, labels, axes = _t_structure()
+    pts, _, axes = _t_structure()
     rng = np.random.default_rng(5)
     g = rng.uniform([-2, -3], [8, 3], size=(60_000, 2))
     ground = np.column_stack([g, np.full(len(g), -1.0) + rng.normal(0, 0.003, len(g))])
