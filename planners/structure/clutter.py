@@ -4,10 +4,11 @@ A member's faces end at the member's edges; a strip of ground, a slab or a
 wall that happens to look linear at some scale is a face whose plane goes
 on beyond it.  For the candidate's largest face, the points within the
 plane tolerance in two bands beside the face (each ``band`` wide, over the
-face's length) are counted; when their density is a sizeable fraction of
-the face's own, the candidate is a piece of a larger plane, not a member.
-Point lookups go through a KD-tree over sampled band centres, so the work
-is bounded by the band area, not by the cloud.
+face's length) are binned into cells; when most cells hold a point, the
+plane continues and the candidate is a piece of a larger surface.  Coverage,
+not density: the plane of a truss also holds its diagonals, which cross the
+band as a few narrow strips.  Point lookups go through a KD-tree over
+sampled band centres, so the work is bounded by the band area.
 """
 
 from __future__ import annotations
@@ -19,14 +20,13 @@ from planners.structure.model import Face
 
 
 def plane_continuation(
-    tree: cKDTree, pts: np.ndarray, face: Face, band: float, tol: float
+    tree: cKDTree, pts: np.ndarray, face: Face, band: float, tol: float, cell: float
 ) -> float:
-    """Density of points in the face's plane beside it, relative to the
-    density on the face (0: the plane ends with the face)."""
+    """Fraction of the ``cell``-sized cells in the two bands beside ``face``
+    that hold a point of its plane (0: the plane ends with the face)."""
     lo, hi = face.boundary.min(axis=0), face.boundary.max(axis=0)
     length = float(hi[0] - lo[0])
-    width = float(hi[1] - lo[1])
-    if length <= 0 or width <= 0 or face.n_points == 0:
+    if length <= 0 or hi[1] <= lo[1]:
         return 0.0
     step = band
     xs = (
@@ -39,23 +39,24 @@ def plane_continuation(
     centres = face.to_world(np.column_stack([gx.ravel(), gy.ravel()]))
     reach = float(np.hypot(0.5 * step, 0.5 * band)) + tol
     found = tree.query_ball_point(centres, reach)
-    idx = (
-        np.unique(np.concatenate([np.asarray(f, dtype=np.int64) for f in found]))
-        if len(found)
-        else np.zeros(0, np.int64)
-    )
+    idx = np.unique(np.concatenate([np.asarray(f, dtype=np.int64) for f in found]))
+    n_x = max(1, int(np.ceil(length / cell)))
+    n_y = max(1, int(np.ceil(band / cell)))
+    total = 2 * n_x * n_y
     if len(idx) == 0:
         return 0.0
     rel = pts[idx] - face.origin
     x = rel @ face.x_axis
     y = rel @ face.y_axis
     z = rel @ face.normal
-    beside = (
-        (np.abs(z) <= tol)
-        & (x >= lo[0])
-        & (x <= hi[0])
-        & (((y < lo[1]) & (y >= lo[1] - band)) | ((y > hi[1]) & (y <= hi[1] + band)))
-    )
-    density_beside = beside.sum() / (2 * band * length)
-    density_face = face.n_points / (length * width)
-    return float(density_beside / density_face)
+    left = (y < lo[1]) & (y >= lo[1] - band)
+    right = (y > hi[1]) & (y <= hi[1] + band)
+    beside = (np.abs(z) <= tol) & (x >= lo[0]) & (x <= hi[0]) & (left | right)
+    if not beside.any():
+        return 0.0
+    cx = np.minimum(((x[beside] - lo[0]) / cell).astype(np.int64), n_x - 1)
+    off = np.where(left[beside], lo[1] - y[beside], y[beside] - hi[1])
+    cy = np.minimum((off / cell).astype(np.int64), n_y - 1)
+    side = right[beside].astype(np.int64)
+    cells = np.unique((side * n_x + cx) * n_y + cy)
+    return float(len(cells) / total)

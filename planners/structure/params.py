@@ -63,7 +63,7 @@ class StructureParams:
         s = float(spacing)
         scales = self.scales_m
         if scales is None:
-            r = max(0.1, 5.0 * s)
+            r = max(0.1, 3.0 * s)
             out = [r]
             while out[-1] * 2 <= 1.5 * self.max_section_m:
                 out.append(out[-1] * 2)
@@ -72,7 +72,7 @@ class StructureParams:
             raise InvalidInputError(f"scales_m must be positive radii in metres, got {scales!r}")
         min_len = self.min_member_length_m
         if min_len is None:
-            min_len = max(0.4, 8.0 * s)
+            min_len = max(0.4, 5.0 * s)
         return replace(
             self, spacing_m=s, scales_m=tuple(sorted(scales)), min_member_length_m=min_len
         )

@@ -53,10 +53,15 @@ from planners.structure.model import Face, Member, StructureModel
 from planners.structure.params import StructureParams
 
 #: fewest points a member keeps after assignment
-MIN_MEMBER_POINTS = 20
-#: a candidate whose largest face's plane goes on beside it at this fraction
-#: of the face's point density or more is a piece of a larger surface
-CONTINUATION_MAX = 0.25
+MIN_MEMBER_POINTS = 8
+#: a member needs this many points, and a section this many spacings deep,
+#: before its faces say whether it is steel (a 10 cm scan of an 8 cm angle
+#: is a row of single points)
+RESOLVED_POINTS = 60
+RESOLVED_SPACINGS = 4.0
+#: a candidate whose largest face's plane covers this fraction of the cells
+#: beside it or more is a piece of a larger surface
+CONTINUATION_MAX = 0.5
 #: a candidate with fewer of its points on its faces is not steel (vegetation, rubble)
 FACE_FRACTION_MIN = 0.8
 #: assign → refit rounds before the final assignment
@@ -180,11 +185,16 @@ def model_structure(
     for m in members:
         big = max(m.faces, key=lambda f: f.n_points, default=None)
         band = max(0.3, 2.0 * m.width_m, 10 * spacing)
+        cell = max(3.0 * spacing, band / 6.0)
         on_faces = sum(f.n_points for f in m.faces) / max(m.n_points, 1)
+        resolved = m.n_points >= RESOLVED_POINTS and m.depth_m >= RESOLVED_SPACINGS * spacing
         # steel is a few planes (or a tube); vegetation and rubble are not
-        if m.profile != "tube" and on_faces < FACE_FRACTION_MIN:
+        if resolved and m.profile != "tube" and on_faces < FACE_FRACTION_MIN:
             continue
-        if big is None or plane_continuation(tree, pts, big, band, 2 * tol) < CONTINUATION_MAX:
+        if (
+            big is None
+            or plane_continuation(tree, pts, big, band, 2 * tol, cell) < CONTINUATION_MAX
+        ):
             not_clutter.append(m)
     if len(not_clutter) < len(members):
         labels, members, radii, _ = _renumber(labels, members, radii, not_clutter, spacing)
@@ -233,13 +243,13 @@ def _assign_and_refit(
             c.direction,
             c.t0,
             c.t1,
-            max(c.radius, 2 * spacing),
+            max(c.radius, spacing),
             c.fragments,
         )
         for c in cands
     ]
     min_len = float(prm.min_member_length_m or 0.0)
-    margin = 3.0 * spacing
+    margin = 1.5 * spacing
     shared = np.zeros(len(pts), bool)
     for _ in range(REFITS):
         labels, shared = assign_points(pts, *_arrays(lines), margin)
