@@ -22,8 +22,9 @@ from planners.structure.model import Face
 def plane_continuation(
     tree: cKDTree, pts: np.ndarray, face: Face, band: float, tol: float, cell: float
 ) -> float:
-    """Fraction of the ``cell``-sized cells in the two bands beside ``face``
-    that hold a point of its plane (0: the plane ends with the face)."""
+    """Fraction of the ``cell``-sized cells in the better covered of the two
+    bands beside ``face`` that hold a point of its plane (0: the plane ends
+    with the face on both sides)."""
     lo, hi = face.boundary.min(axis=0), face.boundary.max(axis=0)
     length = float(hi[0] - lo[0])
     if length <= 0 or hi[1] <= lo[1]:
@@ -59,4 +60,6 @@ def plane_continuation(
     cy = np.minimum((off / cell).astype(np.int64), n_y - 1)
     side = right[beside].astype(np.int64)
     cells = np.unique((side * n_x + cx) * n_y + cy)
-    return float(len(cells) / total)
+    per_side = np.bincount(cells // (n_x * n_y), minlength=2)
+    # the better-covered side: a strip at the edge of the ground continues on one side only
+    return float(per_side.max() / (total / 2))

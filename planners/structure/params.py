@@ -34,6 +34,8 @@ class StructureParams:
     max_gap_m: float = 2.0
     #: shortest member kept (m); None: max(0.4 m, 8 s)
     min_member_length_m: float | None = None
+    #: a member is at least this many section depths long (a stubby blob is not one)
+    min_slenderness: float = 2.5
     #: a member meeting no other one and shorter than this is clutter (m)
     min_free_length_m: float = 2.0
     #: working voxels at the finest scale at most (bounds time and memory)
@@ -50,6 +52,7 @@ class StructureParams:
             "merge_angle_deg",
             "max_section_m",
             "max_gap_m",
+            "min_slenderness",
         ):
             v = getattr(self, name)
             if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):

@@ -61,7 +61,7 @@ RESOLVED_POINTS = 60
 RESOLVED_SPACINGS = 4.0
 #: a candidate whose largest face's plane covers this fraction of the cells
 #: beside it or more is a piece of a larger surface
-CONTINUATION_MAX = 0.5
+CONTINUATION_MAX = 0.55
 #: a candidate with fewer of its points on its faces is not steel (vegetation, rubble)
 FACE_FRACTION_MIN = 0.8
 #: assign → refit rounds before the final assignment
@@ -184,12 +184,14 @@ def model_structure(
     not_clutter = []
     for m in members:
         big = max(m.faces, key=lambda f: f.n_points, default=None)
-        band = max(0.3, 2.0 * m.width_m, 10 * spacing)
+        band = max(1.0, 2.0 * m.width_m, 10 * spacing)
         cell = max(3.0 * spacing, band / 6.0)
         on_faces = sum(f.n_points for f in m.faces) / max(m.n_points, 1)
         resolved = m.n_points >= RESOLVED_POINTS and m.depth_m >= RESOLVED_SPACINGS * spacing
         # steel is a few planes (or a tube); vegetation and rubble are not
         if resolved and m.profile != "tube" and on_faces < FACE_FRACTION_MIN:
+            continue
+        if m.length_m < prm.min_slenderness * max(m.depth_m, m.width_m):
             continue
         if (
             big is None
