@@ -6,13 +6,17 @@ flange lies closer to a slender diagonal's axis than to its own, but deep
 in the beam's envelope and at the rim of the diagonal's.  Points inside two envelopes are flagged
 as joint-zone points for the face test of :mod:`.pipeline`.
 
-Distances are computed point × member in row chunks bounded by ``BUDGET``
-elements, so memory does not grow with the product of the two counts.
+Each member looks only at the points a KD-tree finds near its axis; the
+face distances run point × face in row chunks bounded by ``BUDGET``
+elements, so memory does not grow with the product of two counts.
 """
 
 from __future__ import annotations
 
 import numpy as np
+from scipy.spatial import cKDTree
+
+from planners.structure.model import Face
 
 #: point × member distance elements per chunk
 BUDGET = 4_000_000
@@ -35,36 +39,57 @@ def assign_points(
     t1: np.ndarray,
     radius: np.ndarray,
     margin: float,
+    tree: cKDTree | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """``(labels, shared)``: (N,) member index per point (−1 outside every
-    envelope) and (N,) whether the point lies inside two or more envelopes."""
+    envelope) and (N,) whether the point lies inside two or more envelopes.
+
+    Per member, only the points near it are looked at: the axis is sampled
+    every envelope radius h, and a point within the envelope (radius ρ) of
+    the segment is within ρ + h/2 of a sample, so a ball query on the
+    points' KD-tree (``tree``, built here when not given) finds them all.
+    Work and memory follow the points near each member, not N × M."""
     n, m = len(points), len(centres)
     out = np.full(n, -1, dtype=np.int64)
-    shared = np.zeros(n, dtype=bool)
+    count = np.zeros(n, dtype=np.int32)
+    best = np.full(n, np.inf)
     if m == 0 or n == 0:
-        return out, shared
-    step = max(1, BUDGET // (3 * m))
-    reach = radius[None] + margin
-    for a in range(0, n, step):
-        d = segment_distances(points[a : a + step], centres, dirs, t0, t1)
+        return out, count >= 2
+    tree = tree if tree is not None else cKDTree(points)
+    for k in range(m):
+        reach = float(radius[k] + margin)
+        h = max(reach, 1e-3)
+        ns = max(2, int(np.ceil((t1[k] - t0[k]) / h)) + 1)
+        samples = centres[k] + np.outer(np.linspace(t0[k], t1[k], ns), dirs[k])
+        hits = tree.query_ball_point(samples, reach + 0.5 * h)
+        idx = np.unique(np.concatenate([np.asarray(x, dtype=np.int64) for x in hits]))
+        if len(idx) == 0:
+            continue
+        d = segment_distances(points[idx], centres[k : k + 1], dirs[k : k + 1], t0[k : k + 1], t1[k : k + 1])[:, 0]
         inside = d <= reach
-        depth = np.where(inside, d / radius[None], np.inf)
-        best = np.argmin(depth, axis=1)
-        ok = inside.any(axis=1)
-        out[a : a + step] = np.where(ok, best, -1)
-        shared[a : a + step] = inside.sum(axis=1) >= 2
-    return out, shared
+        idx, depth = idx[inside], d[inside] / radius[k]
+        count[idx] += 1
+        better = depth < best[idx]  # strict: the lower member index wins a tie
+        best[idx[better]] = depth[better]
+        out[idx[better]] = k
+    return out, count >= 2
 
 
-def face_distances(points: np.ndarray, faces: list) -> np.ndarray:  # list[Face]
+def face_distances(
+    points: np.ndarray, faces: list[Face], extend: np.ndarray | None = None
+) -> np.ndarray:
     """(n, F) distance from each point to each face rectangle (its boundary's
-    bounding box in the face plane), computed in one block: callers chunk."""
+    bounding box in the face plane, lengthened by ``extend`` (F,) at both
+    ends along the member), computed in one block: callers chunk."""
     o = np.array([f.origin for f in faces])
     x = np.array([f.x_axis for f in faces])
     nrm = np.array([f.normal for f in faces])
     y = np.cross(nrm, x)
     lo = np.array([f.boundary.min(axis=0) for f in faces])
     hi = np.array([f.boundary.max(axis=0) for f in faces])
+    if extend is not None:
+        lo[:, 0] -= extend
+        hi[:, 0] += extend
     rel = points[:, None, :] - o[None]
     px = np.einsum("nfi,fi->nf", rel, x)
     py = np.einsum("nfi,fi->nf", rel, y)
@@ -75,7 +100,12 @@ def face_distances(points: np.ndarray, faces: list) -> np.ndarray:  # list[Face]
 
 
 def relabel_by_faces(
-    points: np.ndarray, labels: np.ndarray, which: np.ndarray, faces: list, tol: float
+    points: np.ndarray,
+    labels: np.ndarray,
+    which: np.ndarray,
+    faces: list[Face],
+    tol: float,
+    extend: np.ndarray | None = None,
 ) -> np.ndarray:
     """``labels`` with the points ``which`` given to the member owning the
     nearest face within ``tol`` (others unchanged); face × point blocks bounded."""
@@ -87,7 +117,7 @@ def relabel_by_faces(
     step = max(1, BUDGET // (3 * len(faces)))
     for a in range(0, len(idx), step):
         sel = idx[a : a + step]
-        d = face_distances(points[sel], faces)
+        d = face_distances(points[sel], faces, extend)
         k = np.argmin(d, axis=1)
         ok = d[np.arange(len(sel)), k] <= tol
         out[sel[ok]] = owner[k[ok]]

@@ -18,6 +18,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.sparse import csr_matrix
 from scipy.spatial import cKDTree
 
 #: rows of a neighbour query at a time (× k × 3 floats per chunk)
@@ -40,7 +41,10 @@ def voxelise(points: np.ndarray, size: float, weights: np.ndarray | None = None)
     corner so coordinates far from the origin (survey frames) keep precision."""
     lo = points.min(axis=0)
     keys = np.floor((points - lo) / size).astype(np.int64)
-    _, inverse = np.unique(keys, axis=0, return_inverse=True)
+    # one int64 key per cell: a 1-D unique sorts ~10× faster than rows
+    span = keys.max(axis=0) + 1
+    flat = (keys[:, 0] * span[1] + keys[:, 1]) * span[2] + keys[:, 2]
+    _, inverse = np.unique(flat, return_inverse=True)
     inverse = inverse.reshape(-1)
     w = np.ones(len(points)) if weights is None else np.asarray(weights, float)
     wsum = np.bincount(inverse, weights=w)
@@ -68,33 +72,50 @@ def _local_pca(
     centres: np.ndarray, radius: float, k: int
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Linearity, principal direction, mean and neighbour count of the ≤ k
-    voxels within ``radius`` of each voxel."""
+    voxels within ``radius`` of each voxel.
+
+    The neighbourhood moments are sparse products: the k-nearest relation is
+    a sparse (n × n) matrix with at most k entries a row, and its products
+    with the coordinates and their pairwise products give every
+    neighbourhood's sums at once (coordinates are relative to the cloud's
+    corner, metres, so E[xx] − E[x]² keeps its precision)."""
     n = len(centres)
     tree = cKDTree(centres)
-    lin = np.zeros(n)
-    dirs = np.zeros((n, 3))
-    mean = centres.copy()
-    cnt = np.zeros(n, dtype=np.int64)
-    padded = np.vstack([centres, np.zeros((1, 3))])
     kk = min(k, n)
+    rows_l, cols_l = [], []
     for a in range(0, n, CHUNK_ROWS):
         q = centres[a : a + CHUNK_ROWS]
         d, idx = tree.query(q, k=kk, distance_upper_bound=radius)
         idx = np.asarray(idx).reshape(len(q), kk)
-        valid = np.isfinite(np.asarray(d).reshape(len(q), kk))
-        nb = padded[idx] - q[:, None, :]  # relative coordinates keep precision
-        w = valid.astype(float)
-        c = w.sum(axis=1)
-        mu = (nb * w[..., None]).sum(axis=1) / c[:, None]
-        r = (nb - mu[:, None, :]) * w[..., None]
-        cov = np.einsum("nki,nkj->nij", r, r) / c[:, None, None]
-        ev, evec = np.linalg.eigh(cov)
+        ok = np.isfinite(np.asarray(d).reshape(len(q), kk))
+        rows_l.append((np.arange(a, a + len(q))[:, None] + np.zeros((1, kk), np.int64))[ok])
+        cols_l.append(idx[ok])
+    rows = np.concatenate(rows_l)
+    cols = np.concatenate(cols_l)
+    adj = csr_matrix((np.ones(len(rows)), (rows, cols)), shape=(n, n))
+    x = centres - centres.mean(axis=0)
+    prods = np.column_stack(
+        [x, x[:, 0] * x[:, 0], x[:, 0] * x[:, 1], x[:, 0] * x[:, 2],
+         x[:, 1] * x[:, 1], x[:, 1] * x[:, 2], x[:, 2] * x[:, 2]]
+    )  # fmt: skip
+    sums = adj @ prods
+    cnt = np.asarray(adj.sum(axis=1)).ravel()
+    c = np.maximum(cnt, 1.0)
+    mu = sums[:, :3] / c[:, None]
+    m2 = sums[:, 3:] / c[:, None]
+    cov = np.empty((n, 3, 3))
+    ij = ((0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2))
+    for col, (i, j) in enumerate(ij):
+        cov[:, i, j] = cov[:, j, i] = m2[:, col] - mu[:, i] * mu[:, j]
+    lin = np.zeros(n)
+    dirs = np.zeros((n, 3))
+    for a in range(0, n, CHUNK_ROWS):
+        ev, evec = np.linalg.eigh(cov[a : a + CHUNK_ROWS])
         l1 = np.maximum(ev[:, 2], 1e-300)
-        lin[a : a + len(q)] = np.where(c >= 5, (ev[:, 2] - ev[:, 1]) / l1, 0.0)
-        dirs[a : a + len(q)] = evec[:, :, 2]
-        mean[a : a + len(q)] = q + mu
-        cnt[a : a + len(q)] = c.astype(np.int64)
-    return lin, dirs, mean, cnt
+        lin[a : a + len(ev)] = np.where(cnt[a : a + len(ev)] >= 5, (ev[:, 2] - ev[:, 1]) / l1, 0.0)
+        dirs[a : a + len(ev)] = evec[:, :, 2]
+    mean = mu + centres.mean(axis=0)
+    return lin, dirs, mean, cnt.astype(np.int64)
 
 
 def line_features(

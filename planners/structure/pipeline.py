@@ -54,6 +54,12 @@ from planners.structure.params import StructureParams
 
 #: fewest points a member keeps after assignment
 MIN_MEMBER_POINTS = 8
+#: range noise allowed around a section (m): TLS noise is 2–5 mm, photogrammetry more
+NOISE_M = 0.01
+#: and this many spacings (a sparse scan underestimates a section)
+RADIUS_PAD_SPACINGS = 1.0
+#: percent of a member cut off at each end before fitting its direction
+MIDDLE_TRIM = 5.0
 #: a member needs this many points, and a section this many spacings deep,
 #: before its faces say whether it is steel (a 10 cm scan of an 8 cm angle
 #: is a row of single points)
@@ -90,10 +96,10 @@ def _refit(
     from planners.structure.lines import fit_line
 
     c, d, _, _, _ = fit_line(core)
-    # the direction again from the middle 80 %: the ends sit in joints, where
+    # the direction again from the middle 90 %: the ends sit in joints, where
     # the neighbour's steel pulls a least-squares line
     t = (core - c) @ d
-    lo, hi = np.percentile(t, [10, 90])
+    lo, hi = np.percentile(t, [MIDDLE_TRIM, 100 - MIDDLE_TRIM])
     middle = core[(t >= lo) & (t <= hi)]
     if len(middle) >= MIN_MEMBER_POINTS:
         c, d, _, _, _ = fit_line(middle)
@@ -105,7 +111,7 @@ def _refit(
     centre = c + mid2[0] * cs.u + mid2[1] * cs.v
     t0, t1 = np.percentile((points - centre) @ d, [0.5, 99.5])
     half_diag = 0.5 * float(np.hypot(*(box[1] - box[0])))
-    return centre, d, float(t0), float(t1), half_diag + 2 * spacing
+    return centre, d, float(t0), float(t1), half_diag + RADIUS_PAD_SPACINGS * spacing + NOISE_M
 
 
 def model_structure(
@@ -162,7 +168,8 @@ def model_structure(
     )
     stage("lines", 0.5)
 
-    labels, shared, members, radii = _assign_and_refit(pts, cands, spacing, prm)
+    tree = cKDTree(pts)
+    labels, shared, members, radii = _assign_and_refit(pts, cands, spacing, prm, tree)
     stage("assign", 0.7)
 
     rng = np.random.default_rng(prm.seed)
@@ -172,7 +179,10 @@ def model_structure(
     # on a face of; the members' sections are then measured again without
     # the points they had borrowed
     faces = [f for m in members for f in m.faces]
-    relabelled = relabel_by_faces(pts, labels, shared, faces, 2 * tol)
+    # a face runs the member's whole length, but its points stop where the
+    # joint's points were given to the neighbour: lengthen it by the section
+    reach = np.array([radii[f.member] for f in faces]) if faces else None
+    relabelled = relabel_by_faces(pts, labels, shared, faces, 2 * tol, reach)
     if np.any(relabelled != labels):
         labels = relabelled
         _fit_faces(pts, labels, members, spacing, tol, rng)
@@ -180,7 +190,6 @@ def model_structure(
 
     # pieces of larger planes (ground, slabs, walls) and of things that are
     # not a few planes (vegetation) are not members
-    tree = cKDTree(pts)
     not_clutter = []
     for m in members:
         big = max(m.faces, key=lambda f: f.n_points, default=None)
@@ -227,7 +236,11 @@ def model_structure(
 
 
 def _assign_and_refit(
-    pts: np.ndarray, cands: list[LineCandidate], spacing: float, prm: StructureParams
+    pts: np.ndarray,
+    cands: list[LineCandidate],
+    spacing: float,
+    prm: StructureParams,
+    tree: cKDTree,
 ) -> tuple[np.ndarray, np.ndarray, list[Member], np.ndarray]:
     """Labels per point and the members with refitted axes.
 
@@ -254,7 +267,7 @@ def _assign_and_refit(
     margin = 1.5 * spacing
     shared = np.zeros(len(pts), bool)
     for _ in range(REFITS):
-        labels, shared = assign_points(pts, *_arrays(lines), margin)
+        labels, shared = assign_points(pts, *_arrays(lines), margin, tree)
         groups = join_groups(
             lines, prm.merge_angle_deg, prm.max_gap_m, prm.max_section_m, prm.link_angle_deg
         )
@@ -264,6 +277,9 @@ def _assign_and_refit(
             core = mine & ~shared
             # the section from the points no other member competes for; the
             # extent from all, so that members reach into their joints
+            if core.sum() < MIN_MEMBER_POINTS:
+                # a slender member in a dense joint region: all of its points
+                core = mine
             if core.sum() < MIN_MEMBER_POINTS:
                 continue
             fit = _refit(pts[core], pts[mine], spacing)
@@ -279,7 +295,7 @@ def _assign_and_refit(
         lines = refitted
         if not lines:
             return none, shared, [], np.zeros(0)
-    labels, shared = assign_points(pts, *_arrays(lines), margin)
+    labels, shared = assign_points(pts, *_arrays(lines), margin, tree)
     members = [
         Member(
             id=i,

@@ -269,3 +269,31 @@ def test_pc2beam_crop_two_members_connected_and_routed() -> None:
     assert plan.uncovered_members == []
     covered = {model.graph.edges[e]["member"] for e in plan.route.edges}
     assert covered == {0, 1}
+
+
+def _assign_brute(points, centres, dirs, t0, t1, radius, margin):
+    """Reference: every point against every member."""
+    d = segment_distances(points, centres, dirs, t0, t1)
+    inside = d <= radius[None] + margin
+    depth = np.where(inside, d / radius[None], np.inf)
+    best = np.argmin(depth, axis=1)
+    return np.where(inside.any(axis=1), best, -1), inside.sum(axis=1) >= 2
+
+
+@settings(max_examples=40, deadline=None)
+@given(st.integers(0, 10_000), st.integers(1, 6))
+def test_assign_points_with_a_kd_tree_equals_all_pairs(seed: int, m: int) -> None:
+    from planners.structure.assign import assign_points
+
+    rng = np.random.default_rng(seed)
+    pts = rng.uniform(-2, 2, size=(600, 3))
+    centres = rng.uniform(-1, 1, size=(m, 3))
+    dirs = rng.normal(size=(m, 3))
+    dirs /= np.linalg.norm(dirs, axis=1, keepdims=True)
+    t0 = -rng.uniform(0.1, 2, m)
+    t1 = rng.uniform(0.1, 2, m)
+    radius = rng.uniform(0.05, 0.8, m)
+    got = assign_points(pts, centres, dirs, t0, t1, radius, 0.03)
+    want = _assign_brute(pts, centres, dirs, t0, t1, radius, 0.03)
+    assert np.array_equal(got[0], want[0])
+    assert np.array_equal(got[1], want[1])
