@@ -46,6 +46,9 @@ PIBC_METHODS = ("angular", "thesis")
 #: (points × polygon edges, points × clusters, poses × footprint points), so
 #: they are built in chunks of at most this many (8 MiB per float64 array).
 CHUNK_ELEMENTS = 1 << 20
+#: Most shapely geometries (one footprint rectangle or swept hull per pose)
+#: :func:`rectangles_on_steel` and :func:`swept_on_steel` build at once.
+SHAPES_PER_CHUNK = 1 << 15
 
 
 def chunk_slices(n: int, per_item: int, budget: int = CHUNK_ELEMENTS) -> list[slice]:
@@ -344,12 +347,16 @@ def rectangles_on_steel(
     pass between."""
     import shapely
 
-    corners = footprint_corners(
-        poses, length_m, width_m, center_x_m=center_x_m, center_y_m=center_y_m
-    )
-    if len(corners) == 0:
-        return np.zeros(0, dtype=bool)
-    return np.asarray(shapely.contains(steel, shapely.polygons(corners)), dtype=bool)
+    poses = np.asarray(poses, dtype=float).reshape(-1, 3)
+    out = np.zeros(len(poses), dtype=bool)
+    # One shapely polygon per pose (a GEOS object of a few hundred bytes):
+    # built and tested a bounded batch at a time.
+    for sl in chunk_slices(len(poses), 1, SHAPES_PER_CHUNK):
+        corners = footprint_corners(
+            poses[sl], length_m, width_m, center_x_m=center_x_m, center_y_m=center_y_m
+        )
+        out[sl] = np.asarray(shapely.contains(steel, shapely.polygons(corners)), dtype=bool)
+    return out
 
 
 def swept_on_steel(
@@ -383,17 +390,21 @@ def swept_on_steel(
         poses, length_m, width_m, center_x_m=center_x_m, center_y_m=center_y_m
     )
     reach = float(np.max(np.hypot(*(corners[0] - poses[0, :2]).T)))
-    prev = np.concatenate([corners[:1], corners[:-1]], axis=0)
-    # one hull per pose: an object array (asarray narrows the scalar-or-array stub type)
-    hulls = np.asarray(
-        shapely.convex_hull(shapely.multipoints(np.concatenate([prev, corners], axis=1)))
-    )
+    prev_of = np.maximum(np.arange(len(poses)) - 1, 0)  # pose 0 is its own predecessor
     dyaw = np.abs(wrap_angle(np.diff(poses[:, 2], prepend=poses[0, 2])))
     sagitta = reach * (1.0 - np.cos(np.minimum(dyaw, np.pi) / 2.0))
-    turned = sagitta > 1e-12
-    if turned.any():
-        hulls[turned] = shapely.buffer(hulls[turned], sagitta[turned], quad_segs=2)
-    return np.asarray(shapely.contains(steel, hulls), dtype=bool)
+    out = np.zeros(len(poses), dtype=bool)
+    # One hull per pose (GEOS objects): built and tested a bounded batch at a time.
+    for sl in chunk_slices(len(poses), 1, SHAPES_PER_CHUNK):
+        both = np.concatenate([corners[prev_of[sl]], corners[sl]], axis=1)
+        # an object array (asarray narrows the scalar-or-array stub type)
+        hulls = np.asarray(shapely.convex_hull(shapely.multipoints(both)))
+        sag = sagitta[sl]
+        turned = sag > 1e-12
+        if turned.any():
+            hulls[turned] = shapely.buffer(hulls[turned], sag[turned], quad_segs=2)
+        out[sl] = np.asarray(shapely.contains(steel, hulls), dtype=bool)
+    return out
 
 
 def wrap_angle(a: np.ndarray | float) -> np.ndarray:
