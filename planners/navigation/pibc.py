@@ -46,6 +46,13 @@ PIBC_METHODS = ("angular", "thesis")
 #: (points × polygon edges, points × clusters, poses × footprint points), so
 #: they are built in chunks of at most this many (8 MiB per float64 array).
 CHUNK_ELEMENTS = 1 << 20
+#: Rings with more edges than this are tested by :func:`point_in_polygon`
+#: through a y-band index (about this many edges a band) instead of against
+#: every edge.
+BAND_MIN_EDGES = 64
+#: Most shapely geometries (one footprint rectangle or swept hull per pose)
+#: :func:`rectangles_on_steel` and :func:`swept_on_steel` build at once.
+SHAPES_PER_CHUNK = 1 << 15
 
 
 def chunk_slices(n: int, per_item: int, budget: int = CHUNK_ELEMENTS) -> list[slice]:
@@ -59,17 +66,43 @@ def point_in_polygon(
     points: np.ndarray, polygon: np.ndarray, *, budget: int = CHUNK_ELEMENTS
 ) -> np.ndarray:
     """Even–odd ray casting (exact reference): (Q,) bool, vectorised over
-    points × edges in chunks of at most ``budget`` point–edge pairs."""
+    points × edges in chunks of at most ``budget`` point–edge pairs.
+
+    A ring of more than ``BAND_MIN_EDGES`` edges (a big cluster's boundary
+    has thousands) is indexed by y: the points, sorted by y, go in bands,
+    and each band is tested against the edges whose y-range meets it only.
+    An edge outside a point's y cannot cross its ray (the test's first
+    condition), so the crossing count, the arithmetic of every counted pair
+    and the answer are those of the full points × edges test, without its
+    points × all-edges work."""
     p = np.asarray(points, dtype=float).reshape(-1, 2)
     a = np.asarray(polygon, dtype=float).reshape(-1, 2)
+    b = np.roll(a, -1, axis=0)
     out = np.zeros(len(p), dtype=bool)
-    for sl in chunk_slices(len(p), len(a), budget):
-        out[sl] = _crossings_odd(p[sl], a)
+    if len(a) <= BAND_MIN_EDGES or len(p) == 0:
+        for sl in chunk_slices(len(p), len(a), budget):
+            out[sl] = _crossings_odd(p[sl], a, b)
+        return out
+    order = np.argsort(p[:, 1], kind="stable")
+    ys = p[order, 1]
+    e_lo = np.minimum(a[:, 1], b[:, 1])
+    e_hi = np.maximum(a[:, 1], b[:, 1])
+    per_band = max(1, len(p) * BAND_MIN_EDGES // len(a))  # about edges / 64 bands
+    for i0 in range(0, len(p), per_band):
+        idx = order[i0 : i0 + per_band]
+        y0, y1 = ys[i0], ys[min(i0 + per_band, len(p)) - 1]
+        # edges with a point of the band in [min y, max y): the rest have cond False
+        near = (e_lo <= y1) & (e_hi > y0)
+        if not near.any():
+            continue  # no edge spans these y: every crossing count is 0
+        ea, eb = a[near], b[near]
+        for sl in chunk_slices(len(idx), len(ea), budget):
+            out[idx[sl]] = _crossings_odd(p[idx[sl]], ea, eb)
     return out
 
 
-def _crossings_odd(p: np.ndarray, a: np.ndarray) -> np.ndarray:
-    b = np.roll(a, -1, axis=0)
+def _crossings_odd(p: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Whether each point's rightward ray crosses an odd number of the edges a→b."""
     x, y = p[:, 0:1], p[:, 1:2]
     cond = (a[None, :, 1] > y) != (b[None, :, 1] > y)
     dy = b[:, 1] - a[:, 1]
@@ -344,12 +377,16 @@ def rectangles_on_steel(
     pass between."""
     import shapely
 
-    corners = footprint_corners(
-        poses, length_m, width_m, center_x_m=center_x_m, center_y_m=center_y_m
-    )
-    if len(corners) == 0:
-        return np.zeros(0, dtype=bool)
-    return np.asarray(shapely.contains(steel, shapely.polygons(corners)), dtype=bool)
+    poses = np.asarray(poses, dtype=float).reshape(-1, 3)
+    out = np.zeros(len(poses), dtype=bool)
+    # One shapely polygon per pose (a GEOS object of a few hundred bytes):
+    # built and tested a bounded batch at a time.
+    for sl in chunk_slices(len(poses), 1, SHAPES_PER_CHUNK):
+        corners = footprint_corners(
+            poses[sl], length_m, width_m, center_x_m=center_x_m, center_y_m=center_y_m
+        )
+        out[sl] = np.asarray(shapely.contains(steel, shapely.polygons(corners)), dtype=bool)
+    return out
 
 
 def swept_on_steel(
@@ -383,17 +420,21 @@ def swept_on_steel(
         poses, length_m, width_m, center_x_m=center_x_m, center_y_m=center_y_m
     )
     reach = float(np.max(np.hypot(*(corners[0] - poses[0, :2]).T)))
-    prev = np.concatenate([corners[:1], corners[:-1]], axis=0)
-    # one hull per pose: an object array (asarray narrows the scalar-or-array stub type)
-    hulls = np.asarray(
-        shapely.convex_hull(shapely.multipoints(np.concatenate([prev, corners], axis=1)))
-    )
+    prev_of = np.maximum(np.arange(len(poses)) - 1, 0)  # pose 0 is its own predecessor
     dyaw = np.abs(wrap_angle(np.diff(poses[:, 2], prepend=poses[0, 2])))
     sagitta = reach * (1.0 - np.cos(np.minimum(dyaw, np.pi) / 2.0))
-    turned = sagitta > 1e-12
-    if turned.any():
-        hulls[turned] = shapely.buffer(hulls[turned], sagitta[turned], quad_segs=2)
-    return np.asarray(shapely.contains(steel, hulls), dtype=bool)
+    out = np.zeros(len(poses), dtype=bool)
+    # One hull per pose (GEOS objects): built and tested a bounded batch at a time.
+    for sl in chunk_slices(len(poses), 1, SHAPES_PER_CHUNK):
+        both = np.concatenate([corners[prev_of[sl]], corners[sl]], axis=1)
+        # an object array (asarray narrows the scalar-or-array stub type)
+        hulls = np.asarray(shapely.convex_hull(shapely.multipoints(both)))
+        sag = sagitta[sl]
+        turned = sag > 1e-12
+        if turned.any():
+            hulls[turned] = shapely.buffer(hulls[turned], sag[turned], quad_segs=2)
+        out[sl] = np.asarray(shapely.contains(steel, hulls), dtype=bool)
+    return out
 
 
 def wrap_angle(a: np.ndarray | float) -> np.ndarray:

@@ -31,6 +31,7 @@ import numpy as np
 from planners.errors import InvalidInputError
 from planners.motion import MotionValid, Valid, plan_motion
 from planners.motion import wrap_angle as wrap
+from planners.navigation.pibc import chunk_slices
 
 __all__ = [
     "DiffDrivePlanner",
@@ -46,6 +47,16 @@ __all__ = [
     "settle_pose",
     "wrap",
 ]
+
+#: Most turn poses :meth:`DiffDrivePlanner.turn_point` checks in one validity
+#: call (each is then projected to every footprint point: 4096 × the body's
+#: ~100 points stays well inside ``pibc.CHUNK_ELEMENTS``-sized temporaries).
+TURN_CHUNK_POSES = 4096
+#: Candidate turning points whose turn passes and whose whole way
+#: :meth:`DiffDrivePlanner.turn_point` then checks before giving up.
+TURN_WAYS_TRIED = 64
+#: Positions along the segment :func:`settle_pose` checks per validity call.
+SETTLE_CHUNK_POSITIONS = 128
 
 
 @dataclass
@@ -283,7 +294,13 @@ def settle_pose(
     yaw_offsets_deg: tuple[float, ...] = (0.0, 180.0, 15.0, -15.0, 165.0, -165.0, 30.0, -30.0),
 ) -> np.ndarray | None:
     """The valid pose nearest to ``point`` along the segment point→toward, trying
-    yaws around ``yaw_hint`` (vectorised: all candidates in one PIBC call).
+    yaws around ``yaw_hint`` in the order given at the nearest position that has
+    any valid one.
+
+    Positions are checked nearest first, ``SETTLE_CHUNK_POSITIONS`` of them
+    (every yaw at each) per validity call, stopping at the first batch with
+    a valid pose: a long edge's far positions are only looked at when the
+    near ones all fail, and no call holds more than a bounded batch.
 
     At a bar's free end the robot cannot stand on the end vertex itself (its
     footprint would overhang); it goes as far as the steel allows.
@@ -294,15 +311,16 @@ def settle_pose(
     t = np.linspace(0.0, 1.0, n + 1)
     xy = point + t[:, None] * d
     yaws = wrap(yaw_hint + np.deg2rad(np.asarray(yaw_offsets_deg)))
-    cand = np.concatenate(
-        [np.column_stack([xy, np.full(len(xy), y)]) for y in yaws]
-    )  # ordered by yaw, then distance
-    ok = valid(cand).reshape(len(yaws), len(xy))
-    if not ok.any():
-        return None
-    first = np.where(ok.any(axis=0))[0][0]  # nearest position with any valid yaw
-    k = int(np.argmax(ok[:, first]))  # first yaw in preference order
-    return np.array([xy[first, 0], xy[first, 1], yaws[k]])
+    for sl in chunk_slices(len(xy), 1, SETTLE_CHUNK_POSITIONS):
+        cand = np.concatenate(
+            [np.column_stack([xy[sl], np.full(len(xy[sl]), y)]) for y in yaws]
+        )  # ordered by yaw, then distance
+        ok = valid(cand).reshape(len(yaws), len(xy[sl]))
+        if ok.any():
+            first = np.where(ok.any(axis=0))[0][0]  # nearest position with any valid yaw
+            k = int(np.argmax(ok[:, first]))  # first yaw in preference order
+            return np.array([xy[sl][first, 0], xy[sl][first, 1], yaws[k]])
+    return None
 
 
 # ------------------------------------------------------------------ differential drive
@@ -553,8 +571,11 @@ class DiffDrivePlanner:
         The turn is where a narrow crossing decides feasibility: the whole
         footprint must stay on steel while it rotates, so the best point is
         rarely the vertex itself (in an L corner it lies towards the inside
-        of the corner).  All candidate turns are checked in one vectorised
-        validity call; the full paths of those that pass, cheapest first.
+        of the corner).  Candidates are taken cheapest first: their turns are
+        checked in batches of at most ``TURN_CHUNK_POSES`` poses, and the full
+        paths of the first ``TURN_WAYS_TRIED`` whose turn passes, in that
+        order; the first valid path is returned, so memory stays bounded and
+        the search stops as soon as it has its answer.
         """
         n = int(np.ceil(radius_m / spacing_m))
         g = np.arange(-n, n + 1) * spacing_m
@@ -586,33 +607,43 @@ class DiffDrivePlanner:
                 cands.append(np.column_stack([cost, np.arange(len(pts)), h_in, h_out]))
         c = np.vstack(cands)
         c = c[np.argsort(c[:, 0], kind="stable")]
-        # Pre-check the turn at p alone (the hard part), all candidates in one
-        # state-validity call; the motion validator decides the whole way below.
-        turns = [
-            primitive_poses(
-                np.array([*pts[int(i)], hi]),
-                np.array([*pts[int(i)], ho]),
-                resolution_m=self.res,
-                turn_resolution_rad=self.turn_res,
-            )
-            for _, i, hi, ho in c
-        ]
-        counts = np.array([len(t) for t in turns])
-        ok = self.valid(np.vstack(turns))
-        bad_per = np.add.reduceat(~ok, np.concatenate([[0], np.cumsum(counts)[:-1]]))
-        for _, i, hi, ho in c[bad_per == 0][:64]:
-            p = pts[int(i)]
-            way = [start]
-            if abs(float(wrap(hi - start[2]))) > 1e-12:
-                way.append(np.array([start[0], start[1], hi]))
-            way.append(np.array([p[0], p[1], hi]))
-            if abs(float(wrap(ho - hi))) > 1e-12:
-                way.append(np.array([p[0], p[1], ho]))
-            way.append(np.array([goal[0], goal[1], ho]))
-            if abs(float(wrap(goal[2] - ho))) > 1e-12:
-                way.append(goal.copy())
-            if self.way_ok(way):
-                return way
+        # Pre-check the turn at p alone (the hard part), cheapest candidates
+        # first, a bounded batch of turns per state-validity call; the motion
+        # validator decides the whole way of the first ``TURN_WAYS_TRIED``
+        # whose turn passes.  (One call over every candidate held all their
+        # turn poses × footprint points at once: gigabytes for a body-sized
+        # radius, and mostly wasted, as a cheap candidate usually passes.)
+        per_turn = int(np.ceil(np.pi / self.turn_res)) + 1  # poses of the longest turn
+        tried = 0
+        for sl in chunk_slices(len(c), per_turn, TURN_CHUNK_POSES):
+            turns = [
+                primitive_poses(
+                    np.array([*pts[int(i)], hi]),
+                    np.array([*pts[int(i)], ho]),
+                    resolution_m=self.res,
+                    turn_resolution_rad=self.turn_res,
+                )
+                for _, i, hi, ho in c[sl]
+            ]
+            counts = np.array([len(t) for t in turns])
+            ok = self.valid(np.vstack(turns))
+            bad_per = np.add.reduceat(~ok, np.concatenate([[0], np.cumsum(counts)[:-1]]))
+            for _, i, hi, ho in c[sl][bad_per == 0]:
+                if tried == TURN_WAYS_TRIED:
+                    return None
+                tried += 1
+                p = pts[int(i)]
+                way = [start]
+                if abs(float(wrap(hi - start[2]))) > 1e-12:
+                    way.append(np.array([start[0], start[1], hi]))
+                way.append(np.array([p[0], p[1], hi]))
+                if abs(float(wrap(ho - hi))) > 1e-12:
+                    way.append(np.array([p[0], p[1], ho]))
+                way.append(np.array([goal[0], goal[1], ho]))
+                if abs(float(wrap(goal[2] - ho))) > 1e-12:
+                    way.append(goal.copy())
+                if self.way_ok(way):
+                    return way
         return None
 
     def plan(

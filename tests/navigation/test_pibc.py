@@ -164,3 +164,25 @@ def test_large_calls_keep_temporaries_bounded() -> None:
     keep = _away_from_edges(pts[:5000], poly)
     assert np.array_equal(inside[:5000][keep], ref[:5000][keep])
     assert contained.sum() > 0 and valid.shape == (20_000,)
+
+
+@settings(max_examples=25, deadline=None)
+@given(st.integers(0, 2**31 - 1), st.integers(65, 3000), st.integers(1, 64))
+def test_band_index_equals_all_edges(seed: int, k: int, budget: int) -> None:
+    """A ring of more than ``BAND_MIN_EDGES`` edges is tested through the
+    y-band index; its answers are those of every point against every edge,
+    also for points on vertices and at a vertex's y (where the even–odd
+    rule's half-open edge spans decide)."""
+    from planners.navigation.pibc import BAND_MIN_EDGES, _crossings_odd
+
+    assert k > BAND_MIN_EDGES
+    rng = np.random.default_rng(seed)
+    ang = np.sort(rng.uniform(-np.pi, np.pi, k))
+    rad = rng.uniform(0.2, 1.0, k)  # spiky: rays cross many edges
+    ring = np.column_stack([rad * np.cos(ang), rad * np.sin(ang)])
+    pts = rng.uniform(-1.1, 1.1, size=(700, 2))
+    pts[:100] = ring[rng.integers(k, size=100)]
+    pts[100:200, 1] = ring[rng.integers(k, size=100), 1]
+    every_edge = _crossings_odd(pts, ring, np.roll(ring, -1, axis=0))
+    assert np.array_equal(point_in_polygon(pts, ring, budget=budget), every_edge)
+    assert np.array_equal(point_in_polygon(pts, ring), every_edge)
