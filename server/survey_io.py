@@ -26,6 +26,11 @@ from typing import Any, Protocol
 
 import numpy as np
 
+# re-exported: uploads decide units here (the decision itself lives with the spacing)
+from planners.pointcloud.spacing import MIN_POINTS_TO_DETECT as MIN_POINTS_TO_DETECT
+from planners.pointcloud.spacing import MM_EXTENT_FROM as MM_EXTENT_FROM
+from planners.pointcloud.spacing import MM_SPACING_FROM as MM_SPACING_FROM
+from planners.pointcloud.spacing import decide_units as decide_units
 from planners.pointcloud.spacing import measure_spacing
 
 #: Points per block (three float64 columns: 24 MB).
@@ -134,37 +139,9 @@ def _e57_scan(e57: Any, index: int) -> Iterator[np.ndarray]:
 
 
 # ------------------------------------------------------------------ spacing and units
-#: A median point spacing at or above this (in the file's unit) cannot be metres
-#: of a steel scan (crews scan at 5 mm – 15 cm): the file is in millimetres.
-MM_SPACING_FROM = 0.5
-
-
-#: ... and the cloud spans at least this much (a scan in millimetres of even one
-#: short member spans hundreds of units) ...
-MM_EXTENT_FROM = 100.0
-#: ... with at least this many points (fewer cannot tell a scan's spacing).
-MIN_POINTS_TO_DETECT = 100
-
-
-def decide_units(
-    spacing: float | None, extent: float, n_points: int, override: str = "auto"
-) -> tuple[str, str]:
-    """``("m" | "mm", reason)`` for a cloud of ``n_points`` with median spacing
-    ``spacing`` and largest bounding-box side ``extent``, both in its own
-    unit; ``override`` ``"m"``/``"mm"`` wins over the detection."""
-    if override in ("m", "mm"):
-        return override, f"set by the uploader ({override})"
-    if override != "auto":
-        raise ValueError(f"units must be 'auto', 'm' or 'mm', got {override!r}")
-    if spacing is None or n_points < MIN_POINTS_TO_DETECT:
-        return "m", f"{n_points} points are too few to tell the units: metres assumed"
-    if spacing >= MM_SPACING_FROM and extent >= MM_EXTENT_FROM:
-        return "mm", (
-            f"median point spacing {spacing:.3g} and extent {extent:.4g} in the file's unit: "
-            f"as metres that is a scan sparser than {MM_SPACING_FROM} m over "
-            f"≥ {MM_EXTENT_FROM:.0f} m, not steel, so millimetres"
-        )
-    return "m", f"median point spacing {spacing:.3g}, extent {extent:.4g}: metres"
+# The unit decision (:func:`planners.pointcloud.spacing.decide_units`) lives
+# beside the spacing it is made from, so a planner given a cloud in an unknown
+# unit decides the same way an upload does.
 
 
 def survey_of_npy(path: str | os.PathLike[str], fmt: str, units: str = "auto") -> dict[str, Any]:

@@ -1,10 +1,44 @@
 """Point spacing of a cloud: the median distance to the nearest distinct
 neighbour over a random sample (the quantity every structure-model default
-is derived from, and what an upload reports)."""
+is derived from, and what an upload reports), and the unit decision made
+from it (:func:`decide_units`: metres or millimetres)."""
 
 from __future__ import annotations
 
 import numpy as np
+
+from planners.errors import InvalidInputError
+
+#: A median point spacing at or above this (in the file's unit) cannot be metres
+#: of a steel scan (crews scan at 5 mm – 15 cm): the file is in millimetres.
+MM_SPACING_FROM = 0.5
+#: ... and the cloud spans at least this much (a scan in millimetres of even one
+#: short member spans hundreds of units) ...
+MM_EXTENT_FROM = 100.0
+#: ... with at least this many points (fewer cannot tell a scan's spacing).
+MIN_POINTS_TO_DETECT = 100
+
+
+def decide_units(
+    spacing: float | None, extent: float, n_points: int, override: str = "auto"
+) -> tuple[str, str]:
+    """``("m" | "mm", reason)`` for a cloud of ``n_points`` with median spacing
+    ``spacing`` and largest bounding-box side ``extent``, both in its own
+    unit; ``override`` ``"m"``/``"mm"`` wins over the detection.  Raises
+    :class:`InvalidInputError` (a ``ValueError``) for any other override."""
+    if override in ("m", "mm"):
+        return override, f"set by the uploader ({override})"
+    if override != "auto":
+        raise InvalidInputError(f"units must be 'auto', 'm' or 'mm', got {override!r}")
+    if spacing is None or n_points < MIN_POINTS_TO_DETECT:
+        return "m", f"{n_points} points are too few to tell the units: metres assumed"
+    if spacing >= MM_SPACING_FROM and extent >= MM_EXTENT_FROM:
+        return "mm", (
+            f"median point spacing {spacing:.3g} and extent {extent:.4g} in the file's unit: "
+            f"as metres that is a scan sparser than {MM_SPACING_FROM} m over "
+            f"≥ {MM_EXTENT_FROM:.0f} m, not steel, so millimetres"
+        )
+    return "m", f"median point spacing {spacing:.3g}, extent {extent:.4g}: metres"
 
 
 def measure_spacing(

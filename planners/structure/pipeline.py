@@ -347,7 +347,7 @@ def _fit_faces(
 def _renumber(
     labels: np.ndarray, members: list[Member], radii: np.ndarray, keep: list[Member], spacing: float
 ) -> tuple[np.ndarray, list[Member], np.ndarray, list]:
-    old = np.array([m.id for m in keep], dtype=np.int64)
+    old = np.array([m.id for m in keep], dtype=np.int64)  # int even when nothing is kept
     remap = np.full(len(members) + 1, -1, dtype=np.int64)
     remap[old] = np.arange(len(keep))
     new_labels = remap[labels]  # −1 indexes the last slot, which is −1

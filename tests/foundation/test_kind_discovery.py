@@ -22,7 +22,7 @@ def test_discovered_modules_are_exactly_those_that_define_kind() -> None:
         if hasattr(module, "KIND"):
             defining.append(module.__name__)
     assert sorted(KIND_MODULES) == sorted(defining)
-    assert len(KIND_MODULES) == 7
+    assert len(KIND_MODULES) == 8
 
 
 def test_the_source_scan_takes_top_level_assignments_only(tmp_path: Path) -> None:
