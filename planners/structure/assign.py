@@ -65,7 +65,9 @@ def assign_points(
         idx = np.unique(np.concatenate([np.asarray(x, dtype=np.int64) for x in hits]))
         if len(idx) == 0:
             continue
-        d = segment_distances(points[idx], centres[k : k + 1], dirs[k : k + 1], t0[k : k + 1], t1[k : k + 1])[:, 0]
+        d = segment_distances(
+            points[idx], centres[k : k + 1], dirs[k : k + 1], t0[k : k + 1], t1[k : k + 1]
+        )[:, 0]
         inside = d <= reach
         idx, depth = idx[inside], d[inside] / radius[k]
         count[idx] += 1
