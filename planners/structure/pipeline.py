@@ -278,9 +278,6 @@ def _assign_and_refit(
             # the section from the points no other member competes for; the
             # extent from all, so that members reach into their joints
             if core.sum() < MIN_MEMBER_POINTS:
-                # a slender member in a dense joint region: all of its points
-                core = mine
-            if core.sum() < MIN_MEMBER_POINTS:
                 continue
             fit = _refit(pts[core], pts[mine], spacing)
             if fit is None or fit[3] - fit[2] < min_len:
