@@ -129,3 +129,23 @@ def member_graph(members: list[Member], joints: list[Joint], end_tol: float) -> 
             if n0 != n1:
                 g.add_edge(n0, n1, member=m.id, weight=max(abs(t1 - t0), 1e-6))
     return g
+
+
+def extend_to_joints(members: list[Member], joints: list[Joint]) -> None:
+    """Lengthen each member's axis, in place, to the joints beyond its ends.
+
+    A centroid line runs from joint to joint, but the scanned points of a
+    member stop short of the joint, where the neighbour's steel is: the
+    points there went to the neighbour, and the line fitted to the rest ends
+    early.  Axes only grow here, along their own line."""
+    on: dict[int, list[np.ndarray]] = {}
+    for j in joints:
+        for mid in j.members:
+            on.setdefault(mid, []).append(j.pos)
+    for m in members:
+        if m.id not in on:
+            continue
+        u = m.direction
+        t = np.array([(p - m.axis[0]) @ u for p in on[m.id]])
+        lo, hi = min(0.0, float(t.min())), max(m.length_m, float(t.max()))
+        m.axis = np.array([m.axis[0] + lo * u, m.axis[0] + hi * u])

@@ -41,7 +41,7 @@ from planners.structure.faces import (
     section_box,
 )
 from planners.structure.features import line_features
-from planners.structure.joints import find_joints, member_graph
+from planners.structure.joints import extend_to_joints, find_joints, member_graph
 from planners.structure.lines import (
     LineCandidate,
     candidates_from_regions,
@@ -70,6 +70,8 @@ RESOLVED_SPACINGS = 4.0
 CONTINUATION_MAX = 0.55
 #: a candidate with fewer of its points on its faces is not steel (vegetation, rubble)
 FACE_FRACTION_MIN = 0.8
+#: how far past a member's last point (beyond the neighbour's section) a joint is looked for (m)
+JOINT_REACH_M = 0.4
 #: assign → refit rounds before the final assignment
 REFITS = 2
 
@@ -211,7 +213,7 @@ def model_structure(
         labels, members, radii, _ = _renumber(labels, members, radii, not_clutter, spacing)
     stage("clutter", 0.9)
 
-    joints = find_joints(members, radii, reach=max(3 * spacing, 0.05))
+    joints = find_joints(members, radii, reach=max(3 * spacing, JOINT_REACH_M))
     joined = {mid for j in joints for mid in j.members}
     keep = [
         m
@@ -220,6 +222,7 @@ def model_structure(
     ]
     if len(keep) < len(members):
         labels, members, radii, joints = _renumber(labels, members, radii, keep, spacing)
+    extend_to_joints(members, joints)
     graph = member_graph(members, joints, end_tol=float(radii.max()) if len(radii) else 0.0)
     stage("graph", 1.0)
 
@@ -355,5 +358,5 @@ def _renumber(
         for f in m.faces:
             f.member, f.id = i, face_id
             face_id += 1
-    joints = find_joints(keep, new_radii, reach=max(3 * spacing, 0.05))
+    joints = find_joints(keep, new_radii, reach=max(3 * spacing, JOINT_REACH_M))
     return new_labels, keep, new_radii, joints
