@@ -194,6 +194,8 @@ def model_structure(
     # not a few planes (vegetation) are not members
     not_clutter = []
     for m in members:
+        if m.n_points < MIN_MEMBER_POINTS:  # its points all went to neighbours
+            continue
         big = max(m.faces, key=lambda f: f.n_points, default=None)
         band = max(1.0, 2.0 * m.width_m, 10 * spacing)
         cell = max(3.0 * spacing, band / 6.0)
