@@ -31,12 +31,17 @@ from planners.structure.model import Face, Member
 __all__ = ["FaceGeom", "driving_face", "face_continuity", "foot_centres"]
 
 
+#: faces at least this share of the largest one's area are equals when choosing
+NEAR_AREA = 0.8
+
+
 def driving_face(member: Member) -> Face | None:
     """The face the robot drives on along ``member``, or ``None`` without faces.
 
     Flanges are preferred (the outer flange of an I, channel or tee is where
     the ARA's feet sit); among the candidates the largest by area wins, and
-    faces within 1 % of the largest count as equal (an I's two flanges),
+    faces within 20 % of the largest count as equal (an I's two flanges,
+    measured on a scan that sees one better than the other),
     of which the one whose normal points most upwards (+z) is taken — the
     top flange — then the lowest face id, so the choice is deterministic.
     """
@@ -45,7 +50,7 @@ def driving_face(member: Member) -> Face | None:
     flanges = [f for f in member.faces if f.kind == "flange"]
     pool = flanges or list(member.faces)
     top = max(float(f.area_m2) for f in pool)
-    near = [f for f in pool if float(f.area_m2) >= 0.99 * top]
+    near = [f for f in pool if float(f.area_m2) >= NEAR_AREA * top]
 
     def upness(f: Face) -> float:
         n = np.asarray(f.normal, float)

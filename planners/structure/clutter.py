@@ -20,11 +20,20 @@ from planners.structure.model import Face
 
 
 def plane_continuation(
-    tree: cKDTree, pts: np.ndarray, face: Face, band: float, tol: float, cell: float
+    tree: cKDTree,
+    pts: np.ndarray,
+    face: Face,
+    band: float,
+    tol: float,
+    cell: float,
+    own: np.ndarray | None = None,
 ) -> float:
     """Fraction of the ``cell``-sized cells in the better covered of the two
-    bands beside ``face`` that hold a point of its plane (0: the plane ends
-    with the face on both sides)."""
+    bands beside ``face`` that hold a point of its plane — the smaller of
+    that over the band and over its first row of cells along the face's
+    edge (0: the plane ends with the face on both sides).  Points flagged in
+    ``own`` (the member's own: its side faces meet this face's edge) are
+    not counted."""
     lo, hi = face.boundary.min(axis=0), face.boundary.max(axis=0)
     length = float(hi[0] - lo[0])
     if length <= 0 or hi[1] <= lo[1]:
@@ -41,6 +50,8 @@ def plane_continuation(
     reach = float(np.hypot(0.5 * step, 0.5 * band)) + tol
     found = tree.query_ball_point(centres, reach)
     idx = np.unique(np.concatenate([np.asarray(f, dtype=np.int64) for f in found]))
+    if own is not None:
+        idx = idx[~own[idx]]
     n_x = max(1, int(np.ceil(length / cell)))
     n_y = max(1, int(np.ceil(band / cell)))
     total = 2 * n_x * n_y
@@ -60,6 +71,10 @@ def plane_continuation(
     cy = np.minimum((off / cell).astype(np.int64), n_y - 1)
     side = right[beside].astype(np.int64)
     cells = np.unique((side * n_x + cx) * n_y + cy)
-    per_side = np.bincount(cells // (n_x * n_y), minlength=2)
+    per_side = np.bincount(cells // (n_x * n_y), minlength=2) / (total / 2)
+    # the plane must go on from the face's very edge: a neighbouring member
+    # in the same plane (two stringers side by side) leaves a strip empty
+    edge = cells[(cells % n_y) == 0]
+    at_edge = np.bincount(edge // (n_x * n_y), minlength=2) / n_x
     # the better-covered side: a strip at the edge of the ground continues on one side only
-    return float(per_side.max() / (total / 2))
+    return float(np.minimum(per_side, at_edge).max())

@@ -21,6 +21,9 @@ from scipy.spatial import cKDTree
 
 from planners.structure.model import Joint, Member
 
+#: members closer to parallel than this (15°) meet only along their bodies
+PARALLEL_COS = float(np.cos(np.radians(15.0)))
+
 
 def closest_points(
     p0: np.ndarray, p1: np.ndarray, q0: np.ndarray, q1: np.ndarray
@@ -46,8 +49,19 @@ def _extended(axis: np.ndarray, by: float) -> np.ndarray:
     return np.array([axis[0] - by * u, axis[1] + by * u])
 
 
-def find_joints(members: list[Member], radii: np.ndarray, reach: float) -> list[Joint]:
-    """Joints of ``members`` (``radii``: section radius per member, m)."""
+def _past_end(s: float, length: float, ext: float) -> bool:
+    """Whether parameter ``s`` ∈ [0, 1] of a segment lengthened by ``ext`` at
+    both ends falls beyond the original segment's ends."""
+    t = s * (length + 2 * ext) - ext
+    return t < 0 or t > length
+
+
+def find_joints(
+    members: list[Member], radii: np.ndarray, reach: float, side_tol: float = 0.0
+) -> list[Joint]:
+    """Joints of ``members`` (``radii``: section radius per member, m):
+    within the radii plus ``reach`` past an end, plus ``side_tol`` along the
+    bodies."""
     if len(members) < 2:
         return []
     step = max(0.2, float(radii.max()))
@@ -72,10 +86,19 @@ def find_joints(members: list[Member], radii: np.ndarray, reach: float) -> list[
     for i, j in cand:
         if i == j:
             continue
-        a = _extended(members[i].axis, radii[j] + reach)
-        b = _extended(members[j].axis, radii[i] + reach)
-        pa, pb, _, _ = closest_points(a[0], a[1], b[0], b[1])
-        if np.linalg.norm(pa - pb) <= radii[i] + radii[j] + reach:
+        ext_a, ext_b = radii[j] + reach, radii[i] + reach
+        a = _extended(members[i].axis, ext_a)
+        b = _extended(members[j].axis, ext_b)
+        pa, pb, sa, sb = closest_points(a[0], a[1], b[0], b[1])
+        # the reach bridges what a member's points stop short of, past its
+        # ends only: two members side by side along their lengths do not meet
+        past = _past_end(sa, members[i].length_m, ext_a) or _past_end(
+            sb, members[j].length_m, ext_b
+        )
+        # parallel members side by side do not meet past their ends either
+        past = past and abs(float(members[i].direction @ members[j].direction)) < PARALLEL_COS
+        allowed = radii[i] + radii[j] + (reach if past else side_tol)
+        if np.linalg.norm(pa - pb) <= allowed:
             raw.append((0.5 * (pa + pb), {int(i), int(j)}))
     if not raw:
         return []

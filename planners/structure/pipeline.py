@@ -72,8 +72,9 @@ CONTINUATION_MAX = 0.55
 FACE_FRACTION_MIN = 0.8
 #: how far past a member's last point (beyond the neighbour's section) a joint is looked for (m)
 JOINT_REACH_M = 0.4
-#: assign → refit rounds before the final assignment
-REFITS = 2
+#: assign → refit rounds before the final assignment: at least, at most
+MIN_REFITS = 2
+MAX_REFITS = 5
 
 Progress = Callable[[float, str], None]
 
@@ -208,14 +209,17 @@ def model_structure(
             continue
         if (
             big is None
-            or plane_continuation(tree, pts, big, band, 2 * tol, cell) < CONTINUATION_MAX
+            or plane_continuation(tree, pts, big, band, 2 * tol, cell, labels == m.id)
+            < CONTINUATION_MAX
         ):
             not_clutter.append(m)
     if len(not_clutter) < len(members):
         labels, members, radii, _ = _renumber(labels, members, radii, not_clutter, spacing)
     stage("clutter", 0.9)
 
-    joints = find_joints(members, radii, reach=max(3 * spacing, JOINT_REACH_M))
+    joints = find_joints(
+        members, radii, reach=max(3 * spacing, JOINT_REACH_M), side_tol=3 * spacing
+    )
     joined = {mid for j in joints for mid in j.members}
     keep = [
         m
@@ -249,7 +253,7 @@ def _assign_and_refit(
 ) -> tuple[np.ndarray, np.ndarray, list[Member], np.ndarray]:
     """Labels per point and the members with refitted axes.
 
-    ``REFITS`` rounds of: assign the points, refit every axis from its
+    ``MIN_REFITS`` to ``MAX_REFITS`` rounds of: assign the points, refit every axis from its
     points, join refitted lines that are collinear across a gap or side by
     side (short candidates' directions are too uncertain for the first join
     to catch every occlusion fragment), then a final assignment."""
@@ -271,7 +275,8 @@ def _assign_and_refit(
     min_len = float(prm.min_member_length_m or 0.0)
     margin = 1.5 * spacing
     shared = np.zeros(len(pts), bool)
-    for _ in range(REFITS):
+    for round_ in range(MAX_REFITS):
+        before = _arrays(lines)[4]
         labels, shared = assign_points(pts, *_arrays(lines), margin, tree)
         groups = join_groups(
             lines, prm.merge_angle_deg, prm.max_gap_m, prm.max_section_m, prm.link_angle_deg
@@ -297,6 +302,16 @@ def _assign_and_refit(
         lines = refitted
         if not lines:
             return none, shared, [], np.zeros(0)
+        # a candidate's first radius is that of the voxels that looked linear
+        # (often one face or edge); each round widens it towards the whole
+        # section: stop once the envelopes hold still
+        after = _arrays(lines)[4]
+        if (
+            round_ + 1 >= MIN_REFITS
+            and len(after) == len(before)
+            and np.all(np.abs(after - before) <= 0.1 * before)
+        ):
+            break
     labels, shared = assign_points(pts, *_arrays(lines), margin, tree)
     members = [
         Member(
@@ -360,5 +375,7 @@ def _renumber(
         for f in m.faces:
             f.member, f.id = i, face_id
             face_id += 1
-    joints = find_joints(keep, new_radii, reach=max(3 * spacing, JOINT_REACH_M))
+    joints = find_joints(
+        keep, new_radii, reach=max(3 * spacing, JOINT_REACH_M), side_tol=3 * spacing
+    )
     return new_labels, keep, new_radii, joints
