@@ -35,6 +35,7 @@ from planners.pointcloud.spacing import measure_spacing
 from planners.structure.assign import assign_points, relabel_by_faces
 from planners.structure.clutter import plane_continuation
 from planners.structure.faces import (
+    CrossSection,
     classify_profile,
     cross_section,
     member_faces,
@@ -72,6 +73,8 @@ CONTINUATION_MAX = 0.55
 FACE_FRACTION_MIN = 0.8
 #: how far past a member's last point (beyond the neighbour's section) a joint is looked for (m)
 JOINT_REACH_M = 0.4
+#: direction through the two halves' section centres (else least squares)
+DIRECTION_FROM_HALVES = True
 #: assign → refit rounds before the final assignment: at least, at most
 MIN_REFITS = 2
 MAX_REFITS = 5
@@ -89,6 +92,31 @@ def _face_kinds(profile: str, faces: list[Face], depth_axis: np.ndarray) -> None
             f.kind = "flange" if abs(float(f.normal @ depth_axis)) > 0.7 else "web"
         else:
             f.kind = "side"
+
+
+def _direction_from_halves(cs: CrossSection, c: np.ndarray, d: np.ndarray) -> np.ndarray:
+    """The direction through the section-box centres of the two halves of a
+    member: a least-squares line follows where the points are (one flange
+    seen at one end, the web at the other) and tilts by degrees on a short
+    member; the box centres follow the section."""
+    med = float(np.median(cs.t))
+    halves = [cs.t < med, cs.t >= med]
+    if min(int(h.sum()) for h in halves) < MIN_MEMBER_POINTS:
+        return d
+    vt, _, _ = section_box(cs.uv)
+    ends = []
+    for h in halves:
+        q = cs.uv[h] @ vt.T
+        lo, hi = np.percentile(q, [1, 99], axis=0)
+        mid = (0.5 * (lo + hi)) @ vt
+        ends.append(c + float(np.median(cs.t[h])) * d + mid[0] * cs.u + mid[1] * cs.v)
+    step = ends[1] - ends[0]
+    n = float(np.linalg.norm(step))
+    if n < 1e-9:
+        return d
+    new = step / n
+    # keep the sign convention of fit_line
+    return new if float(new @ d) >= 0 else -new
 
 
 def _refit(
@@ -109,6 +137,9 @@ def _refit(
     cs = cross_section(core, c, d)
     if len(cs.uv) < 3:
         return None
+    if DIRECTION_FROM_HALVES:
+        d = _direction_from_halves(cs, c, d)
+        cs = cross_section(core, c, d)
     vt, mu, box = section_box(cs.uv)
     mid2 = mu + (0.5 * (box[0] + box[1])) @ vt
     centre = c + mid2[0] * cs.u + mid2[1] * cs.v
