@@ -264,7 +264,8 @@ def test_pc2beam_crop_two_members_connected_and_routed() -> None:
     # seen from one side and 0.14 m wide, is not reliably: see docs)
     beam = max(model.members, key=lambda m: m.length_m)
     assert beam.profile == "I"
-    assert beam.depth_m == pytest.approx(0.39, abs=0.03)
+    # its points span 0.36 m vertically over a 1.2 m length tilted ~2°
+    assert beam.depth_m == pytest.approx(0.34, abs=0.04)
     plan = plan_inspection(model)
     assert plan.uncovered_members == []
     covered = {model.graph.edges[e]["member"] for e in plan.route.edges}
