@@ -54,11 +54,20 @@ def validate_params(services: Services, kind: PlanKind, params: dict[str, Any]) 
     cloud_id = getattr(model, "cloud_id", None)
     if cloud_id is not None:
         try:
-            services.store.get_cloud(cloud_id)
+            cloud = services.store.get_cloud(cloud_id)
         except NotFoundError:
             raise HTTPException(
                 422, detail=f"params.cloud_id: no stored cloud {cloud_id!r}"
             ) from None
+        scale = (cloud.survey or {}).get("scale_to_m", 1.0)
+        if getattr(model, "units", None) == "mm" and scale != 1.0:
+            # the upload already turned its millimetres into metres: scaling
+            # again would plan a structure a thousand times too small
+            raise HTTPException(
+                422,
+                detail=f"params.units: cloud {cloud_id!r} was converted from millimetres to "
+                "metres when it was uploaded; use units 'auto' or 'm'",
+            )
     if kind.validate is not None:
         try:
             kind.validate(model)

@@ -283,6 +283,14 @@ def test_millimetre_clouds_are_scaled_to_metres(api) -> None:
     assert auto["result"]["units"]["scale_to_m"] == 0.001
     assert "millimetres" in auto["result"]["units"]["reason"]
     assert auto["metrics"]["member_count"] == 2
+    # A cloud the upload already converted from millimetres is not scaled twice.
+    converted = upload(api, (ell() + SURVEY) * 1000.0, units="mm")
+    r = api.post(
+        "/api/v1/plans",
+        json={"kind": "ara.inspect", "params": {"cloud_id": converted, "units": "mm"}},
+    )
+    assert r.status_code == 422 and "converted from millimetres" in r.json()["detail"]
+    assert "params.units" in r.json()["detail"]
 
 
 def test_bad_requests(api) -> None:
