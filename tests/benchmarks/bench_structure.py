@@ -82,9 +82,7 @@ def run_one(kind: str, seed: int, spacing: float) -> dict:
         t = time.perf_counter()
         plan = plan_inspection(model)
         t_route = time.perf_counter() - t
-        driven = {
-            plan.graph.edges[e]["member"] for r in plan.routes for e in r.edges
-        } - {None}
+        driven = {plan.graph.edges[e]["member"] for r in plan.routes for e in r.edges} - {None}
         on_route = len(driven) / len(model.members)
     return {
         "points": len(scan.points),
@@ -110,7 +108,11 @@ def accuracy(kinds: list[str], seeds: int, spacings: list[float]) -> None:
                     ("points", "recall", "recall_visible", "precision", "on_route", "model_s", "route_s")}  # fmt: skip
             stages = {k: round(float(np.mean([r["stages"].get(k, 0.0) for r in rows])), 2)
                       for k in rows[0]["stages"]}  # fmt: skip
-            flag = "met" if mean["recall_visible"] >= TARGET_RECALL and mean["precision"] >= TARGET_PRECISION else "MISSED"
+            flag = (
+                "met"
+                if mean["recall_visible"] >= TARGET_RECALL and mean["precision"] >= TARGET_PRECISION
+                else "MISSED"
+            )
             print(f"{kind:>9} {spacing:7.3f} {seeds:5d} {mean['points']:8.0f} {mean['recall']:7.3f} "
                   f"{mean['recall_visible']:7.3f} {mean['precision']:6.3f} {mean['on_route']:6.3f} "
                   f"{mean['model_s']:8.2f} {mean['route_s']:8.2f}  {stages}  [{flag}]", flush=True)  # fmt: skip
