@@ -443,18 +443,15 @@ class _Checker:
         )
         needA = (eA < cut) & cr[:, sp.sa_block]
         needB = eB < cut
-        need = needA[:, sp.pa] & needB[:, sp.pb]  # (R, sphere pairs)
-        r_idx, k_idx = np.nonzero(need)
+        r_idx, i, j, key = _needed_pairs(needA, needB, sp)
         if len(r_idx):
             Pf = P.reshape(-1, 3)
             n_s = P.shape[1]
-            i, j = sp.i[k_idx], sp.j[k_idx]
             d = (
                 np.linalg.norm(Pf[r_idx * n_s + i] - Pf[r_idx * n_s + j], axis=1)
                 - sp.r[i]
                 - sp.r[j]
             )
-            key = r_idx * len(sp.a) + sp.block[k_idx]  # non-decreasing (row-major, blocks sorted)
             starts = np.flatnonzero(np.r_[True, key[1:] != key[:-1]])
             mins = np.minimum.reduceat(d, starts)
             vr = val[rows].ravel()
@@ -547,15 +544,40 @@ class _Checker:
         return ok
 
 
+def _needed_pairs(
+    needA: np.ndarray, needB: np.ndarray, sp: _SelfArrays
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The sphere pairs :meth:`_Checker._self` must evaluate: per row and
+    link pair (block), every needed sphere on link a with every needed one
+    on link b — a block's pairs are the full product of its spheres, so this
+    join on (row, block) is the set ``needA[:, pa] & needB[:, pb]`` without
+    the (rows × all sphere pairs) mask.  Returns row, sphere i, sphere j and
+    the key row·blocks + block, non-decreasing."""
+    ra, ca = np.nonzero(needA)  # row-major; sa is grouped by block, ascending
+    rb, cb = np.nonzero(needB)
+    n_blk = len(sp.a)
+    ka = ra * n_blk + sp.sa_block[ca]
+    kb = rb * n_blk + sp.sb_block[cb]
+    lo = np.searchsorted(kb, ka, "left")
+    cnt = np.searchsorted(kb, ka, "right") - lo
+    total = int(cnt.sum())
+    if total == 0:
+        e = np.zeros(0, dtype=int)
+        return e, e, e, e
+    rep = np.repeat(np.arange(len(ka)), cnt)
+    within = np.arange(total) - np.repeat(np.cumsum(cnt) - cnt, cnt)
+    return ra[rep], sp.sa[ca[rep]], sp.sb[cb[lo[rep] + within]], ka[rep]
+
+
 @dataclass
 class _SelfArrays:
     """Self-collision pairs flattened for :meth:`_Checker._self`.  Per link
     pair (block): links ``a``, ``b``, bounding-sphere centres ``ca``/``cb``
     (link frames) and radii ``ra``/``rb`` (sum ``rab``), ``fine``.  Spheres
     index [fine cover, coarse cover] (radii ``r``); ``sa``/``sb`` list each
-    block's spheres on link a / b (blocks ``sa_block``/``sb_block``); per
-    sphere pair ``i``, ``j``, its ``block`` (sorted) and positions ``pa``,
-    ``pb`` of its spheres in ``sa``/``sb``."""
+    block's spheres on link a / b (blocks ``sa_block``/``sb_block``); a
+    block's sphere pairs are every sphere of ``sa`` with every one of ``sb``
+    (:func:`_needed_pairs` relies on it)."""
 
     a: np.ndarray
     b: np.ndarray
@@ -570,11 +592,6 @@ class _SelfArrays:
     sa_block: np.ndarray
     sb: np.ndarray
     sb_block: np.ndarray
-    i: np.ndarray
-    j: np.ndarray
-    block: np.ndarray
-    pa: np.ndarray
-    pb: np.ndarray
     any_coarse: bool
 
     @staticmethod
@@ -591,25 +608,18 @@ class _SelfArrays:
         fine = np.array([p[2] for p in pairs], dtype=bool)
         ca, cb = np.zeros((n, 3)), np.zeros((n, 3))
         ra, rb = np.zeros(n), np.zeros(n)
-        sa, sab, sb, sbb, ii, jj, blk, pa, pb = ([] for _ in range(9))
-        na = nb = 0
+        sa, sab, sb, sbb = ([] for _ in range(4))
         for k, (la, lb_, f, i, j) in enumerate(pairs):
             bc, br = bounds if f else self_bounds
             ca[k], cb[k], ra[k], rb[k] = bc[la], bc[lb_], br[la], br[lb_]
             off = 0 if f else S
-            ua, ia = np.unique(np.asarray(i), return_inverse=True)
-            ub, ib = np.unique(np.asarray(j), return_inverse=True)
+            ua, ub = np.unique(np.asarray(i)), np.unique(np.asarray(j))
+            if len(np.asarray(i)) != len(ua) * len(ub):
+                raise ValueError(f"self pairs of links {la}, {lb_} are not all sphere pairs")
             sa.append(ua + off)
             sab.append(np.full(len(ua), k))
             sb.append(ub + off)
             sbb.append(np.full(len(ub), k))
-            ii.append(np.asarray(i) + off)
-            jj.append(np.asarray(j) + off)
-            blk.append(np.full(len(i), k))
-            pa.append(ia.ravel() + na)
-            pb.append(ib.ravel() + nb)
-            na += len(ua)
-            nb += len(ub)
 
         def cat(x: list[np.ndarray]) -> np.ndarray:
             return np.concatenate(x).astype(int) if x else np.zeros(0, int)
@@ -617,7 +627,7 @@ class _SelfArrays:
         r = np.concatenate([robot.cover.radius, robot.self_cover.radius])
         return _SelfArrays(
             a, b, ca, cb, ra, rb, ra + rb, fine, r, cat(sa), cat(sab), cat(sb), cat(sbb),
-            cat(ii), cat(jj), cat(blk), cat(pa), cat(pb), bool((~fine).any()),
+            bool((~fine).any()),
         )  # fmt: skip
 
 

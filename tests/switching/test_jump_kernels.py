@@ -180,3 +180,33 @@ def test_sphere_cover_world_per_link_equals_the_gather(batch):
         G = F[:, cov.link]
         want = np.einsum("bsij,sj->bsi", G[..., :3, :3], cov.centre) + G[..., :3, 3]
         np.testing.assert_allclose(cov.world(F), want, rtol=0, atol=1e-12)
+
+
+@settings(max_examples=40, deadline=None)
+@given(
+    rows=st.integers(1, 6),
+    p_a=st.floats(0.0, 1.0),
+    p_b=st.floats(0.0, 1.0),
+    seed=st.integers(0, 2**16),
+)
+def test_needed_pairs_equal_the_pair_mask(cx, rows, p_a, p_b, seed):
+    """The (row, block) join lists exactly the sphere pairs whose two spheres
+    are both needed, each once: brute force over every block's product."""
+    ctx, _ = cx
+    sp = ctx.checker(0, np.eye(4), None).self_arrays
+    rng = np.random.default_rng(seed)
+    needA = rng.random((rows, len(sp.sa))) < p_a
+    needB = rng.random((rows, len(sp.sb))) < p_b
+    r_idx, i, j, key = J._needed_pairs(needA, needB, sp)
+    want = set()
+    for r in range(rows):
+        for ca in np.flatnonzero(needA[r]):
+            for cb in np.flatnonzero(needB[r]):
+                if sp.sa_block[ca] == sp.sb_block[cb]:
+                    want.add(
+                        (r, int(sp.sa[ca]), int(sp.sb[cb]), r * len(sp.a) + int(sp.sa_block[ca]))
+                    )
+    got = list(zip(r_idx.tolist(), i.tolist(), j.tolist(), key.tolist(), strict=True))
+    assert len(got) == len(set(got))
+    assert set(got) == want
+    assert np.all(np.diff(key) >= 0)  # reduceat over runs of equal keys
