@@ -402,6 +402,15 @@ class _Checker:
             out[b_idx, s_idx] = obs.clearance(C[b_idx, s_idx], cov.radius[s_idx], upper=cap)
         return np.where(subset[None, :], out, np.inf).min(axis=1)
 
+    def _scene_all(self, F: np.ndarray, C: np.ndarray) -> np.ndarray:
+        """Scene clearance of every checked sphere: the moving foot against
+        the contact-zone points when there is a zone, all against the scene
+        (one query when there is none: the same set)."""
+        if self.contact is None:
+            return self._scene(F, C, self.check, self.obstacles)
+        scene = self._scene(F, C, self.rest, self.obstacles)
+        return np.minimum(scene, self._scene(F, C, self.foot, self.contact))
+
     def _self(self, F: np.ndarray, C: np.ndarray, cap: float = _CAP) -> np.ndarray:
         """Self clearance per configuration, all link pairs at once.
 
@@ -468,10 +477,7 @@ class _Checker:
                 [self.scene_clearances(Q[k : k + _CHUNK]) for k in range(0, len(Q), _CHUNK)]
             )
         F = self.world(Q)
-        C = self.robot.cover.world(F)
-        scene = self._scene(F, C, self.rest, self.obstacles)
-        obs = self.contact if self.contact is not None else self.obstacles
-        return np.minimum(scene, self._scene(F, C, self.foot, obs))
+        return self._scene_all(F, self.robot.cover.world(F))
 
     def self_clearances(self, Q: np.ndarray) -> np.ndarray:
         """:meth:`clearances`' self part alone."""
@@ -503,13 +509,9 @@ class _Checker:
         if len(Q) > _CHUNK:  # bounded temporaries (the re-check passes whole phases)
             parts = [self.clearances(Q[k : k + _CHUNK]) for k in range(0, len(Q), _CHUNK)]
             return np.concatenate([p[0] for p in parts]), np.concatenate([p[1] for p in parts])
-        cov = self.robot.cover
         F = self.world(Q)
-        C = cov.world(F)  # (B, S, 3)
-        scene = self._scene(F, C, self.rest, self.obstacles)
-        obs = self.contact if self.contact is not None else self.obstacles
-        scene = np.minimum(scene, self._scene(F, C, self.foot, obs))
-        return scene, self._self(F, C)
+        C = self.robot.cover.world(F)  # (B, S, 3)
+        return self._scene_all(F, C), self._self(F, C)
 
     def valid(self, Q: np.ndarray) -> np.ndarray:
         """Joint limits, scene clearance ≥ margin and self clearance ≥ margin.
@@ -534,12 +536,13 @@ class _Checker:
             return ok
         F, C = F[idx], C[idx]
         cap = cm + _EPS
-        scene = self._scene(F, C, self.rest, self.obstacles, cap)
-        good = scene >= cm
+        if self.contact is None:  # one obstacle set: one query for every link
+            ok[idx] = self._scene(F, C, self.check, self.obstacles, cap) >= cm
+            return ok
+        good = self._scene(F, C, self.rest, self.obstacles, cap) >= cm
         if good.any():
-            obs = self.contact if self.contact is not None else self.obstacles
             g = np.nonzero(good)[0]
-            good[g] = self._scene(F[g], C[g], self.foot, obs, cap) >= cm
+            good[g] = self._scene(F[g], C[g], self.foot, self.contact, cap) >= cm
         ok[idx] = good
         return ok
 
