@@ -362,10 +362,22 @@ class _Checker:
         self.check = ~np.isin(cov.link, anchored)
         self.foot = np.isin(cov.link, moving_foot) & self.check
         self.rest = self.check & ~self.foot
-        n = len(robot.link_names)
-        self.bounds = cov.link_bounds(n)
-        self.self_bounds = robot.self_cover.link_bounds(n)
-        self.self_arrays = _SelfArrays.build(robot, pairs, self.bounds, self.self_bounds)
+        self.self_arrays = _SelfArrays.build(robot, pairs)
+        groups = [
+            g
+            for k in np.unique(cov.link)
+            for g in _sphere_groups(cov, np.flatnonzero(cov.link == k))
+        ]
+        s_group = np.empty(len(cov.link), dtype=int)
+        for gi, g in enumerate(groups):
+            s_group[g[0]] = gi
+        self.scene_groups = (
+            cov.link[[g[0][0] for g in groups]],
+            np.array([g[1] for g in groups]).reshape(-1, 3),
+            np.array([g[2] for g in groups], dtype=float),
+            s_group,
+        )
+        self._group_first = np.array([g[0][0] for g in groups], dtype=int)  # a sphere of each
 
     def world(self, Q: np.ndarray) -> np.ndarray:
         F = self.robot.fk_all(np.atleast_2d(Q))
@@ -382,20 +394,21 @@ class _Checker:
         obs: PointObstacles,
         cap: float = _CAP,
     ) -> np.ndarray:
-        """Min scene clearance over the spheres in ``subset``, capped at
-        ``cap``; links whose bounding sphere is ≥ ``cap`` away are not
-        queried sphere by sphere (their spheres are at least as far)."""
+        """Min scene clearance over the spheres in ``subset`` (whole links),
+        capped at ``cap``; sphere groups (:func:`_sphere_groups`) whose
+        bounding sphere is ≥ ``cap`` away are not queried sphere by sphere
+        (their spheres are at least as far)."""
         cov = self.robot.cover
         if not subset.any():
             return np.full(len(C), np.inf)
-        bc, br = self.bounds
-        links = np.unique(cov.link[subset])
-        FL = F[:, links]
-        lc = np.einsum("blij,lj->bli", FL[..., :3, :3], bc[links]) + FL[..., :3, 3]
-        lb = obs.clearance(lc, br[links], upper=cap)  # (B, nl) lower bounds per link
-        need_link = np.zeros((len(C), len(self.robot.link_names)), dtype=bool)
-        need_link[:, links] = lb < cap
-        need = need_link[:, cov.link] & subset[None, :]
+        g_link, g_centre, g_radius, s_group = self.scene_groups
+        gs = np.flatnonzero(subset[self._group_first])  # groups lie within one link
+        FG = F[:, g_link[gs]]
+        gc = np.einsum("bgij,gj->bgi", FG[..., :3, :3], g_centre[gs]) + FG[..., :3, 3]
+        lb = obs.clearance(gc, g_radius[gs], upper=cap)  # (B, groups) lower bounds
+        need_group = np.zeros((len(C), len(g_link)), dtype=bool)
+        need_group[:, gs] = lb < cap
+        need = need_group[:, s_group] & subset[None, :]
         out = np.full(C.shape[:2], cap)
         if need.any():
             b_idx, s_idx = np.nonzero(need)
@@ -424,9 +437,9 @@ class _Checker:
         B = len(F)
         if len(sp.a) == 0:
             return np.full(B, np.inf)
-        Fa, Fb = F[:, sp.a], F[:, sp.b]
-        ca = np.einsum("bpij,pj->bpi", Fa[..., :3, :3], sp.ca) + Fa[..., :3, 3]
-        cb = np.einsum("bpij,pj->bpi", Fb[..., :3, :3], sp.cb) + Fb[..., :3, 3]
+        Fg = F[:, sp.g_link]  # each group's centre once (blocks share groups)
+        wg = np.einsum("bgij,gj->bgi", Fg[..., :3, :3], sp.g_centre) + Fg[..., :3, 3]
+        ca, cb = wg[:, sp.ga], wg[:, sp.gb]
         bound = np.linalg.norm(ca - cb, axis=2) - sp.rab  # (B, P) link-pair bounds
         close = bound < cap
         val = np.where(close, cap, bound)
@@ -440,19 +453,16 @@ class _Checker:
         else:  # coarse spheres unused: placeholders keep the indices valid
             P = np.concatenate([P, np.zeros((len(rows), len(sp.r) - P.shape[1], 3))], axis=1)
         cut = cap + _EPS
-        eA = (
-            np.linalg.norm(P[:, sp.sa] - cb[rows][:, sp.sa_block], axis=2)
-            - sp.r[sp.sa]
-            - sp.rb[sp.sa_block]
-        )
-        eB = (
-            np.linalg.norm(P[:, sp.sb] - ca[rows][:, sp.sb_block], axis=2)
-            - sp.r[sp.sb]
-            - sp.ra[sp.sb_block]
-        )
-        needA = (eA < cut) & cr[:, sp.sa_block]
+        # Only the spheres of blocks close in some row (a handful of 73).
+        near = cr.any(axis=0)
+        colA = np.flatnonzero(near[sp.sa_block])
+        colB = np.flatnonzero(near[sp.sb_block])
+        sa, sa_blk, sb, sb_blk = sp.sa[colA], sp.sa_block[colA], sp.sb[colB], sp.sb_block[colB]
+        eA = np.linalg.norm(P[:, sa] - cb[rows][:, sa_blk], axis=2) - sp.r[sa] - sp.rb[sa_blk]
+        eB = np.linalg.norm(P[:, sb] - ca[rows][:, sb_blk], axis=2) - sp.r[sb] - sp.ra[sb_blk]
+        needA = (eA < cut) & cr[:, sa_blk]
         needB = eB < cut
-        r_idx, i, j, key = _needed_pairs(needA, needB, sp)
+        r_idx, i, j, key = _needed_pairs(needA, needB, (sa, sa_blk), (sb, sb_blk), len(sp.a))
         if len(r_idx):
             Pf = P.reshape(-1, 3)
             n_s = P.shape[1]
@@ -547,20 +557,49 @@ class _Checker:
         return ok
 
 
+#: Spheres per group at most in the self-clearance blocks (:func:`_sphere_groups`).
+_GROUP = 16
+
+
+def _sphere_groups(
+    cover: SphereCover, idx: np.ndarray
+) -> list[tuple[np.ndarray, np.ndarray, float]]:
+    """Split the spheres ``idx`` (one link) into groups of at most
+    :data:`_GROUP` by halving at the median along the widest extent; per
+    group (sphere indices, bounding-sphere centre in the link frame, radius
+    enclosing every sphere)."""
+    c = cover.centre[idx]
+    if len(idx) > _GROUP:
+        ax = int(np.argmax(np.ptp(c, axis=0)))
+        order = np.argsort(c[:, ax], kind="stable")
+        h = len(idx) // 2
+        return _sphere_groups(cover, np.sort(idx[order[:h]])) + _sphere_groups(
+            cover, np.sort(idx[order[h:]])
+        )
+    centre = c.mean(axis=0)
+    radius = float(np.max(np.linalg.norm(c - centre, axis=1) + cover.radius[idx]))
+    return [(idx, centre, radius)]
+
+
 def _needed_pairs(
-    needA: np.ndarray, needB: np.ndarray, sp: _SelfArrays
+    needA: np.ndarray,
+    needB: np.ndarray,
+    side_a: tuple[np.ndarray, np.ndarray],
+    side_b: tuple[np.ndarray, np.ndarray],
+    n_blk: int,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """The sphere pairs :meth:`_Checker._self` must evaluate: per row and
-    link pair (block), every needed sphere on link a with every needed one
-    on link b — a block's pairs are the full product of its spheres, so this
-    join on (row, block) is the set ``needA[:, pa] & needB[:, pb]`` without
-    the (rows × all sphere pairs) mask.  Returns row, sphere i, sphere j and
-    the key row·blocks + block, non-decreasing."""
-    ra, ca = np.nonzero(needA)  # row-major; sa is grouped by block, ascending
+    block, every needed sphere of side a with every needed one of side b.
+    ``side_a`` = (sphere, block) per column of ``needA``, blocks ascending
+    (likewise b).  A block's pairs are the full product of its spheres, so
+    this join on (row, block) lists them without a (rows × all sphere
+    pairs) mask.  Returns row, sphere i, sphere j and the key
+    row·n_blk + block, non-decreasing."""
+    (sa, sa_block), (sb, sb_block) = side_a, side_b
+    ra, ca = np.nonzero(needA)  # row-major, columns grouped by block: keys ascend
     rb, cb = np.nonzero(needB)
-    n_blk = len(sp.a)
-    ka = ra * n_blk + sp.sa_block[ca]
-    kb = rb * n_blk + sp.sb_block[cb]
+    ka = ra * n_blk + sa_block[ca]
+    kb = rb * n_blk + sb_block[cb]
     lo = np.searchsorted(kb, ka, "left")
     cnt = np.searchsorted(kb, ka, "right") - lo
     total = int(cnt.sum())
@@ -569,14 +608,16 @@ def _needed_pairs(
         return e, e, e, e
     rep = np.repeat(np.arange(len(ka)), cnt)
     within = np.arange(total) - np.repeat(np.cumsum(cnt) - cnt, cnt)
-    return ra[rep], sp.sa[ca[rep]], sp.sb[cb[lo[rep] + within]], ka[rep]
+    return ra[rep], sa[ca[rep]], sb[cb[lo[rep] + within]], ka[rep]
 
 
 @dataclass
 class _SelfArrays:
-    """Self-collision pairs flattened for :meth:`_Checker._self`.  Per link
-    pair (block): links ``a``, ``b``, bounding-sphere centres ``ca``/``cb``
-    (link frames) and radii ``ra``/``rb`` (sum ``rab``), ``fine``.  Spheres
+    """Self-collision pairs flattened for :meth:`_Checker._self`.  Sphere
+    groups (:func:`_sphere_groups`): link ``g_link`` and bounding-sphere
+    centre ``g_centre`` in the link frame.  Per block (a group on link ``a``
+    against a group on link ``b``, links of one self pair): groups ``ga``,
+    ``gb``, their radii ``ra``/``rb`` (sum ``rab``), ``fine``.  Spheres
     index [fine cover, coarse cover] (radii ``r``); ``sa``/``sb`` list each
     block's spheres on link a / b (blocks ``sa_block``/``sb_block``); a
     block's sphere pairs are every sphere of ``sa`` with every one of ``sb``
@@ -584,8 +625,10 @@ class _SelfArrays:
 
     a: np.ndarray
     b: np.ndarray
-    ca: np.ndarray
-    cb: np.ndarray
+    g_link: np.ndarray
+    g_centre: np.ndarray
+    ga: np.ndarray
+    gb: np.ndarray
     ra: np.ndarray
     rb: np.ndarray
     rab: np.ndarray
@@ -601,36 +644,56 @@ class _SelfArrays:
     def build(
         robot: JumpRobot,
         pairs: list[tuple[int, int, bool, np.ndarray, np.ndarray]],
-        bounds: tuple[np.ndarray, np.ndarray],
-        self_bounds: tuple[np.ndarray, np.ndarray],
     ) -> _SelfArrays:
         S = len(robot.cover.radius)
-        n = len(pairs)
-        a = np.array([p[0] for p in pairs], dtype=int)
-        b = np.array([p[1] for p in pairs], dtype=int)
-        fine = np.array([p[2] for p in pairs], dtype=bool)
-        ca, cb = np.zeros((n, 3)), np.zeros((n, 3))
-        ra, rb = np.zeros(n), np.zeros(n)
+        a_l, b_l, f_l, ga_l, gb_l, ra_l, rb_l = ([] for _ in range(7))
         sa, sab, sb, sbb = ([] for _ in range(4))
-        for k, (la, lb_, f, i, j) in enumerate(pairs):
-            bc, br = bounds if f else self_bounds
-            ca[k], cb[k], ra[k], rb[k] = bc[la], bc[lb_], br[la], br[lb_]
-            off = 0 if f else S
+        groups: dict[tuple[bool, int, bytes], int] = {}
+        g_link: list[int] = []
+        g_centre: list[np.ndarray] = []
+
+        def group_id(f: bool, link: int, g: tuple[np.ndarray, np.ndarray, float]) -> int:
+            key = (f, link, g[0].tobytes())
+            if key not in groups:
+                groups[key] = len(g_link)
+                g_link.append(link)
+                g_centre.append(g[1])
+            return groups[key]
+
+        for la, lb_, f, i, j in pairs:
             ua, ub = np.unique(np.asarray(i)), np.unique(np.asarray(j))
             if len(np.asarray(i)) != len(ua) * len(ub):
                 raise ValueError(f"self pairs of links {la}, {lb_} are not all sphere pairs")
-            sa.append(ua + off)
-            sab.append(np.full(len(ua), k))
-            sb.append(ub + off)
-            sbb.append(np.full(len(ub), k))
+            cov = robot.cover if f else robot.self_cover
+            off = 0 if f else S
+            # A block per pair of sphere groups: a group's own bounding sphere
+            # culls far more tightly than its link's (a foot is 128 spheres).
+            for ga in _sphere_groups(cov, ua):
+                for gb in _sphere_groups(cov, ub):
+                    k = len(a_l)
+                    for lst, v in zip(
+                        (a_l, b_l, f_l, ga_l, gb_l, ra_l, rb_l),
+                        (la, lb_, f, group_id(f, la, ga), group_id(f, lb_, gb), ga[2], gb[2]),
+                        strict=True,
+                    ):
+                        lst.append(v)
+                    sa.append(ga[0] + off)
+                    sab.append(np.full(len(ga[0]), k))
+                    sb.append(gb[0] + off)
+                    sbb.append(np.full(len(gb[0]), k))
+        a = np.array(a_l, dtype=int)
+        b = np.array(b_l, dtype=int)
+        fine = np.array(f_l, dtype=bool)
+        ga, gb = np.array(ga_l, dtype=int), np.array(gb_l, dtype=int)
+        ra, rb = np.array(ra_l, dtype=float), np.array(rb_l, dtype=float)
 
         def cat(x: list[np.ndarray]) -> np.ndarray:
             return np.concatenate(x).astype(int) if x else np.zeros(0, int)
 
         r = np.concatenate([robot.cover.radius, robot.self_cover.radius])
         return _SelfArrays(
-            a, b, ca, cb, ra, rb, ra + rb, fine, r, cat(sa), cat(sab), cat(sb), cat(sbb),
-            bool((~fine).any()),
+            a, b, np.array(g_link, dtype=int), np.array(g_centre).reshape(-1, 3), ga, gb,
+            ra, rb, ra + rb, fine, r, cat(sa), cat(sab), cat(sb), cat(sbb), bool((~fine).any()),
         )  # fmt: skip
 
 

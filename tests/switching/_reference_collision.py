@@ -57,7 +57,7 @@ def _scene_reference(
     cov = self.robot.cover
     if not subset.any():
         return np.full(len(C), np.inf)
-    bc, br = self.bounds
+    bc, br = self.robot.cover.link_bounds(len(self.robot.link_names))
     links = np.unique(cov.link[subset])
     FL = F[:, links]
     lc = np.einsum("blij,lj->bli", FL[..., :3, :3], bc[links]) + FL[..., :3, 3]
@@ -83,7 +83,8 @@ def clearances_reference(self: Any, Q: np.ndarray) -> tuple[np.ndarray, np.ndarr
     selfc = np.full(len(C), np.inf)
     D = None
     for a, b, fine, i, j in self.pairs:
-        bc, br = self.bounds if fine else self.self_bounds
+        n = len(self.robot.link_names)
+        bc, br = (self.robot.cover if fine else self.robot.self_cover).link_bounds(n)
         ca = F[:, a, :3, :3] @ bc[a] + F[:, a, :3, 3]
         cb = F[:, b, :3, :3] @ bc[b] + F[:, b, :3, 3]
         bound = np.linalg.norm(ca - cb, axis=1) - br[a] - br[b]

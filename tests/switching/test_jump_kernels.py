@@ -197,7 +197,9 @@ def test_needed_pairs_equal_the_pair_mask(cx, rows, p_a, p_b, seed):
     rng = np.random.default_rng(seed)
     needA = rng.random((rows, len(sp.sa))) < p_a
     needB = rng.random((rows, len(sp.sb))) < p_b
-    r_idx, i, j, key = J._needed_pairs(needA, needB, sp)
+    r_idx, i, j, key = J._needed_pairs(
+        needA, needB, (sp.sa, sp.sa_block), (sp.sb, sp.sb_block), len(sp.a)
+    )
     want = set()
     for r in range(rows):
         for ca in np.flatnonzero(needA[r]):
