@@ -646,8 +646,10 @@ class _SelfArrays:
         pairs: list[tuple[int, int, bool, np.ndarray, np.ndarray]],
     ) -> _SelfArrays:
         S = len(robot.cover.radius)
-        a_l, b_l, f_l, ga_l, gb_l, ra_l, rb_l = ([] for _ in range(7))
-        sa, sab, sb, sbb = ([] for _ in range(4))
+        # Per block: link a, link b, fine?, group a, group b, radius a, radius b.
+        blocks: list[tuple[int, int, bool, int, int, float, float]] = []
+        sa: list[np.ndarray] = []
+        sb: list[np.ndarray] = []
         groups: dict[tuple[bool, int, bytes], int] = {}
         g_link: list[int] = []
         g_centre: list[np.ndarray] = []
@@ -668,32 +670,29 @@ class _SelfArrays:
             off = 0 if f else S
             # A block per pair of sphere groups: a group's own bounding sphere
             # culls far more tightly than its link's (a foot is 128 spheres).
-            for ga in _sphere_groups(cov, ua):
-                for gb in _sphere_groups(cov, ub):
-                    k = len(a_l)
-                    for lst, v in zip(
-                        (a_l, b_l, f_l, ga_l, gb_l, ra_l, rb_l),
-                        (la, lb_, f, group_id(f, la, ga), group_id(f, lb_, gb), ga[2], gb[2]),
-                        strict=True,
-                    ):
-                        lst.append(v)
-                    sa.append(ga[0] + off)
-                    sab.append(np.full(len(ga[0]), k))
-                    sb.append(gb[0] + off)
-                    sbb.append(np.full(len(gb[0]), k))
-        a = np.array(a_l, dtype=int)
-        b = np.array(b_l, dtype=int)
-        fine = np.array(f_l, dtype=bool)
-        ga, gb = np.array(ga_l, dtype=int), np.array(gb_l, dtype=int)
-        ra, rb = np.array(ra_l, dtype=float), np.array(rb_l, dtype=float)
+            for g1 in _sphere_groups(cov, ua):
+                for g2 in _sphere_groups(cov, ub):
+                    blocks.append(
+                        (la, lb_, f, group_id(f, la, g1), group_id(f, lb_, g2), g1[2], g2[2])
+                    )
+                    sa.append(g1[0] + off)
+                    sb.append(g2[0] + off)
+        cols = list(zip(*blocks, strict=True)) if blocks else [()] * 7
+        a, b, ga, gb = (np.array(cols[k], dtype=int) for k in (0, 1, 3, 4))
+        fine = np.array(cols[2], dtype=bool)
+        ra, rb = np.array(cols[5], dtype=float), np.array(cols[6], dtype=float)
 
         def cat(x: list[np.ndarray]) -> np.ndarray:
             return np.concatenate(x).astype(int) if x else np.zeros(0, int)
 
+        def owners(x: list[np.ndarray]) -> np.ndarray:
+            return cat([np.full(len(v), k) for k, v in enumerate(x)])
+
         r = np.concatenate([robot.cover.radius, robot.self_cover.radius])
         return _SelfArrays(
             a, b, np.array(g_link, dtype=int), np.array(g_centre).reshape(-1, 3), ga, gb,
-            ra, rb, ra + rb, fine, r, cat(sa), cat(sab), cat(sb), cat(sbb), bool((~fine).any()),
+            ra, rb, ra + rb, fine, r, cat(sa), owners(sa), cat(sb), owners(sb),
+            bool((~fine).any()),
         )  # fmt: skip
 
 
