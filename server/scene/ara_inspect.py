@@ -19,9 +19,9 @@ import numpy as np
 from server.planview import PlanView
 from server.scene.common import (
     FAIL_RGB,
-    PASS_RGB,
     ROUTE_RGB,
     add_spheres,
+    add_start_end_picker,
     label_colors,
 )
 from server.scene.context import DrawContext
@@ -36,9 +36,6 @@ INCHWORM_RGB = (200, 60, 230)
 OTHER_ROUTE_RGB = (250, 200, 60)
 #: Gap-jump edges of a route.
 JUMP_RGB = (200, 60, 230)
-VERTEX_RGB = (90, 200, 255)
-START_RGB = PASS_RGB
-END_RGB = FAIL_RGB
 GAP_RGB = FAIL_RGB
 
 
@@ -126,24 +123,9 @@ def _draw_vertices(ctx: DrawContext, root: str, res: dict[str, Any], local: Any)
         return
     ids = [n["id"] for n in nodes]
     pos = local([n["pos"] for n in nodes])
-    picks: list[int] = []
-
-    def clicked(i: int) -> None:
-        with ctx.lock:
-            picks.append(ids[i])
-            if len(picks) == 2:
-                ctx.propose({"start": picks[0], "end": picks[1]})
-                picks.clear()
-
-    vcolors = np.tile(np.array(VERTEX_RGB, np.uint8), (len(ids), 1))
-    for role, rgb in (("start", START_RGB), ("end", END_RGB)):
-        if res.get(role) in ids:
-            vcolors[ids.index(res[role])] = rgb
-    add_spheres(ctx.scene, f"{root}/vertices", pos, radius=0.04, colors=vcolors, on_click=clicked)
-    for v, p in zip(ids, pos, strict=True):
-        ctx.scene.add_label(
-            f"{root}/vertex_ids/{v}", text=str(v), position=tuple(float(x) for x in p + 0.06)
-        )
+    add_start_end_picker(
+        ctx, root, ids, pos, chosen=res, radius=0.04, label_positions=np.asarray(pos) + 0.06
+    )
 
 
 def _draw_routes(ctx: DrawContext, root: str, res: dict[str, Any], local: Any) -> None:

@@ -8,11 +8,10 @@ import numpy as np
 
 from server.planview import PlanView
 from server.scene.common import (
-    FAIL_RGB,
     ROUTE_RGB,
     STEEL_RGB,
     add_polyline,
-    add_spheres,
+    add_start_end_picker,
     label_colors,
     rotation_to_wxyz,
 )
@@ -69,32 +68,15 @@ def draw(ctx: DrawContext, plan: PlanView) -> None:
             thickness=2.0,
             thickness_units="screen",
         )
-    picks: list[int] = []
-
-    def clicked(i: int) -> None:
-        # First click picks the start, the second the end; then propose a plan.
-        with ctx.lock:
-            picks.append(ids[i])
-            if len(picks) == 2:
-                ctx.propose({"start": picks[0], "end": picks[1]})
-                picks.clear()
-
-    vcolors = np.tile(np.array([90, 200, 255], np.uint8), (len(ids), 1))
-    for role, rgb in (("start", (40, 170, 70)), ("end", FAIL_RGB)):
-        if res.get(role) in ids:
-            vcolors[ids.index(res[role])] = rgb
-    add_spheres(
-        ctx.scene,
-        f"{ctx.root}/vertices",
+    add_start_end_picker(
+        ctx,
+        ctx.root,
+        ids,
         pos + 3 * LIFT * normal,
+        chosen=res,
         radius=0.02,
-        colors=vcolors,
-        on_click=clicked,
+        label_positions=pos + 6 * LIFT * normal,
     )
-    for v, p in zip(ids, pos, strict=True):
-        ctx.scene.add_label(
-            f"{ctx.root}/vertex_ids/{v}", text=str(v), position=tuple(p + 6 * LIFT * normal)
-        )
 
     # The route: one arrow per driven edge, numbered in driving order.
     route = res["route"]["edges"]

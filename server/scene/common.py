@@ -2,12 +2,15 @@
 
 from __future__ import annotations
 
-from collections.abc import Callable
-from typing import Any
+from collections.abc import Callable, Sequence
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from server.scene.context import current_scene_client
+
+if TYPE_CHECKING:
+    from server.scene.context import DrawContext
 
 #: Qualitative palette (Tableau 10) for clusters, planes and sequences.
 PALETTE = np.array(
@@ -22,6 +25,7 @@ PASS_RGB = (40, 170, 70)
 FAIL_RGB = (220, 50, 50)
 STEEL_RGB = (150, 160, 175)
 ROUTE_RGB = (255, 140, 0)
+VERTEX_RGB = (90, 200, 255)
 
 
 def label_colors(labels: np.ndarray) -> np.ndarray:
@@ -121,6 +125,42 @@ def add_spheres(
                     current_scene_client.reset(token)
 
     return handle
+
+
+def add_start_end_picker(
+    ctx: DrawContext,
+    name: str,
+    ids: Sequence[Any],
+    positions: np.ndarray,
+    *,
+    chosen: dict[str, Any],
+    radius: float,
+    label_positions: np.ndarray,
+) -> None:
+    """Graph vertices as clickable spheres labelled with their ids, the
+    plan's ``chosen`` start green and end red: the first click picks the
+    start, the second the end, then a plan with both is proposed (the
+    console confirms it, like every scene action)."""
+    picks: list[Any] = []
+
+    def clicked(i: int) -> None:
+        with ctx.lock:
+            picks.append(ids[i])
+            if len(picks) == 2:
+                ctx.propose({"start": picks[0], "end": picks[1]})
+                picks.clear()
+
+    colors = np.tile(np.array(VERTEX_RGB, np.uint8), (len(ids), 1))
+    for role, rgb in (("start", PASS_RGB), ("end", FAIL_RGB)):
+        if chosen.get(role) in ids:
+            colors[list(ids).index(chosen[role])] = rgb
+    add_spheres(
+        ctx.scene, f"{name}/vertices", positions, radius=radius, colors=colors, on_click=clicked
+    )
+    for v, p in zip(ids, label_positions, strict=True):
+        ctx.scene.add_label(
+            f"{name}/vertex_ids/{v}", text=str(v), position=tuple(float(x) for x in p)
+        )
 
 
 def add_polyline(
