@@ -347,8 +347,9 @@ class _LocalSearch:
         has_b = b >= 0
         aa = np.where(has_a, a, v)
         bb = np.where(has_b, b, v)
-        ox, oy = x[bb] - x[v], y[bb] - y[v]
-        ix, iy = x[v] - x[aa], y[v] - y[aa]
+        xv, yv = x.take(v), y.take(v)  # gathered once (the hot path of the search)
+        ox, oy = x.take(bb) - xv, y.take(bb) - yv
+        ix, iy = xv - x.take(aa), yv - y.take(aa)
         dout = np.hypot(ox, oy)
         den = np.hypot(ix, iy) * dout
         ok = den > 1e-15
