@@ -225,3 +225,24 @@ def test_disc_far_from_every_pixel_centre_covers_none(seed, rad):
     idx, _ = ras.disc_pixels(cen, np.full(len(cen), rad))
     hit = np.isin(idx, flat).any(axis=1)
     assert not (hit & (d > rad * (1.0 + 1e-6))).any()
+
+
+@pytest.mark.parametrize(
+    "poly, r_min, budget",
+    [
+        (Polygon([(0, 0), (2, 0), (2, 2), (0, 2)]), 0.024, 0.004),  # large: both skipped
+        (Polygon([(0, 0), (0.3, 0), (0.3, 0.3), (0, 0.3)]), 0.024, 0.004),  # small square
+        (Polygon([(0, 0), (0.5, 0), (0.5, 0.02), (0.25, 0.02), (0.25, 0.3), (0, 0.3)]), 0.02, 0.0),
+        (star_polygon(3, size=0.4), 0.02, 0.004),
+        (star_polygon(5, size=0.6), 0.015, 0.001),
+    ],
+)
+def test_pointwise_bound_shortcuts_change_nothing(poly, r_min, budget):
+    """Issue #18: the coverage bound's skipped convolution / distance
+    transform give the full computation's answer (it is 1 exactly when they
+    are skipped), including a slit narrower than the disc with no budget."""
+    from planners.blasting.bound import pointwise_bound
+
+    full = pointwise_bound(poly, r_min, budget, shortcut=False)
+    fast = pointwise_bound(poly, r_min, budget)
+    assert fast == full
