@@ -116,13 +116,25 @@ def _waypoint_branches(
     grouped = wfam >= 0
     if grouped.any():
         ok[grouped] &= _family_mask(wfam[grouped])
+    # sign-only clearance per (way-point, branch), kept across the re-runs:
+    # a re-run moves few way-points to another branch, and a configuration's
+    # value does not depend on what it is evaluated with
+    known = np.full(ok.shape, np.nan)
     for _ in range(4):
         usable = ok.any(axis=1)
         usable[at] = True
         Qu, oku, spu = Q[usable], ok[usable], spot[usable]
         br = _arm.choose_branches(Qu, oku, q_start)
         qb = Qu[np.arange(len(Qu)), br]
-        bad = (clear.sign(qb) <= 0) if not clear.obst.empty else np.zeros(len(qb), dtype=bool)
+        if clear.obst.empty:
+            bad = np.zeros(len(qb), dtype=bool)
+        else:
+            rows_u = np.nonzero(usable)[0]
+            sv = known[rows_u, br]
+            todo = np.isnan(sv)
+            sv[todo] = clear.sign(qb[todo])
+            known[rows_u[todo], br[todo]] = sv[todo]
+            bad = sv <= 0
         bad &= spu < 0  # spots were checked already
         if not bad.any():
             break
