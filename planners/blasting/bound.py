@@ -61,10 +61,22 @@ class PointwiseBound:
 
 
 def pointwise_bound(
-    polygon: BaseGeometry, r_min: float, budget: float, *, pixel: float | None = None
+    polygon: BaseGeometry,
+    r_min: float,
+    budget: float,
+    *,
+    pixel: float | None = None,
+    shortcut: bool = True,
 ) -> PointwiseBound:
     """Certified upper bound on coverage by discs of radius ≥ ``r_min`` whose
-    overspray stays within ``budget`` × surface area (see module docstring)."""
+    overspray stays within ``budget`` × surface area (see module docstring).
+
+    With ``shortcut`` (default) two steps are skipped where they cannot
+    change the answer: the convolution when even a disc lying wholly
+    outside (the kernel's pixel count) is within the budget — then every
+    lower bound is, and no pixel is uncoverable — and the distance
+    transform when every pixel certainly inside is within the budget
+    itself (its distance is 0).  ``shortcut=False`` always computes both."""
     area = polygon.area
     h = pixel if pixel is not None else r_min / 30.0
     minx, miny, maxx, maxy = polygon.bounds
@@ -74,6 +86,16 @@ def pointwise_bound(
         h = float(np.sqrt(w * hh / MAX_PIXELS))
         pad = 2.0 * r_min + 4.0 * h
         w, hh = maxx - minx + 2 * pad, maxy - miny + 2 * pad
+    # a disc centred within h/√2 of a grid centre g contains every pixel
+    # square whose centre is within r_min − √2·h of g
+    R = r_min - np.sqrt(2.0) * h
+    if R <= 0:
+        return PointwiseBound(1.0, 0.0, h)
+    m = int(np.floor(R / h))
+    o = np.arange(-m, m + 1) * h
+    K = (o[None, :] ** 2 + o[:, None] ** 2 <= R * R).astype(float)
+    if shortcut and float(K.sum()) * h * h <= budget * area:
+        return PointwiseBound(1.0, 0.0, h)  # the convolution counts ≤ K's pixels
     x0, y0 = minx - pad, miny - pad
     nx, ny = int(np.ceil(w / h)), int(np.ceil(hh / h))
     # inscribed polygonal arcs come closer than the true offset: inflate
@@ -86,16 +108,10 @@ def pointwise_bound(
         if not shrunk.is_empty
         else np.zeros((ny, nx), dtype=bool)
     )
-    # a disc centred within h/√2 of a grid centre g contains every pixel
-    # square whose centre is within r_min − √2·h of g
-    R = r_min - np.sqrt(2.0) * h
-    if R <= 0:
-        return PointwiseBound(1.0, 0.0, h)
-    m = int(np.floor(R / h))
-    o = np.arange(-m, m + 1) * h
-    K = (o[None, :] ** 2 + o[:, None] ** 2 <= R * R).astype(float)
     over_lb = np.rint(fftconvolve(outside.astype(float), K, mode="same")) * h * h
     ok = over_lb <= budget * area
+    if shortcut and not (inside & ~ok).any():
+        return PointwiseBound(1.0, 0.0, h)  # every such pixel has distance 0 below
     # a disc containing a point of pixel q has its centre within r_min +
     # h/√2 of q's centre, hence a grid centre within r_min + √2·h
     dist = distance_transform_edt(~ok) * h

@@ -42,6 +42,9 @@ EDIT_PIXEL = 1.0 / 8.0
 # The metric raster is finer and shifted so editing cannot fit its pixels.
 METRIC_PIXEL = 1.0 / 12.0
 MAX_PIXELS = 2_500_000
+#: Pixel entries per chunk when the greedy candidates are scored (bounds the
+#: (chunk, W²) work arrays of :meth:`Raster.disc_pixels`).
+EDIT_CHUNK_PX = 2_000_000
 # Both rasters are turned by odd angles against the plane frame: a raster
 # aligned with a polygon edge sees slivers along that edge only at a fixed
 # depth and biases coverage by up to ±0.5 % on small, square shapes.
@@ -472,7 +475,11 @@ def edit_improved(
         upts = np.stack(
             [ras.x0 + (unc % ras.nx + 0.5) * h, ras.y0 + (unc // ras.nx + 0.5) * h], axis=1
         )
-        near = cKDTree(upts).query(cand, k=1, distance_upper_bound=r)[0] < np.inf
+        # a disc farther than its own radius from every uncovered pixel centre
+        # covers none of them (gain 0: it can never enter the greedy below);
+        # the slack keeps every disc that covers one, whatever the rounding
+        dist = cKDTree(upts).query(cand, k=1, distance_upper_bound=r)[0]
+        near = (dist < np.inf) & (dist <= cr * (1.0 + 1e-6))
         cand, cr = cand[near], cr[near]
     else:
         cand, cr = cand[:0], cr[:0]
@@ -480,10 +487,32 @@ def edit_improved(
     added_r: list[float] = []
     max_added = 3 * len(lattice) + 50
     if len(cand):
-        idx, _ = ras.disc_pixels(cand, cr)
-        valid = idx >= 0
-        safe = np.where(valid, idx, 0)
-        out_px = np.count_nonzero(valid & ~inside[safe], axis=1)
+        # pixel lists (CSR: pix[ptr[k]:ptr[k+1]]) of the candidates that can
+        # gain at all (initial score > min_gain: scores only fall as pixels
+        # get covered), scored in chunks so the (chunk, W²) work arrays stay
+        # bounded; the others are never looked at again
+        min_gain = 2.0  # pixels
+        W = int(np.ceil(2 * float(cr.max()) / h)) + 2
+        step = max(1, EDIT_CHUNK_PX // (W * W))
+        pix_l, len_l, out_l, s0_l, ids_l = [], [], [], [], []
+        for a0 in range(0, len(cand), step):
+            idx, _ = ras.disc_pixels(cand[a0 : a0 + step], cr[a0 : a0 + step])
+            valid = idx >= 0
+            safe = np.where(valid, idx, 0)
+            o_px = np.count_nonzero(valid & ~inside[safe], axis=1)
+            g_px = np.count_nonzero(valid & inside[safe] & ~covered[safe], axis=1)
+            sc = g_px - overspray_weight * o_px
+            sel = np.nonzero(sc > min_gain)[0]
+            pix_l.append(idx[sel][valid[sel]])
+            len_l.append(np.count_nonzero(valid[sel], axis=1))
+            out_l.append(o_px[sel])
+            s0_l.append(sc[sel])
+            ids_l.append(a0 + sel)
+        pix = np.concatenate(pix_l)
+        ptr = np.r_[0, np.cumsum(np.concatenate(len_l))]
+        out_px = np.concatenate(out_l)
+        s0 = np.concatenate(s0_l)
+        ids = np.concatenate(ids_l)  # candidate index of each kept row
         # Stop at the target, or a little below what discs can reach at all
         # without overspray (the opening of the surface by the smallest
         # disc), so an unreachable target does not buy many useless discs.
@@ -492,15 +521,12 @@ def edit_improved(
             shapely.buffer(shapely.buffer(polygon, -rs, quad_segs=16), rs, quad_segs=16)
         )
         target = min(coverage_target, reach / polygon.area - 0.002)
-        min_gain = 2.0  # pixels
 
         def score(k: int) -> float:
-            ii = idx[k][valid[k]]
+            ii = pix[ptr[k] : ptr[k + 1]]
             return float(np.count_nonzero(inside[ii] & ~covered[ii])) - overspray_weight * out_px[k]
 
-        gains = np.count_nonzero(valid & inside[safe] & ~covered[safe], axis=1)
-        s0 = gains - overspray_weight * out_px
-        heap = [(-float(s), int(k)) for k, s in enumerate(s0) if s > min_gain]
+        heap = [(-float(s), int(k)) for k, s in enumerate(s0)]
         heapq.heapify(heap)
         while heap and cov_in < target * n_in and len(added_c) < max_added:
             _neg, k = heapq.heappop(heap)
@@ -510,7 +536,7 @@ def edit_improved(
             if heap and s < -heap[0][0]:
                 heapq.heappush(heap, (-s, k))  # stale: re-queue with the true score
                 continue
-            ii = idx[k][valid[k]]
+            ii = pix[ptr[k] : ptr[k + 1]]
             new_out = int(np.count_nonzero(~inside[ii] & ~covered[ii]))
             if over_px + new_out > budget_px:
                 continue
@@ -518,8 +544,8 @@ def edit_improved(
             over_px += new_out
             covered[ii] = True
             cnt[ii] += 1
-            added_c.append(cand[k])
-            added_r.append(cr[k])
+            added_c.append(cand[ids[k]])
+            added_r.append(cr[ids[k]])
     centers = np.concatenate([base, np.reshape(added_c, (-1, 2))]) if added_c else base
     radii = np.concatenate([radii, np.asarray(added_r, dtype=float)])
     classes = np.concatenate([base_cls, np.full(len(added_c), ADDED, dtype=np.int8)])

@@ -234,7 +234,9 @@ def fill_uncovered(
         if er.is_empty:
             continue
         lines = shapely.shortest_line(er, shapely.points(anchors))
-        c = shapely.get_coordinates(shapely.get_point(lines, 0))
+        # each line has exactly two vertices, the first on ``er``: read the
+        # coordinates in one call (get_point builds a Point per line)
+        c = shapely.get_coordinates(lines).reshape(len(anchors), 2, 2)[:, 0]
         ok = np.linalg.norm(c - anchors, axis=1) <= rho * (1.0 - 1e-9)
         if rho == levels[0]:
             reach0 = ok

@@ -434,15 +434,19 @@ def _retilt(
         surface.to_world(aims.reshape(-1, 2)).reshape(n, C, 3)
         - cand[None] * standoff[spots][:, :, None]
     )
-    # closed-form IK of every candidate, IK_CHUNK targets a call: its
-    # temporaries are a few (targets, 8, 4, 4) arrays each
+    # closed-form IK of every candidate the reach bound leaves (its wrist
+    # centre within wrist_reach_m of the shoulder circle: beyond it no
+    # branch exists, :func:`planners.blasting.arm.wrist_reach_m`; on the 4 m
+    # square 91 % of the 181,888 candidates), IK_CHUNK targets a call: its
+    # temporaries are a few (targets, 8, 4, 4) arrays each.  The others keep
+    # ok = False (their Q is never read: only ok branches are checked/taken)
     flat, axs = fl.reshape(-1, 3), np.tile(cand, (n, 1))
-    Qf: np.ndarray = np.empty((len(flat), 8, 6))
-    okf: np.ndarray = np.empty((len(flat), 8), dtype=bool)
-    for a in range(0, len(flat), IK_CHUNK):
-        Qf[a : a + IK_CHUNK], okf[a : a + IK_CHUNK] = robot.ik_axis(
-            flat[a : a + IK_CHUNK], axs[a : a + IK_CHUNK], st.q_start
-        )
+    Qf: np.ndarray = np.zeros((len(flat), 8, 6))
+    okf: np.ndarray = np.zeros((len(flat), 8), dtype=bool)
+    live = np.nonzero(~_arm.beyond_reach(robot, flat, axs))[0]
+    for a in range(0, len(live), IK_CHUNK):
+        sel = live[a : a + IK_CHUNK]
+        Qf[sel], okf[sel] = robot.ik_axis(flat[sel], axs[sel], st.q_start)
     Qt, okt = Qf.reshape(n, C, 8, 6), okf.reshape(n, C, 8)
     reach = np.asarray(okt.any(axis=2), dtype=bool)
     open_ = np.ones(n, dtype=bool)

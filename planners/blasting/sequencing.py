@@ -347,8 +347,9 @@ class _LocalSearch:
         has_b = b >= 0
         aa = np.where(has_a, a, v)
         bb = np.where(has_b, b, v)
-        ox, oy = x[bb] - x[v], y[bb] - y[v]
-        ix, iy = x[v] - x[aa], y[v] - y[aa]
+        xv, yv = x.take(v), y.take(v)  # gathered once (the hot path of the search)
+        ox, oy = x.take(bb) - xv, y.take(bb) - yv
+        ix, iy = xv - x.take(aa), yv - y.take(aa)
         dout = np.hypot(ox, oy)
         den = np.hypot(ix, iy) * dout
         ok = den > 1e-15
@@ -365,7 +366,8 @@ class _LocalSearch:
         for _ in range(max_rounds):
             pos = np.empty(n, dtype=np.int64)
             pos[order] = np.arange(n)
-            moves = self._two_opt(order, pos) + self._or_opt(order, pos)
+            cur = self._current(order)  # shared by both neighbourhoods
+            moves = self._two_opt(order, pos, cur) + self._or_opt(order, pos, cur)
             if not moves:
                 break
             moves.sort(key=lambda m: m[0])
@@ -389,14 +391,23 @@ class _LocalSearch:
         nxt = np.where(i < n - 1, order[np.minimum(i + 1, n - 1)], -1)
         return prv, nxt
 
-    def _two_opt(self, order: np.ndarray, pos: np.ndarray) -> list:
+    def _current(self, order: np.ndarray) -> np.ndarray:
+        """g of the vertex at each position with its current neighbours."""
+        prv, nxt = self._prev_next(order, np.arange(len(order)))
+        return self.g(prv, order, nxt)
+
+    def _two_opt(self, order: np.ndarray, pos: np.ndarray, cur: np.ndarray | None = None) -> list:
         """Reverse order[i..j] (0 ≤ i < j ≤ n−1) where order[j] is a near
-        neighbour of order[i−1] or order[j+1] of order[i]."""
+        neighbour of order[i−1] or order[j+1] of order[i].  ``cur``: g of
+        the vertex at each position (the moves' old terms are gathered from
+        it instead of evaluated per move)."""
         n = len(order)
         idx = np.arange(n)
         prv, nxt = self._prev_next(order, idx)
+        if cur is None:
+            cur = self._current(order)
         # inner swap gain prefix: s[v] = g(next, v, prev) − g(prev, v, next)
-        swap = self.g(nxt, order, prv) - self.g(prv, order, nxt)
+        swap = self.g(nxt, order, prv) - cur
         S = np.concatenate([[0.0], np.cumsum(swap)])
         cand_i, cand_j = [], []
         # new edge (order[i-1], order[j]): i = pos[a]+1, j = pos[nbr of a]
@@ -420,11 +431,12 @@ class _LocalSearch:
         bb = np.where(j < n - 2, order[np.minimum(j + 2, n - 1)], -1)
         in_i = order[np.minimum(i + 1, n - 1)]  # neighbour of p_i inside the block
         in_j = order[np.maximum(j - 1, 0)]
+        # the vertices at i−1, i, j, j+1 keep their current neighbours
         old = (
-            np.where(a >= 0, self.g(aa, np.maximum(a, 0), p_i), 0.0)
-            + self.g(a, p_i, in_i)
-            + self.g(in_j, p_j, b)
-            + np.where(b >= 0, self.g(p_j, np.maximum(b, 0), bb), 0.0)
+            np.where(a >= 0, cur[np.maximum(i - 1, 0)], 0.0)
+            + cur[i]
+            + cur[j]
+            + np.where(b >= 0, cur[np.minimum(j + 1, n - 1)], 0.0)
         )
         new = (
             np.where(a >= 0, self.g(aa, np.maximum(a, 0), p_j), 0.0)
@@ -447,16 +459,34 @@ class _LocalSearch:
             moves.append((float(delta[k]), max(ii - 2, 0), jj + 2, fn))
         return moves
 
-    def _or_opt(self, order: np.ndarray, pos: np.ndarray) -> list:
+    def _or_opt(self, order: np.ndarray, pos: np.ndarray, cur: np.ndarray | None = None) -> list:
         """Move order[i..i+L-1] (L = 1..3) between order[k] and order[k+1]
-        (k = −1 puts it first), optionally reversed; k near a segment end."""
+        (k = −1 puts it first), optionally reversed; k near a segment end.
+        ``cur`` as in :meth:`_two_opt`."""
         n = len(order)
+        if cur is None:
+            cur = self._current(order)
         moves = []
         for L in (1, 2, 3):
             if n < L + 2:
                 break
             i = np.arange(0, n - L + 1)
             first, last = order[i], order[i + L - 1]
+            # terms that depend on the segment only, once per segment (the
+            # moves below gather them): removal joins a–b; L = 3 reversed
+            # swaps the middle vertex's neighbours
+            Zi = lambda m, v: np.where(m >= 0, v, 0.0)  # noqa: E731
+            a_i = np.where(i > 0, order[np.maximum(i - 1, 0)], -1)
+            aa_i = np.where(i > 1, order[np.maximum(i - 2, 0)], -1)
+            b_i = np.where(n > i + L, order[np.minimum(i + L, n - 1)], -1)
+            bb_i = np.where(n > i + L + 1, order[np.minimum(i + L + 1, n - 1)], -1)
+            new_ab_i = Zi(a_i, self.g(aa_i, np.maximum(a_i, 0), b_i)) + Zi(
+                b_i, self.g(a_i, np.maximum(b_i, 0), bb_i)
+            )
+            if L == 3:
+                mid_i = order[np.minimum(i + 1, n - 1)]
+                mid_rev_i = self.g(last, mid_i, first)
+                mid_fwd_i = self.g(first, mid_i, last)
             # insertion after a neighbour of first/last, or before one
             ko = min(self.nbr.shape[1], 5)
             nb = np.concatenate([self.nbr[first, :ko], self.nbr[last, :ko]], axis=1)
@@ -470,9 +500,7 @@ class _LocalSearch:
                 continue
             s0, s1 = order[Ix], order[Ix + L - 1]
             a = np.where(Ix > 0, order[np.maximum(Ix - 1, 0)], -1)
-            aa = np.where(Ix > 1, order[np.maximum(Ix - 2, 0)], -1)
             b = np.where(n > Ix + L, order[np.minimum(Ix + L, n - 1)], -1)
-            bb = np.where(n > Ix + L + 1, order[np.minimum(Ix + L + 1, n - 1)], -1)
             x = np.where(K >= 0, order[np.maximum(K, 0)], -1)
             xp = np.where(K >= 1, order[np.maximum(K - 1, 0)], -1)
             y = np.where(n > K + 1, order[np.minimum(K + 1, n - 1)], -1)
@@ -482,15 +510,12 @@ class _LocalSearch:
             # When the segment sits right after y… the neighbours overlap; the
             # windows below are disjoint because K is outside [Ix-1, Ix+L-1].
             Z = lambda m, v: np.where(m >= 0, v, 0.0)  # noqa: E731
-            old_common = Z(a, self.g(aa, np.maximum(a, 0), s0)) + Z(
-                b, self.g(s1, np.maximum(b, 0), bb)
-            )
-            old_common += Z(x, self.g(xp, np.maximum(x, 0), y)) + Z(
-                y, self.g(x, np.maximum(y, 0), yn)
-            )
-            old_seg = self.g(a, s0, s0n if L > 1 else b) + (self.g(s1p, s1, b) if L > 1 else 0.0)
-            # removal joins a–b
-            new_ab = Z(a, self.g(aa, np.maximum(a, 0), b)) + Z(b, self.g(a, np.maximum(b, 0), bb))
+            # old terms: the vertices at Ix−1, Ix+L, K, K+1 and the segment's
+            # ends with their current neighbours (gathered from cur)
+            old_common = Z(a, cur[np.maximum(Ix - 1, 0)]) + Z(b, cur[np.minimum(Ix + L, n - 1)])
+            old_common += Z(x, cur[np.maximum(K, 0)]) + Z(y, cur[np.minimum(K + 1, n - 1)])
+            old_seg = cur[Ix] + (cur[Ix + L - 1] if L > 1 else 0.0)
+            new_ab = new_ab_i[Ix]
             # overlap fix: if x == a (K == Ix−1) excluded; if y == a (K == Ix−2) the
             # removal changes a's prev/next and the insertion too: skip those.
             clash = (Ix - 2 == K) | (Ix + L == K)
@@ -501,10 +526,8 @@ class _LocalSearch:
                 else:  # the inner neighbours of the (reversed) segment's ends
                     h0n, h1p = (s1p, s0n) if rev else (s0n, s1p)
                     seg_new = self.g(x, h0, h0n) + self.g(h1p, h1, y)
-                if L == 3:
-                    mid = order[Ix + 1]
-                    if rev:
-                        seg_new = seg_new + self.g(s1, mid, s0) - self.g(s0, mid, s1)
+                if L == 3 and rev:
+                    seg_new = seg_new + mid_rev_i[Ix] - mid_fwd_i[Ix]
                 ins = Z(x, self.g(xp, np.maximum(x, 0), h0)) + Z(
                     y, self.g(h1, np.maximum(y, 0), yn)
                 )

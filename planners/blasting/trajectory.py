@@ -116,13 +116,25 @@ def _waypoint_branches(
     grouped = wfam >= 0
     if grouped.any():
         ok[grouped] &= _family_mask(wfam[grouped])
+    # sign-only clearance per (way-point, branch), kept across the re-runs:
+    # a re-run moves few way-points to another branch, and a configuration's
+    # value does not depend on what it is evaluated with
+    known = np.full(ok.shape, np.nan)
     for _ in range(4):
         usable = ok.any(axis=1)
         usable[at] = True
         Qu, oku, spu = Q[usable], ok[usable], spot[usable]
         br = _arm.choose_branches(Qu, oku, q_start)
         qb = Qu[np.arange(len(Qu)), br]
-        bad = (clear.sign(qb) <= 0) if not clear.obst.empty else np.zeros(len(qb), dtype=bool)
+        if clear.obst.empty:
+            bad = np.zeros(len(qb), dtype=bool)
+        else:
+            rows_u = np.nonzero(usable)[0]
+            sv = known[rows_u, br]
+            todo = np.isnan(sv)
+            sv[todo] = clear.sign(qb[todo])
+            known[rows_u[todo], br[todo]] = sv[todo]
+            bad = sv <= 0
         bad &= spu < 0  # spots were checked already
         if not bad.any():
             break
@@ -405,15 +417,24 @@ def _transition(
         steps = np.ceil(np.abs(np.diff(p, axis=0)).max(axis=1) / STEP_RAD)
         return max(m, int(np.maximum(steps, 1).sum()))
 
-    # one batched sign-only look at every candidate's way-points rules most
-    # of them out before the (more expensive) certification
+    # a sign-only look at the candidates' way-points rules most of them out
+    # before the (more expensive) certification: the shortest candidate
+    # first (it is usually taken), the others in one batch only when it is
+    # not; the first candidate in order that passes both is the same either way
     paths = [direct if len(p) == 2 else _resample(p, n_points(p)) for p in polys]
-    sign = clear_sign(np.vstack(paths))
-    cut = np.cumsum([len(p) for p in paths])[:-1]
-    worst = [float(c.min()) for c in np.split(sign, cut)]  # exact where ≤ 0
-    hit = [c <= 0 for c in worst]
-    for poly, path, h in zip(polys, paths, hit, strict=True):
-        if h:
+    worst: list[float] = []
+
+    def look(k: int) -> None:
+        if k < len(worst):
+            return
+        batch = paths[k : k + 1] if k == 0 else paths[k:]
+        sign = clear_sign(np.vstack(batch))
+        cut = np.cumsum([len(p) for p in batch])[:-1]
+        worst.extend(float(c.min()) for c in np.split(sign, cut))  # exact where ≤ 0
+
+    for k, (poly, path) in enumerate(zip(polys, paths, strict=True)):
+        look(k)
+        if worst[k] <= 0:
             continue
         cs = np.r_[c0, clear_val(poly[1:-1]) if len(poly) > 2 else [], c1]
         if cs.min() > 0 and _motion.edge_free(poly[:-1], poly[1:], clear_val, w,
@@ -421,6 +442,8 @@ def _transition(
             if len(poly) > 2:
                 stats["via_moves"] += 1
             return path
+    look(len(paths) - 1)  # every candidate looked at (no-op when done)
+    hit = [c <= 0 for c in worst]
     if joint_planner == "none":
         # nothing certified between way-points: the shortest candidate whose
         # way-points are free, else the clearest (the clearance check fails)

@@ -102,7 +102,9 @@ def _raster_coverage(surface, plan, discs, h: float = 0.001) -> tuple[float, flo
         dx, dy = X[i0:i1, j0:j1] - cx, Y[i0:i1, j0:j1] - cy
         s_, t_ = dx * ux + dy * uy, dy * ux - dx * uy
         hit[i0:i1, j0:j1] |= (s_ / a) ** 2 + (t_ / b) ** 2 <= 1.0
-    return float((hit & inside).sum() / inside.sum()), float((hit & ~inside).sum() * h * h / poly.area)
+    return float((hit & inside).sum() / inside.sum()), float(
+        (hit & ~inside).sum() * h * h / poly.area
+    )
 
 
 @pytest.fixture(scope="module")
@@ -124,7 +126,9 @@ def test_surface_1_plan_passes_every_check(s1_plan):
     # rasterised here, joint limits from the robot model, speeds from q(t)
     cov, over = _raster_coverage(scenes.bridge_surface(1), p, p.order)
     assert cov >= 0.99 and over <= 0.005, (cov, over)
-    assert p.coverage == pytest.approx(cov, abs=2e-3) and p.overspray == pytest.approx(over, abs=5e-4)
+    assert p.coverage == pytest.approx(cov, abs=2e-3) and p.overspray == pytest.approx(
+        over, abs=5e-4
+    )
     q, t = p.joint_trajectory, p.times
     lim = np.asarray(ROBOT.joint_limits)
     assert (q >= lim[:, 0] - 1e-12).all() and (q <= lim[:, 1] + 1e-12).all()

@@ -191,3 +191,58 @@ def test_narrow_band_is_filled_with_small_discs_and_checked_independently():
     over = union.difference(poly).area / poly.area
     assert cov >= 0.99 and over <= 0.005
     assert abs(cov - m.coverage) < 0.002 and abs(over - m.overspray) < 0.001
+
+
+@pytest.mark.parametrize("shape", ["trapezoid", "arbitrary"])
+def test_improved_editing_same_whatever_the_scoring_chunk(shape, monkeypatch):
+    """Issue #18: the greedy candidates scored in chunks (only those that can
+    gain kept) give the one-pass answer exactly, down to one per chunk."""
+    poly = Polygon(scenes.seed_shape(shape, 0.5))
+    kw = {"small_r": R_DEFAULT * 9.625 / 15.875, "coverage_target": 0.993}
+    monkeypatch.setattr(C, "EDIT_CHUNK_PX", 10**12)
+    one = C.edit_improved(poly, R_DEFAULT, **kw)
+    monkeypatch.setattr(C, "EDIT_CHUNK_PX", 1)
+    many = C.edit_improved(poly, R_DEFAULT, **kw)
+    for f in ("centers", "radii", "classes", "small"):
+        np.testing.assert_array_equal(getattr(one, f), getattr(many, f))
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.integers(0, 10_000), st.floats(0.005, 0.05))
+def test_disc_far_from_every_pixel_centre_covers_none(seed, rad):
+    """The premise of the greedy's candidate filter: a disc whose centre is
+    farther than its radius from every pixel centre of a set covers none
+    of them (its pixels are those whose centre lies within the radius)."""
+    rng = np.random.default_rng(seed)
+    poly = Polygon([(0, 0), (0.3, 0), (0.3, 0.2), (0, 0.2)])
+    ras = C.Raster.of(poly, rad / 8.0, pad=rad + 0.01)
+    flat = rng.choice(ras.nx * ras.ny, size=50, replace=False)
+    pc = np.stack(
+        [ras.x0 + (flat % ras.nx + 0.5) * ras.h, ras.y0 + (flat // ras.nx + 0.5) * ras.h], 1
+    )
+    cen = rng.uniform([-0.01, -0.01], [0.31, 0.21], size=(200, 2))
+    d = np.min(np.linalg.norm(cen[:, None] - pc[None], axis=-1), axis=1)
+    idx, _ = ras.disc_pixels(cen, np.full(len(cen), rad))
+    hit = np.isin(idx, flat).any(axis=1)
+    assert not (hit & (d > rad * (1.0 + 1e-6))).any()
+
+
+@pytest.mark.parametrize(
+    "poly, r_min, budget",
+    [
+        (Polygon([(0, 0), (2, 0), (2, 2), (0, 2)]), 0.024, 0.004),  # large: both skipped
+        (Polygon([(0, 0), (0.3, 0), (0.3, 0.3), (0, 0.3)]), 0.024, 0.004),  # small square
+        (Polygon([(0, 0), (0.5, 0), (0.5, 0.02), (0.25, 0.02), (0.25, 0.3), (0, 0.3)]), 0.02, 0.0),
+        (star_polygon(3, size=0.4), 0.02, 0.004),
+        (star_polygon(5, size=0.6), 0.015, 0.001),
+    ],
+)
+def test_pointwise_bound_shortcuts_change_nothing(poly, r_min, budget):
+    """Issue #18: the coverage bound's skipped convolution / distance
+    transform give the full computation's answer (it is 1 exactly when they
+    are skipped), including a slit narrower than the disc with no budget."""
+    from planners.blasting.bound import pointwise_bound
+
+    full = pointwise_bound(poly, r_min, budget, shortcut=False)
+    fast = pointwise_bound(poly, r_min, budget)
+    assert fast == full
