@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import contextlib
 import functools
+import gc
 import logging
 import multiprocessing as mp
 import os
@@ -36,6 +37,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from threadpoolctl import threadpool_limits
 
 from planners.errors import CancelledError, InvalidInputError
 from server.events import EventBus
@@ -49,6 +51,8 @@ _STOP = ("__stop__", 0.0, "")
 
 #: Niceness added to planning worker processes (the server and links keep 0).
 WORKER_NICE = 10
+#: BLAS threads per planning worker.
+WORKER_BLAS_THREADS = 1
 
 
 def _worker_init(parent_pid: int, preload: bool = False) -> None:
@@ -57,11 +61,21 @@ def _worker_init(parent_pid: int, preload: bool = False) -> None:
     die_with_parent(parent_pid)
     with contextlib.suppress(OSError):
         os.nice(WORKER_NICE)
+    # One BLAS thread per worker: planners multiply small matrices, and a
+    # second thread waits for a core the server or the other worker holds
+    # (default ara.switch plan with the other core busy: 3.26 s with two
+    # threads, 2.88 s with one; 2026-12-03).  The pool's workers use the cores.
+    threadpool_limits(WORKER_BLAS_THREADS, user_api="blas")
     if preload:
         try:
             preload_kinds()
         except Exception:  # an initializer error would break the pool: plan cold instead
             log.warning("preloading the plan kinds failed", exc_info=True)
+        # The preloaded modules are ~140k objects the cyclic GC would walk at
+        # every full collection, and planners make garbage fast: the default
+        # ara.switch plan took 4.05 s with them tracked, 3.08 s frozen
+        # (2026-12-03, same machine).  They live as long as the worker anyway.
+        gc.freeze()
 
 
 def preload_kinds() -> float:

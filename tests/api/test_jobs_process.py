@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import contextlib
+import gc
 import os
 import signal
 import socket
@@ -191,9 +192,32 @@ def test_workers_preload_every_kind_before_their_first_plan(preload: bool) -> No
         initargs=(os.getpid(), preload),
     ) as pool:
         loaded = pool.submit(loaded_modules, ("server.kinds.", "planners.")).result(timeout=120)
+        frozen = pool.submit(gc.get_freeze_count).result(timeout=60)
     kinds = set(KIND_MODULES) & set(loaded)
     if preload:
         assert kinds == set(KIND_MODULES)
         assert "planners.switching.switch_result" in loaded
+        # the preloaded objects are out of the cyclic GC's way
+        assert frozen > 10_000
     else:
         assert kinds == set()
+        assert frozen == 0
+
+
+def test_workers_run_one_blas_thread() -> None:
+    """A planning worker multiplies with one BLAS thread (a second one waits
+    for a core that the server or the other worker holds)."""
+    from concurrent.futures import ProcessPoolExecutor
+    from multiprocessing import get_context
+
+    from threadpoolctl import threadpool_info
+
+    from server.jobs import WORKER_BLAS_THREADS, _worker_init
+
+    with ProcessPoolExecutor(
+        1, mp_context=get_context("spawn"), initializer=_worker_init, initargs=(os.getpid(), False)
+    ) as pool:
+        info = pool.submit(threadpool_info).result(timeout=60)
+    blas = [i for i in info if i["user_api"] == "blas"]
+    assert blas, info  # numpy's OpenBLAS is loaded in the worker
+    assert all(i["num_threads"] == WORKER_BLAS_THREADS == 1 for i in blas)
