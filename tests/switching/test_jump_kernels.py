@@ -212,3 +212,21 @@ def test_needed_pairs_equal_the_pair_mask(cx, rows, p_a, p_b, seed):
     assert len(got) == len(set(got))
     assert set(got) == want
     assert np.all(np.diff(key) >= 0)  # reduceat over runs of equal keys
+
+
+@settings(max_examples=12, deadline=None)
+@given(anchor=st.sampled_from([0, 1]), sigma=st.floats(0.005, 0.08), seed=st.integers(0, 2**16))
+def test_self_steps_bound_the_self_clearance_change(cx, anchor, sigma, seed):
+    """The self re-check's step bound holds for the clearance it bounds
+    (recomputed by brute force over every sphere pair) and, measured in the
+    links' own frames, does not depend on where the anchor stands."""
+    context, _ = cx
+    W = np.eye(4) if anchor == 0 else context.rob.fk_all(ROB.q_conv[None])[0, -1]
+    chk = context.checker(anchor, W, None)
+    rng = np.random.default_rng(seed)
+    Q = np.clip(ROB.q_conv + np.cumsum(rng.normal(0.0, sigma, (60, 6)), axis=0), LO, HI)
+    bound = chk.self_steps(Q)
+    _, exact = ref.clearances_reference(chk, Q)  # capped at _CAP like the re-check's values
+    assert np.all(np.abs(np.diff(exact)) <= bound + 1e-12)
+    other = context.checker(1 - anchor, np.eye(4) if anchor else W, None)
+    np.testing.assert_allclose(other.self_steps(Q), bound, rtol=0, atol=1e-12)
