@@ -690,7 +690,7 @@ class _SelfArrays:
         for la, lb_, f, i, j in pairs:
             ua, ub = np.unique(np.asarray(i)), np.unique(np.asarray(j))
             if len(np.asarray(i)) != len(ua) * len(ub):
-                raise ValueError(f"self pairs of links {la}, {lb_} are not all sphere pairs")
+                raise InvalidInputError(f"self pairs of links {la}, {lb_} are not all sphere pairs")
             cov = robot.cover if f else robot.self_cover
             off = 0 if f else S
             # A block per pair of sphere groups: a group's own bounding sphere
