@@ -1,4 +1,4 @@
-"""The ``steelpath`` command: serve, token, plan, emulate.
+"""The ``steelpath`` command: serve, token, plan, estop, emulate.
 
 ``serve`` and ``token`` work on the local data directory; ``plan`` talks to a
 running server over REST with a token from ``--token``, ``$STEELPATH_TOKEN``
@@ -92,9 +92,7 @@ def cmd_token(args: argparse.Namespace) -> int:
     try:
         if args.token_cmd == "create":
             name = args.name or f"{args.role} token"
-            tid, secret = create_token(
-                store, name, args.role, "cli", expires_in_s=args.expires_in
-            )
+            tid, secret = create_token(store, name, args.role, "cli", expires_in_s=args.expires_in)
             expiry = store.get_token(tid).expires_at
             until = f", expires {expiry}" if expiry else ", never expires"
             print(f"created {args.role} token {tid} ({name}) in {settings.data}{until}")
@@ -161,6 +159,11 @@ def _request(args: argparse.Namespace, method: str, path: str, **kw: Any) -> Any
     return r.json()
 
 
+def _server_args(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--server", help=f"server URL (default {DEFAULT_URL}, $STEELPATH_URL)")
+    p.add_argument("--token", help="bearer token (default $STEELPATH_TOKEN)")
+
+
 def _bar(progress: float, stage: str, width: int = 30) -> str:
     done = round(progress * width)
     return f"\r[{'#' * done}{'.' * (width - done)}] {progress * 100:5.1f}% {stage[:40]:<40}"
@@ -217,7 +220,93 @@ def cmd_plan(args: argparse.Namespace) -> int:
                 f"{p['id']}\t{p['kind']}\t{p['state']}\t{p['progress'] * 100:.0f}%\t{p['created_at']}"
             )
         return 0
+    if args.plan_cmd == "params":
+        return _print_defaults(args.kind)
+    if args.plan_cmd == "approve":
+        plan = _request(args, "POST", f"/plans/{args.id}/approve", json={"comment": args.comment})
+        print(f"plan {plan['id']} {plan['state']} by {plan.get('approved_by') or '?'}")
+        return 0
+    if args.plan_cmd == "dispatch":
+        ex = _request(args, "POST", f"/plans/{args.id}/dispatch", json={"robot": args.robot})
+        print(f"execution {ex['id']} of plan {args.id} on {ex['robot']}: {ex['state']}")
+        if args.watch:
+            return _watch(args, ex["id"])
+        print(ex["id"])
+        return 0
+    if args.plan_cmd == "watch":
+        return _watch(args, _execution_id(args, args.id))
     return 2
+
+
+#: Execution states a watch stops at (``interrupted`` waits for an operator).
+WATCH_STOPS = {"completed": 0, "aborted": 1, "faulted": 1, "interrupted": 1}
+
+
+def _execution_id(args: argparse.Namespace, ref: str) -> str:
+    """An execution id, or a plan id's newest execution."""
+    if not ref.startswith("pl_"):
+        return ref
+    rows = _request(args, "GET", "/executions", params={"plan_id": ref, "limit": 1})
+    if not rows:
+        raise SystemExit(f"error: plan {ref} has no execution; dispatch it first")
+    return str(rows[0]["id"])
+
+
+def _watch(args: argparse.Namespace, ex_id: str) -> int:
+    """Follow an execution until it ends (or needs an operator): one line
+    per change of state or acknowledged command; exit 0 only on completed."""
+    last = None
+    while True:
+        ex = _request(args, "GET", f"/executions/{ex_id}")
+        line = f"{ex['state']:<11} {ex['acked']}/{ex['total']} commands acknowledged"
+        if ex.get("fault") or ex.get("error"):
+            line += f"  ({ex.get('fault') or ex.get('error')})"
+        if line != last:
+            print(f"execution {ex_id}: {line}", flush=True)
+            last = line
+        if ex["state"] in WATCH_STOPS:
+            if ex["state"] == "interrupted":
+                print(
+                    f"  interrupted: resume with POST /api/v1/executions/{ex_id}/resume "
+                    "(the console's Resume) once the robot is safe",
+                    flush=True,
+                )
+            return WATCH_STOPS[ex["state"]]
+        time.sleep(args.interval)
+
+
+def _print_defaults(kind: str) -> int:
+    """A kind's default params as JSON (a params file to start from); read
+    from the kind's own params model, no server needed."""
+    from server.kinds import registry
+
+    kinds = registry()
+    if kind not in kinds:
+        print(f"error: unknown kind {kind!r}; kinds: {', '.join(sorted(kinds))}", file=sys.stderr)
+        return 2
+    print(json.dumps(kinds[kind].params_model().model_dump(mode="json"), indent=2))
+    return 0
+
+
+# ----------------------------------------------------------------------- estop
+def cmd_estop(args: argparse.Namespace) -> int:
+    """E-stop every robot (or one), or clear a latched E-stop."""
+    if args.estop_cmd == "clear":
+        if bool(args.all) == bool(args.robot):
+            raise SystemExit("error: name a robot, or --all to clear every latched robot")
+        names = (
+            [args.robot] if args.robot else [r["name"] for r in _request(args, "GET", "/robots")]
+        )
+        for name in names:
+            _request(args, "POST", f"/robots/{name}/clear-estop")
+            print(f"E-stop cleared on {name}")
+        return 0
+    body: dict[str, Any] = {"reason": args.reason}
+    if args.robot:
+        body["robot"] = args.robot
+    out = _request(args, "POST", "/estop", json=body)
+    print(f"E-STOP sent to {args.robot or 'every robot'}: {json.dumps(out)}")
+    return 0
 
 
 # --------------------------------------------------------------------- emulate
@@ -286,21 +375,54 @@ def build_parser() -> argparse.ArgumentParser:
         ("submit", "submit a plan and follow its progress"),
         ("show", "show a plan's state, metrics and checks"),
         ("list", "list recent plans"),
+        ("params", "print a kind's default params as JSON (a params file to start from)"),
+        ("approve", "approve a planned plan whose checks all passed"),
+        ("dispatch", "send an approved plan to a robot"),
+        ("watch", "follow an execution until it ends"),
     ):
         sp = psub.add_parser(name, help=helptext, description=helptext)
-        sp.add_argument("--server", help=f"server URL (default {DEFAULT_URL})")
-        sp.add_argument("--token", help="bearer token (default $STEELPATH_TOKEN)")
+        if name == "params":
+            sp.add_argument("kind", help="plan kind, e.g. ara.navigate")
+            continue
+        _server_args(sp)
         if name == "submit":
             sp.add_argument("kind", help="plan kind, e.g. demo.route")
             sp.add_argument(
                 "params", nargs="?", help="params JSON file ('-' for stdin); defaults if omitted"
             )
             sp.add_argument("--no-wait", action="store_true", help="print the plan id and return")
-        elif name == "show":
-            sp.add_argument("id")
+        elif name in ("show", "approve", "dispatch"):
+            sp.add_argument("id", help="plan id")
+        elif name == "watch":
+            sp.add_argument("id", help="execution id, or a plan id for its newest execution")
         else:
             sp.add_argument("--limit", type=int, default=20)
+        if name == "approve":
+            sp.add_argument("--comment", default="", help="why it is safe to run (audited)")
+        if name == "dispatch":
+            sp.add_argument("--robot", required=True, help="robot name (GET /robots)")
+            sp.add_argument("--watch", action="store_true", help="follow the execution")
+        if name in ("dispatch", "watch"):
+            sp.add_argument(
+                "--interval", type=float, default=0.5, help="seconds between reads (watch)"
+            )
     pl.set_defaults(func=cmd_plan)
+
+    es = sub.add_parser(
+        "estop",
+        help="emergency-stop every robot (or one); 'estop clear' releases the latch",
+        description="E-stop: every robot, or --robot NAME.  'steelpath estop clear "
+        "NAME|--all' clears a latched E-stop (operator).",
+    )
+    _server_args(es)
+    es.add_argument("--robot", help="one robot (default: every robot)")
+    es.add_argument("--reason", default="operator E-stop (CLI)", help="recorded in the audit log")
+    esub = es.add_subparsers(dest="estop_cmd")
+    ec = esub.add_parser("clear", help="clear a latched E-stop", description="Clear E-stop.")
+    _server_args(ec)
+    ec.add_argument("robot", nargs="?", help="robot name")
+    ec.add_argument("--all", action="store_true", help="every robot")
+    es.set_defaults(func=cmd_estop)
 
     e = sub.add_parser(
         "emulate",

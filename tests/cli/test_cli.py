@@ -32,7 +32,21 @@ def steelpath(
 
 @pytest.mark.parametrize(
     "args",
-    [[], ["serve"], ["token"], ["token", "create"], ["plan"], ["plan", "submit"], ["plan", "show"]],
+    [
+        [],
+        ["serve"],
+        ["token"],
+        ["token", "create"],
+        ["plan"],
+        ["plan", "submit"],
+        ["plan", "show"],
+        ["plan", "params"],
+        ["plan", "approve"],
+        ["plan", "dispatch"],
+        ["plan", "watch"],
+        ["estop"],
+        ["estop", "clear"],
+    ],
 )
 def test_help_everywhere(args: list[str]) -> None:
     r = steelpath(*args, "--help")
@@ -114,3 +128,67 @@ def test_plan_submit_and_show_against_a_running_server(tmp_path: Path) -> None:
         bad_json.write_text("{nope")
         r = steelpath("plan", "submit", "demo.route", str(bad_json), "--server", url, env=env)
         assert r.returncode != 0 and "not valid JSON" in r.stderr
+
+
+def test_plan_params_prints_a_kinds_defaults() -> None:
+    """``plan params KIND`` prints the params model's defaults as JSON (no
+    server); that JSON is a valid params file for the kind."""
+    from server.kinds import registry
+
+    r = steelpath("plan", "params", "ara.switch")
+    assert r.returncode == 0, r.stderr
+    defaults = json.loads(r.stdout)
+    assert defaults["sample"] == "perpendicular" and defaults["clearance_margin_m"] == 0.01
+    model = registry()["ara.switch"].params_model
+    assert model.model_validate(defaults) == model()
+    bad = steelpath("plan", "params", "ara.swich")
+    assert bad.returncode == 2 and "unknown kind 'ara.swich'" in bad.stderr
+    assert "ara.switch" in bad.stderr  # the kinds are listed
+
+
+def test_approve_dispatch_watch_estop_and_clear(tmp_path: Path) -> None:
+    """A whole CLI session against a server with its emulators: submit,
+    approve, dispatch with --watch to completion; E-stop every robot, then
+    clear them all.  Bad input gets a clear error and a non-zero exit."""
+    settings = make_settings(
+        tmp_path / "var", port=free_port(), emulators=True, emulator_time_scale=40.0
+    )
+    with live_server(settings) as (url, tokens, app):
+        eng = app.state.services.dispatch
+        for name in eng.robot_names():
+            assert eng.wait_connected(name, 30), name
+        env = {"STEELPATH_TOKEN": tokens["operator"], "STEELPATH_URL": url}
+        r = steelpath("plan", "submit", "demo.route", "--no-wait", env=env)
+        pid = r.stdout.strip().splitlines()[-1]
+        deadline = time.monotonic() + 60
+        while "state planned" not in steelpath("plan", "show", pid, env=env).stdout:
+            assert time.monotonic() < deadline, "plan did not finish"
+            time.sleep(0.2)
+        r = steelpath("plan", "dispatch", pid, "--robot", "ara", env=env)
+        assert r.returncode != 0 and "HTTP 409" in r.stderr  # not approved yet
+        r = steelpath("plan", "approve", pid, "--comment", "CLI test", env=env)
+        assert r.returncode == 0 and "approved" in r.stdout, r.stderr
+        r = steelpath(
+            "plan", "dispatch", pid, "--robot", "ara", "--watch", "--interval", "0.1", env=env
+        )
+        assert r.returncode == 0, r.stdout + r.stderr
+        lines = r.stdout.splitlines()
+        assert lines[-1].split(": ", 1)[1].startswith("completed")
+        ex_id = lines[0].split()[1]
+        done = app.state.services.store.get_execution(ex_id)
+        assert done.state == "completed" and done.acked == done.total > 0
+        assert f"{done.total}/{done.total} commands" in lines[-1]
+        again = steelpath("plan", "watch", pid, env=env)  # a plan id: its newest execution
+        assert again.returncode == 0 and ex_id in again.stdout and "completed" in again.stdout
+
+        viewer = {**env, "STEELPATH_TOKEN": tokens["viewer"]}
+        assert "HTTP 403" in steelpath("plan", "approve", pid, env=viewer).stderr
+        r = steelpath("estop", "--reason", "CLI test", env=env)
+        assert r.returncode == 0 and "E-STOP sent to every robot" in r.stdout, r.stderr
+        audit = app.state.services.store.list_audit(limit=20)
+        assert any(a.action == "estop" and a.reason == "CLI test" for a in audit)
+        r = steelpath("estop", "clear", env=env)
+        assert r.returncode != 0 and "--all" in r.stderr
+        r = steelpath("estop", "clear", "--all", env=env)
+        assert r.returncode == 0, r.stderr
+        assert sorted(ln.split()[-1] for ln in r.stdout.splitlines()) == sorted(eng.robot_names())
