@@ -213,6 +213,7 @@ function renderDetail(p) {
   $("#revise").disabled = !allowed.has("revise");
   $("#delete").disabled = !allowed.has("delete");
   $("#dispatch").disabled = !allowed.has("dispatch") || !p.program;
+  applyRole();
   $("#dispatch-box").hidden = true;
   $("#d-program-len").textContent = p.program ? `(${p.program.length} commands)` : "(this kind has no compiler)";
   $("#d-program").textContent = p.program ? p.program.map((c, i) => `${i}: ${JSON.stringify(c)}`).join("\n") : "";
@@ -352,13 +353,14 @@ async function loadRobots() {
   for (const r of state.robots) {
     const hb = r.last_heartbeat ? `${Math.max(0, Date.now() / 1000 - r.last_heartbeat).toFixed(1)} s ago` : "never";
     const faults = (r.faults ? `0x${r.faults.toString(16)}` : "none") + (r.estop_latched ? " · E-STOP latched" : "");
-    const clear = el("button", { class: "secondary", onclick: () => clearEstop(r.name) }, "clear E-stop");
+    const clear = el("button", { class: "secondary operator-only", onclick: () => clearEstop(r.name) }, "clear E-stop");
     clear.disabled = !r.estop_latched;
     tb.append(el("tr", { "data-robot": r.name, "data-link": r.state },
       el("td", {}, r.name), el("td", { class: `link-${r.state}` }, r.state),
       el("td", { title: r.reason }, r.url + (r.emulated ? " (emulator)" : "")),
       el("td", {}, hb), el("td", {}, faults), el("td", {}, clear)));
   }
+  applyRole();
   const sel = $("#dispatch-robot");
   const keep = sel.value;
   sel.innerHTML = "";
@@ -408,6 +410,7 @@ async function showExecution(ex) {
   $("#x-pause").disabled = !allowed.has("pause");
   $("#x-resume").disabled = !allowed.has("resume");
   $("#x-abort").disabled = !allowed.has("abort");
+  applyRole();
 }
 
 for (const action of ["pause", "resume", "abort"]) {
@@ -476,12 +479,31 @@ function openEvents() {
   }
 }
 
+// -------------------------------------------------------------------- role
+// What a viewer's token may not do stays on screen but disabled, with the
+// reason on hover; the E-stop button (operator) is absent for a viewer.
+const OPERATOR_CONTROLS = ["#submit-plan", "#load-sample", "#upload-cloud", "#approve", "#dispatch",
+  "#cancel", "#revise", "#delete", "#x-pause", "#x-resume", "#x-abort"];
+
+function applyRole() {
+  if (!state.me || state.me.role !== "viewer") return;
+  const why = `needs the operator role; ${state.me.name} is a viewer (read-only)`;
+  for (const b of [...OPERATOR_CONTROLS.map((q) => $(q)), ...document.querySelectorAll(".operator-only")]) {
+    if (!b) continue;
+    b.disabled = true;
+    b.title = why;
+  }
+  $("#estop").hidden = true;
+  $("#readonly").hidden = false;
+}
+
 // ------------------------------------------------------------------- start
 async function start() {
   const me = await api("GET", "/session");
   state.me = me;
   $("#whoami").textContent = `${me.name} (${me.role})`;
   $("#logout").hidden = false;
+  applyRole();
   const health = await fetch(API + "/health").then((r) => r.json());
   await Promise.all([loadKinds(), loadSamples(), loadClouds(), loadPlans(), loadAudit(), loadRobots(), loadProposals()]);
   setInterval(loadRobots, 3000);  // heartbeat ages keep moving even when nothing else does

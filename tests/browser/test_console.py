@@ -6,6 +6,7 @@ import os
 import shutil
 from pathlib import Path
 
+import httpx
 import pytest
 
 from tests.conftest import make_settings
@@ -127,6 +128,56 @@ def test_console_plan_approve_and_scene(browser, tmp_path: Path) -> None:
     actions = [e.action for e in store.list_audit("plan", plan_id)]
     assert actions[:2] == ["approve", "finish"]
     assert any(e.action == "estop" for e in store.list_audit("robot"))
+
+
+def test_viewer_gets_a_read_only_console(browser, tmp_path: Path) -> None:
+    """A viewer reads everything but every operator control is disabled with
+    the reason on hover, and the E-stop button (operator) is absent; the
+    operator's console has them."""
+    settings = make_settings(tmp_path / "var", port=free_port())
+    with live_server(settings) as (url, tokens, app):
+        store = app.state.services.store
+        plan_token = tokens["operator"]
+        r = httpx.post(
+            f"{url}/api/v1/plans",
+            json={"kind": "demo.route", "params": {}},
+            headers={"Authorization": f"Bearer {plan_token}"},
+        )
+        pid = r.json()["id"]
+        page = browser.new_page(viewport={"width": 1400, "height": 1000})
+        errors: list[str] = []
+        page.on("pageerror", lambda e: errors.append(str(e)))
+        page.goto(url + "/")
+        page.wait_for_selector("#login:not([hidden])")
+        page.fill("#login-token", tokens["viewer"])
+        page.click("#login-form button[type=submit]")
+        page.wait_for_selector("#kind option[value='demo.route']", state="attached")
+        assert "viewer" in page.inner_text("#whoami")
+        page.wait_for_selector("#readonly:not([hidden])")
+        assert not page.is_visible("#estop")
+        for sel in ("#submit-plan", "#load-sample", "#upload-cloud"):
+            assert page.is_disabled(sel), sel
+            assert "operator role" in (page.get_attribute(sel, "title") or ""), sel
+        page.wait_for_selector(f"#plans tbody tr[data-id='{pid}'][data-state='planned']")
+        page.locator(f"#plans tbody tr[data-id='{pid}']").click()
+        page.wait_for_selector("#d-checks tr[data-check='route_length']")
+        for sel in ("#approve", "#revise", "#delete", "#cancel", "#dispatch"):
+            assert page.is_disabled(sel), sel
+        assert "operator role" in (page.get_attribute("#approve", "title") or "")
+        assert store.get_plan(pid).state == "planned"
+        assert not errors, errors
+        # the operator's console: E-stop on screen, Plan and Approve enabled
+        op = browser.new_page(viewport={"width": 1400, "height": 1000})
+        op.goto(url + "/")
+        op.wait_for_selector("#login:not([hidden])")
+        op.fill("#login-token", tokens["operator"])
+        op.click("#login-form button[type=submit]")
+        op.wait_for_selector("#kind option[value='demo.route']", state="attached")
+        assert op.is_visible("#estop") and not op.is_visible("#readonly")
+        assert op.is_enabled("#submit-plan")
+        op.locator(f"#plans tbody tr[data-id='{pid}']").click()
+        op.wait_for_selector("#d-checks tr[data-check='route_length']")
+        assert op.is_enabled("#approve")
 
 
 def test_api_docs_render_offline(browser, tmp_path: Path) -> None:
