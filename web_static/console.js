@@ -70,7 +70,34 @@ $("#estop").addEventListener("click", async () => {
   try {
     const r = await api("POST", "/estop", { reason: "console E-stop button" });
     flash(`E-STOP sent to ${r.robot}` + (r.errors.length ? ` (errors: ${r.errors.join("; ")})` : ""));
+    await loadRobots();  // the banner names the latched robots at once
   } catch (e) { flash("E-STOP FAILED: " + e.message, true); }
+});
+
+// The red banner stays while any robot's E-stop is latched: which robots,
+// and the last E-stop's time, author and reason from the audit log.
+let bannerKey = null;
+async function renderEstopBanner() {
+  const latched = (state.robots || []).filter((r) => r.estop_latched).map((r) => r.name);
+  const banner = $("#estop-banner");
+  banner.hidden = latched.length === 0;
+  const key = latched.join(",");
+  if (!latched.length || key === bannerKey) return;
+  bannerKey = key;
+  let since = "";
+  try {
+    const last = (await api("GET", "/audit?entity=robot&limit=50")).find((a) => a.action === "estop");
+    if (last) since = ` since ${last.ts.replace("T", " ").slice(0, 19)} UTC by ${last.actor} (${last.reason})`;
+  } catch (e) { /* the names alone still say it */ }
+  $("#estop-text").textContent = `E-STOP latched on ${latched.join(", ")}${since}. ` +
+    "Robots will not move until it is cleared.";
+}
+
+$("#estop-clear-all").addEventListener("click", async () => {
+  const latched = state.robots.filter((r) => r.estop_latched).map((r) => r.name);
+  if (!latched.length) return;
+  if (!window.confirm(`Clear the E-stop on ${latched.join(", ")}? Only when every one is safe to move.`)) return;
+  for (const name of latched) await clearEstop(name);
 });
 
 function flash(msg, bad) {
@@ -360,6 +387,7 @@ async function loadRobots() {
       el("td", { title: r.reason }, r.url + (r.emulated ? " (emulator)" : "")),
       el("td", {}, hb), el("td", {}, faults), el("td", {}, clear)));
   }
+  renderEstopBanner();
   applyRole();
   const sel = $("#dispatch-robot");
   const keep = sel.value;

@@ -268,8 +268,21 @@ def test_dispatch_to_emulator_then_estop(browser, tmp_path: Path) -> None:
             "document.querySelector('#robots tr[data-robot=ara]').textContent.includes('E-STOP latched')",
             timeout=30_000,
         )
+        # The red banner names every latched robot and who stopped them.
+        page.wait_for_selector("#estop-banner:not([hidden])")
+        banner = page.inner_text("#estop-banner")
+        assert "E-STOP latched on" in banner and "ara" in banner, banner
+        assert "console E-stop button" in banner and "by " in banner, banner
         ARTIFACTS.mkdir(exist_ok=True)
         page.screenshot(path=str(ARTIFACTS / "console-dispatch.png"), full_page=True)
+        # Clear all asks first: dismissed, nothing changes; accepted, all clear.
+        page.once("dialog", lambda d: d.dismiss())
+        page.click("#estop-clear-all")
+        assert page.is_visible("#estop-banner")
+        assert app.state.services.dispatch.robot_status("ara")["estop_latched"]
+        page.once("dialog", lambda d: d.accept())
+        page.click("#estop-clear-all")
+        page.wait_for_selector("#estop-banner", state="hidden", timeout=30_000)
         emulator = app.state.services.emulators["ara"]
         assert emulator.stop_events(), "the emulator never saw the stop"
         assert not errors, errors
