@@ -432,8 +432,8 @@ async function showExecution(ex) {
   st.textContent = full.state; st.className = `state ${full.state}`;
   $("#x-progress div").style.width = `${full.progress * 100}%`;
   $("#x-progress span").textContent = `${full.acked}/${full.total} commands`;
-  $("#x-current").textContent = full.current_command ? JSON.stringify(full.current_command) : "–";
-  $("#x-fault").textContent = full.fault || "";
+  $("#x-current").textContent = full.current_command ? describeCommand(full.current_command) : "–";
+  $("#x-fault").textContent = NEXT_ACTION[full.state] ? `${full.state}: ${full.fault || full.error || "no reason given"} — ${NEXT_ACTION[full.state]}` : "";
   const allowed = new Set(full.allowed_actions || []);
   $("#x-pause").disabled = !allowed.has("pause");
   $("#x-resume").disabled = !allowed.has("resume");
@@ -441,9 +441,33 @@ async function showExecution(ex) {
   applyRole();
 }
 
+// What the operator does next, shown with the reason while an execution waits.
+const NEXT_ACTION = {
+  interrupted: "Resume once the robot is safe: it continues from the last acknowledged command",
+  faulted: "fix the fault's cause, then Resume (it clears the robot's fault) or Abort",
+};
+
+// A robot command as a line: its op, then each field with the unit its name
+// carries (speeds_m_s → m/s, duration_s → s, …).
+const UNITS = [["_m_s", "m/s"], ["_rad_s", "rad/s"], ["_rad", "rad"], ["_deg", "°"], ["_mm", "mm"], ["_m", "m"], ["_s", "s"]];
+function describeCommand(c) {
+  const num = (v) => (typeof v === "number" ? Number(v.toPrecision(4)).toString() : String(v));
+  const parts = [];
+  for (const [k, v] of Object.entries(c)) {
+    if (k === "op") continue;
+    const u = UNITS.find(([suffix]) => k.endsWith(suffix));
+    const name = u ? k.slice(0, -u[0].length) : k;
+    const val = Array.isArray(v) ? v.map(num).join(", ") : (v && typeof v === "object" ? JSON.stringify(v) : num(v));
+    parts.push(`${name.replaceAll("_", " ")} ${val}${u ? " " + u[1] : ""}`);
+  }
+  return `${c.op || "command"}: ${parts.join("; ")}`;
+}
+
 for (const action of ["pause", "resume", "abort"]) {
   $(`#x-${action}`).addEventListener("click", async () => {
     if (!state.execution) return;
+    if (action === "abort" && !window.confirm(
+      `Abort execution ${state.execution.id}? The robot stops where it is; the plan must be dispatched again to finish.`)) return;
     try {
       const ex = await api("POST", `/executions/${state.execution.id}/${action}`, action === "resume" ? {} : undefined);
       showExecution(ex);
@@ -452,8 +476,11 @@ for (const action of ["pause", "resume", "abort"]) {
 }
 
 // ------------------------------------------------------------------- audit
+let auditLimit = 20;
 async function loadAudit() {
-  const events = await api("GET", "/audit?limit=30");
+  const events = await api("GET", `/audit?limit=${auditLimit}`);
+  $("#audit-count").textContent = `latest ${events.length}`;
+  $("#audit-more").hidden = events.length < auditLimit;
   const tb = $("#audit tbody");
   tb.innerHTML = "";
   for (const a of events) {
@@ -462,6 +489,8 @@ async function loadAudit() {
       el("td", {}, a.to_state ? `${a.from_state || ""} → ${a.to_state}` : ""), el("td", {}, a.reason || "")));
   }
 }
+
+$("#audit-more").addEventListener("click", () => { auditLimit = Math.min(2000, auditLimit + 50); loadAudit(); });
 
 // ------------------------------------------------------------------ events
 function openEvents() {

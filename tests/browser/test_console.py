@@ -260,6 +260,15 @@ def test_dispatch_to_emulator_then_estop(browser, tmp_path: Path) -> None:
         page.wait_for_function(
             "document.querySelector('#x-state').textContent === 'running'", timeout=30_000
         )
+        # The current command reads as a line with units, not JSON.
+        page.wait_for_function("document.querySelector('#x-current').textContent !== '–'")
+        current = page.inner_text("#x-current")
+        assert current.startswith("wheels: ") and " m/s" in current and "{" not in current, current
+        # Abort asks first; dismissed, the robot keeps going.
+        page.once("dialog", lambda d: d.dismiss())
+        page.click("#x-abort")
+        assert page.inner_text("#x-state") == "running"
+        assert not page.is_visible("#audit")  # the audit log is folded by default
         page.click("#estop")
         page.wait_for_function(
             "document.querySelector('#x-state').textContent === 'aborted'", timeout=30_000
