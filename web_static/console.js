@@ -265,34 +265,55 @@ function renderDetail(p) {
   renderPlots((p.result && p.result.plots) || []);
 }
 
+// Plots: uPlot (vendored in web_static/vendor/uplot, MIT) with axes, ticks,
+// units, legend, hover read-out and drag-to-zoom (double-click resets).  Long
+// series are decimated for display by keeping each bucket's min and max, so
+// peaks survive; the stored arrays keep every sample.
+const PLOT_MAX_POINTS = 4000;
+const PLOT_COLORS = ["#1f77b4", "#ff7f0e", "#2ca02c", "#d62728", "#9467bd", "#8c564b"];
+
+function decimate(xs, series) {
+  const n = xs.length;
+  if (n <= PLOT_MAX_POINTS) return [xs, series];
+  const buckets = Math.floor(PLOT_MAX_POINTS / 2), keep = new Set([0, n - 1]);
+  for (let b = 0; b < buckets; b++) {
+    const lo = Math.floor((b * n) / buckets), hi = Math.floor(((b + 1) * n) / buckets);
+    for (const ys of series) {
+      let imin = -1, imax = -1;
+      for (let j = lo; j < hi; j++) {
+        if (!Number.isFinite(ys[j])) continue;
+        if (imin < 0 || ys[j] < ys[imin]) imin = j;
+        if (imax < 0 || ys[j] > ys[imax]) imax = j;
+      }
+      if (imin >= 0) { keep.add(imin); keep.add(imax); }
+    }
+  }
+  const idx = [...keep].sort((a, b) => a - b);
+  return [idx.map((j) => xs[j]), series.map((ys) => idx.map((j) => ys[j]))];
+}
+
 function renderPlots(plots) {
   const box = $("#d-plots");
+  for (const u of state.uplots || []) u.destroy();
+  state.uplots = [];
   box.innerHTML = "";
   for (const pl of plots) {
-    const xs = pl.x || [];
     const names = Object.keys(pl.series || {});
-    if (!xs.length || !names.length) continue;
-    const all = names.flatMap((n) => pl.series[n]).filter(Number.isFinite);
-    let ymin = Math.min(...all), ymax = Math.max(...all);
-    if (ymin === ymax) { ymin -= 1; ymax += 1; }
-    const xmin = Math.min(...xs), xmax = Math.max(...xs) === xmin ? xmin + 1 : Math.max(...xs);
-    const W = 600, H = 180, L = 50, B = 20;
-    const sx = (x) => L + ((x - xmin) / (xmax - xmin)) * (W - L - 5);
-    const sy = (y) => 5 + (1 - (y - ymin) / (ymax - ymin)) * (H - B - 10);
-    const colors = ["#1f77b4", "#ff7f0e", "#2ca02c", "#d62728", "#9467bd", "#8c564b"];
-    let svg = `<svg viewBox="0 0 ${W} ${H}" preserveAspectRatio="none">`;
-    svg += `<text x="2" y="12" font-size="10">${fmt(ymax)}</text><text x="2" y="${H - B}" font-size="10">${fmt(ymin)}</text>`;
-    svg += `<text x="${L}" y="${H - 4}" font-size="10">${fmt(xmin)}</text><text x="${W - 60}" y="${H - 4}" font-size="10">${fmt(xmax)} ${pl.x_label || ""}</text>`;
-    names.forEach((n, i) => {
-      const ys = pl.series[n];
-      const pts = xs.map((x, j) => (Number.isFinite(ys[j]) ? `${sx(x).toFixed(1)},${sy(ys[j]).toFixed(1)}` : "")).filter(Boolean).join(" ");
-      svg += `<polyline fill="none" stroke="${colors[i % colors.length]}" stroke-width="1.5" points="${pts}"/>`;
-    });
-    svg += "</svg>";
-    const legend = names.map((n, i) => `<span style="color:${colors[i % colors.length]}">■ ${n}</span>`).join("");
-    const div = el("div", { class: "plot" });
-    div.innerHTML = `<h4>${pl.title || ""} <span class="muted small">${pl.y_label || ""}</span></h4>${svg}<div class="legend">${legend}</div>`;
+    if (!(pl.x || []).length || !names.length) continue;
+    const clean = (ys) => ys.map((v) => (Number.isFinite(v) ? v : null));
+    const [xs, ys] = decimate(pl.x, names.map((n) => pl.series[n]));
+    const div = el("div", { class: "plot", "data-points": String(pl.x.length), "data-shown": String(xs.length) });
     box.append(div);
+    const opts = {
+      title: pl.title || "",
+      width: Math.max(320, box.clientWidth - 10),
+      height: 220,
+      scales: { x: { time: false } },
+      series: [{ label: pl.x_label || "x" },
+        ...names.map((n, i) => ({ label: n, stroke: PLOT_COLORS[i % PLOT_COLORS.length], width: 1.5, spanGaps: false }))],
+      axes: [{ label: pl.x_label || "" }, { label: pl.y_label || "" }],
+    };
+    state.uplots.push(new uPlot(opts, [xs, ...ys.map(clean)], div));
   }
 }
 

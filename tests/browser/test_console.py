@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 import os
 import shutil
 from pathlib import Path
@@ -299,3 +300,56 @@ def test_dispatch_to_emulator_then_estop(browser, tmp_path: Path) -> None:
         ex1, ex2 = (store.list_executions(plan_id=p)[0] for p in (plan1, plan2))
         assert (ex1.state, ex1.acked == ex1.total) == ("completed", True)
         assert ex2.state == "aborted" and ex2.acked < ex2.total
+
+
+def test_plots_have_axes_legend_hover_and_survive_200k_points(browser, tmp_path: Path) -> None:
+    """A plan's plots are uPlot charts (served from web_static, no CDN) with
+    axis labels and a legend that reads out values under the cursor; a
+    200,000-point series (which overflowed the former ``Math.min(...)``)
+    draws, decimated for display but keeping its extremes."""
+    settings = make_settings(tmp_path / "var", port=free_port())
+    with live_server(settings) as (url, tokens, app):
+        auth = {"Authorization": f"Bearer {tokens['operator']}"}
+        pid = httpx.post(f"{url}/api/v1/plans", json={"kind": "blast", "params": {}}, headers=auth)
+        pid = pid.json()["id"]
+        page = browser.new_page(viewport={"width": 1400, "height": 1000})
+        errors: list[str] = []
+        page.on("pageerror", lambda e: errors.append(str(e)))
+        page.goto(url + "/")
+        page.fill("#login-token", tokens["operator"])
+        page.click("#login-form button[type=submit]")
+        page.wait_for_selector(f"#plans tbody tr[data-id='{pid}'][data-state]", timeout=60_000)
+        page.wait_for_selector(
+            f"#plans tbody tr[data-id='{pid}'][data-state='planned']", timeout=120_000
+        )
+        page.locator(f"#plans tbody tr[data-id='{pid}']").click()
+        page.wait_for_selector("#d-plots .plot canvas")
+        plots = app.state.services.store.get_plan(pid).result["plots"]
+        first = page.locator("#d-plots .plot").first
+        legend = first.locator(".u-legend").inner_text()
+        for name in plots[0]["series"]:
+            assert name in legend, (name, legend)
+        labels = page.evaluate("state.uplots[0].axes.map((a) => a.label)")  # drawn on the canvas
+        assert labels == [plots[0]["x_label"], plots[0]["y_label"]]
+        box = first.locator(".u-over").bounding_box()
+        assert box is not None
+        page.mouse.move(box["x"] + box["width"] / 2, box["y"] + box["height"] / 2)
+        page.wait_for_function(
+            "[...document.querySelectorAll('#d-plots .plot')[0].querySelectorAll('.u-legend .u-value')]"
+            ".some((v) => v.textContent.trim() !== '--' && v.textContent.trim() !== '')"
+        )
+        shown = page.evaluate(
+            """() => {
+              const n = 200000, x = Array.from({length: n}, (_, i) => i);
+              const y = x.map((i) => Math.sin(i / 500) + (i === 123457 ? 50 : 0));
+              renderPlots([{title: "big", x, x_label: "sample", y_label: "m", series: {y}}]);
+              const u = state.uplots[0];
+              return {shown: u.data[0].length, max: u.data[1].reduce((a, b) => (b > a ? b : a), -Infinity)};
+            }"""
+        )
+        assert 0 < shown["shown"] <= 4000
+        assert shown["max"] == pytest.approx(50 + math.sin(123457 / 500))  # the spike survives
+        assert page.locator("#d-plots .plot canvas").count() == 1
+        ARTIFACTS.mkdir(exist_ok=True)
+        page.locator("#d-plots").screenshot(path=str(ARTIFACTS / "console-plots.png"))
+        assert not errors, errors
