@@ -104,10 +104,20 @@ def _record(
     )
     k = int(np.nanargmax(values) if upper else np.nanargmin(values)) if values.size else 0
     passed = not bool(np.any(bad))
-    rel = ("≤" if passed else ">") if upper else ("≥" if passed else "<")
-    msg = f"{what}: worst {worst:.4g} {unit} {rel} {limit:.4g} {unit}"
-    if not passed:
-        msg += f" at t = {times[k]:.3f} s ({where(k)})"
+    bound = "at most" if upper else "at least"
+
+    def q(v: float) -> str:
+        return f"{v:.4g}" + (f" {unit}" if unit else "")
+
+    # a rounding tolerance on a zero limit reads as 0
+    lim = q(0.0 if abs(limit) < 1e-5 else limit)
+    if passed:
+        msg = f"{what} stays {bound} {lim}: the worst is {q(worst)}"
+    else:
+        msg = (
+            f"{what} must stay {bound} {lim} but reaches {q(worst)} "
+            f"at t = {times[k]:.3f} s ({where(k)})"
+        )
     report.checks.append(GateCheck(name, passed, worst, float(limit), msg))
     for i in np.flatnonzero(bad)[:max_list]:
         report.violations.append(
@@ -499,7 +509,7 @@ def _limit_checks(
         1e-6,
         t,
         lambda k: f"{names[j[k]]} at {np.degrees(q[k, j[k]]):.2f}°",
-        "joint beyond its limit",
+        "a joint's excursion past its limit (negative: inside it)",
         "deg",
     )
     ratio = np.abs(qd) / vmax
