@@ -427,12 +427,14 @@ class _Checker:
     def _self(self, F: np.ndarray, C: np.ndarray, cap: float = _CAP) -> np.ndarray:
         """Self clearance per configuration, all link pairs at once.
 
-        A link pair whose bounding spheres are ≥ ``cap`` apart contributes
-        that bound; for the others a sphere of one link farther than ``cap``
-        from the other link's bounding sphere is dropped (every pair with it
-        is at least that far: triangle inequality), and the pair contributes
-        the minimum over its remaining sphere pairs (closed form), or ``cap``
-        when none remain.  So min(result, cap) equals min(exact, cap)."""
+        The pairs come in blocks: a sphere group of one link against a group
+        of the other (:class:`_SelfArrays`).  A block whose group bounding
+        spheres are ≥ ``cap`` apart contributes that bound; in the others a
+        sphere farther than ``cap`` from the other group's bounding sphere is
+        dropped (every pair with it is at least that far: triangle
+        inequality), and the block contributes the minimum over its remaining
+        sphere pairs (closed form), or ``cap`` when none remain.  So
+        min(result, cap) equals min(exact, cap)."""
         sp = self.self_arrays
         B = len(F)
         if len(sp.a) == 0:
