@@ -45,6 +45,18 @@ def browser():
         b.close()
 
 
+def signed_in(browser, url: str, token: str, height: int = 1000):
+    """A new page signed in with ``token``, and the list its page errors go to."""
+    page = browser.new_page(viewport={"width": 1400, "height": height})
+    errors: list[str] = []
+    page.on("pageerror", lambda e: errors.append(str(e)))
+    page.goto(url + "/")
+    page.wait_for_selector("#login:not([hidden])")
+    page.fill("#login-token", token)
+    page.click("#login-form button[type=submit]")
+    return page, errors
+
+
 def test_console_plan_approve_and_scene(browser, tmp_path: Path) -> None:
     settings = make_settings(tmp_path / "var", port=free_port(), scene_port=free_port())
     with live_server(settings) as (url, tokens, app):
@@ -145,13 +157,7 @@ def test_viewer_gets_a_read_only_console(browser, tmp_path: Path) -> None:
             headers={"Authorization": f"Bearer {plan_token}"},
         )
         pid = r.json()["id"]
-        page = browser.new_page(viewport={"width": 1400, "height": 1000})
-        errors: list[str] = []
-        page.on("pageerror", lambda e: errors.append(str(e)))
-        page.goto(url + "/")
-        page.wait_for_selector("#login:not([hidden])")
-        page.fill("#login-token", tokens["viewer"])
-        page.click("#login-form button[type=submit]")
+        page, errors = signed_in(browser, url, tokens["viewer"])
         page.wait_for_selector("#kind option[value='demo.route']", state="attached")
         assert "viewer" in page.inner_text("#whoami")
         page.wait_for_selector("#readonly:not([hidden])")
@@ -168,11 +174,7 @@ def test_viewer_gets_a_read_only_console(browser, tmp_path: Path) -> None:
         assert store.get_plan(pid).state == "planned"
         assert not errors, errors
         # the operator's console: E-stop on screen, Plan and Approve enabled
-        op = browser.new_page(viewport={"width": 1400, "height": 1000})
-        op.goto(url + "/")
-        op.wait_for_selector("#login:not([hidden])")
-        op.fill("#login-token", tokens["operator"])
-        op.click("#login-form button[type=submit]")
+        op, _ = signed_in(browser, url, tokens["operator"])
         op.wait_for_selector("#kind option[value='demo.route']", state="attached")
         assert op.is_visible("#estop") and not op.is_visible("#readonly")
         assert op.is_enabled("#submit-plan")
@@ -228,12 +230,7 @@ def test_dispatch_to_emulator_then_estop(browser, tmp_path: Path) -> None:
     with live_server(settings) as (url, tokens, app):
         for name in app.state.services.dispatch.robot_names():
             assert app.state.services.dispatch.wait_connected(name, 30)
-        page = browser.new_page(viewport={"width": 1400, "height": 1100})
-        errors: list[str] = []
-        page.on("pageerror", lambda e: errors.append(str(e)))
-        page.goto(url + "/")
-        page.fill("#login-token", tokens["operator"])
-        page.click("#login-form button[type=submit]")
+        page, errors = signed_in(browser, url, tokens["operator"], height=1100)
         page.wait_for_selector("#robots tr[data-robot='ara'][data-link='ready']", timeout=30_000)
 
         # A sample cloud, loaded through the page.
@@ -312,12 +309,7 @@ def test_plots_have_axes_legend_hover_and_survive_200k_points(browser, tmp_path:
         auth = {"Authorization": f"Bearer {tokens['operator']}"}
         pid = httpx.post(f"{url}/api/v1/plans", json={"kind": "blast", "params": {}}, headers=auth)
         pid = pid.json()["id"]
-        page = browser.new_page(viewport={"width": 1400, "height": 1000})
-        errors: list[str] = []
-        page.on("pageerror", lambda e: errors.append(str(e)))
-        page.goto(url + "/")
-        page.fill("#login-token", tokens["operator"])
-        page.click("#login-form button[type=submit]")
+        page, errors = signed_in(browser, url, tokens["operator"])
         page.wait_for_selector(f"#plans tbody tr[data-id='{pid}'][data-state]", timeout=60_000)
         page.wait_for_selector(
             f"#plans tbody tr[data-id='{pid}'][data-state='planned']", timeout=120_000
