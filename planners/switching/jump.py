@@ -341,6 +341,41 @@ _EPS = 1e-9  # validity culls just above the margin (rounding of the bounds)
 _CHUNK = 128  # configurations per batch in :meth:`_Checker.clearances`
 
 
+@dataclass(frozen=True)
+class _Culling:
+    """What culls a robot's clearance checks, the same for every checker of
+    one plan (built once in :func:`_jump_context`): the self-pair blocks and
+    the scene's sphere groups — per group its link, bounding centre (link
+    frame) and radius, the group of every sphere, and one sphere of each
+    group (``first``)."""
+
+    self_arrays: _SelfArrays
+    scene: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]
+    first: np.ndarray
+
+    @staticmethod
+    def build(
+        robot: JumpRobot, pairs: list[tuple[int, int, bool, np.ndarray, np.ndarray]]
+    ) -> _Culling:
+        cov = robot.cover
+        groups = [
+            g
+            for k in np.unique(cov.link)
+            for g in _sphere_groups(cov, np.flatnonzero(cov.link == k))
+        ]
+        s_group = np.empty(len(cov.link), dtype=int)
+        for gi, g in enumerate(groups):
+            s_group[g[0]] = gi
+        first = np.array([g[0][0] for g in groups], dtype=int)
+        scene = (
+            cov.link[first],
+            np.array([g[1] for g in groups]).reshape(-1, 3),
+            np.array([g[2] for g in groups], dtype=float),
+            s_group,
+        )
+        return _Culling(_SelfArrays.build(robot, pairs), scene, first)
+
+
 class _Checker:
     """Batched validity of configurations for one phase (anchor + obstacles)."""
 
@@ -353,6 +388,7 @@ class _Checker:
         contact: PointObstacles | None,
         pairs: list[tuple[int, int, bool, np.ndarray, np.ndarray]],
         params: JumpParams,
+        culling: _Culling | None = None,
     ) -> None:
         self.robot, self.anchor, self.W = robot, anchor, anchor_pose
         self.obstacles, self.contact, self.pairs, self.params = obstacles, contact, pairs, params
@@ -362,22 +398,8 @@ class _Checker:
         self.check = ~np.isin(cov.link, anchored)
         self.foot = np.isin(cov.link, moving_foot) & self.check
         self.rest = self.check & ~self.foot
-        self.self_arrays = _SelfArrays.build(robot, pairs)
-        groups = [
-            g
-            for k in np.unique(cov.link)
-            for g in _sphere_groups(cov, np.flatnonzero(cov.link == k))
-        ]
-        s_group = np.empty(len(cov.link), dtype=int)
-        for gi, g in enumerate(groups):
-            s_group[g[0]] = gi
-        self.scene_groups = (
-            cov.link[[g[0][0] for g in groups]],
-            np.array([g[1] for g in groups]).reshape(-1, 3),
-            np.array([g[2] for g in groups], dtype=float),
-            s_group,
-        )
-        self._group_first = np.array([g[0][0] for g in groups], dtype=int)  # a sphere of each
+        c = culling if culling is not None else _Culling.build(robot, pairs)
+        self.self_arrays, self.scene_groups, self._group_first = c.self_arrays, c.scene, c.first
 
     def world(self, Q: np.ndarray) -> np.ndarray:
         F = self.robot.fk_all(np.atleast_2d(Q))
@@ -932,6 +954,7 @@ class _JumpContext:
     timings: dict[str, float] = field(default_factory=dict)
     attempts: int = 0
     foot2_start: np.ndarray = field(default_factory=lambda: np.eye(4))
+    culling: _Culling | None = None
 
     def zone(self, T: np.ndarray) -> PointObstacles:
         """Scene points outside the contact zone of a foot at ``T`` (the
@@ -942,7 +965,9 @@ class _JumpContext:
 
     def checker(self, anchor: int, W_anchor: np.ndarray, zone: PointObstacles | None) -> _Checker:
         """Validity checker with foot ``anchor`` standing at ``W_anchor``."""
-        return _Checker(self.rob, anchor, W_anchor, self.full, zone, self.pairs, self.params)
+        return _Checker(
+            self.rob, anchor, W_anchor, self.full, zone, self.pairs, self.params, self.culling
+        )
 
     def plan_free(
         self, checker: _Checker, start: np.ndarray, goals: np.ndarray
@@ -990,7 +1015,10 @@ def _jump_context(
     q0 = rob.q_mobile.copy()
     F0 = rob.fk_all(q0[None])[0]
     foot1_start = F0[-1]  # base frame (foot 2 = identity)
-    return _JumpContext(rob, params, footholds, all_pts, full, pairs, q0, foot1_start, rng)
+    return _JumpContext(
+        rob, params, footholds, all_pts, full, pairs, q0, foot1_start, rng,
+        culling=_Culling.build(rob, pairs),
+    )  # fmt: skip
 
 
 def _phase_b(cx: _JumpContext, free2: _Checker) -> tuple[list[np.ndarray], np.ndarray]:
