@@ -112,12 +112,18 @@ def sphere_cover(
     return SphereCover(np.concatenate(links), np.vstack(centres), np.concatenate(radii))
 
 
+#: Voxel side of the thinned obstacle points (:meth:`PointObstacles.maybe_within`).
+_THIN_M = 0.02
+
+
 class PointObstacles:
-    """Obstacle points in the planning frame, with a KD-tree."""
+    """Obstacle points in the planning frame, with a KD-tree (and, built on
+    first use, a second one over the points thinned to one per voxel)."""
 
     def __init__(self, points: np.ndarray) -> None:
         self.points = np.asarray(points, dtype=float).reshape(-1, 3)
         self.tree = cKDTree(self.points) if len(self.points) else None
+        self._thin: cKDTree | None = None
 
     def clearance(self, centres: np.ndarray, radii: np.ndarray, upper: float = 0.1) -> np.ndarray:
         """Distance from each sphere surface to the nearest point, capped at
@@ -127,9 +133,33 @@ class PointObstacles:
         flat = centres.reshape(-1, 3)
         if self.tree is None:
             return np.full(centres.shape[:-1], upper)
-        d, _ = self.tree.query(flat, k=1, distance_upper_bound=upper + float(radii.max()))
-        d = np.minimum(d, upper + float(radii.max())).reshape(centres.shape[:-1])
+        bound = upper + float(radii.max())
+        d, _ = self.tree.query(flat, k=1, distance_upper_bound=bound)
+        d = np.minimum(d, bound).reshape(centres.shape[:-1])
         return np.minimum(d - radii, upper)
+
+    def maybe_within(self, centres: np.ndarray, reach: np.ndarray) -> np.ndarray:
+        """Per centre (…, 3): whether some obstacle point may lie within its
+        ``reach`` (broadcast to …) — a superset of the points that do.
+
+        Answered on the obstacle points thinned to one per voxel of
+        :data:`_THIN_M` (every dropped point lies within v·√3 of a kept
+        one, so d(p, all) ≥ d(p, kept) − v·√3); the culling of sphere groups
+        needs only this yes/no, and the thinned tree answers it ~3× faster
+        than the full one at the reaches a group has (~0.2 m)."""
+        shape = centres.shape[:-1]
+        if self.tree is None:
+            return np.zeros(shape, dtype=bool)
+        if self._thin is None:
+            key = np.floor(self.points / _THIN_M).astype(np.int64)
+            _, first = np.unique(key, axis=0, return_index=True)
+            self._thin = cKDTree(self.points[np.sort(first)])
+        slack = _THIN_M * np.sqrt(3.0)
+        r = np.broadcast_to(reach, shape)
+        d, _ = self._thin.query(
+            centres.reshape(-1, 3), k=1, distance_upper_bound=float(r.max()) + slack
+        )
+        return d.reshape(shape) - slack < r
 
 
 def self_pairs(

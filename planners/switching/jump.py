@@ -427,9 +427,9 @@ class _Checker:
         gs = np.flatnonzero(subset[self._group_first])  # groups lie within one link
         FG = F[:, g_link[gs]]
         gc = np.einsum("bgij,gj->bgi", FG[..., :3, :3], g_centre[gs]) + FG[..., :3, 3]
-        lb = obs.clearance(gc, g_radius[gs], upper=cap)  # (B, groups) lower bounds
         need_group = np.zeros((len(C), len(g_link)), dtype=bool)
-        need_group[:, gs] = lb < cap
+        # A group's spheres can be within cap only if its bounding sphere is.
+        need_group[:, gs] = obs.maybe_within(gc, cap + g_radius[gs])
         need = need_group[:, s_group] & subset[None, :]
         out = np.full(C.shape[:2], cap)
         if need.any():

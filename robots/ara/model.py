@@ -75,10 +75,14 @@ class AraModel(RobotModel):
         A = O_R[None] + s * K[None] + (1.0 - c) * K2[None]  # (B, 6, 3, 3)
         out = np.zeros((B, len(self.link_names), 4, 4))
         out[:, :, 3, 3] = 1.0
-        R = np.broadcast_to(np.eye(3), (B, 3, 3))
-        p = np.zeros((B, 3))
-        out[:, 0, :3, :3] = R
-        for i in range(self.dof):
+        out[:, 0, 0, 0] = out[:, 0, 1, 1] = out[:, 0, 2, 2] = 1.0
+        # The base is the identity, so the first joint's frame is its own
+        # origin and rotation (I·x is exact: same values as the product).
+        p = np.repeat(O_t[0][None], B, axis=0)
+        R = A[:, 0]
+        out[:, 1, :3, :3] = R
+        out[:, 1, :3, 3] = p
+        for i in range(1, self.dof):
             p = p + R @ O_t[i]
             R = R @ A[:, i]
             out[:, i + 1, :3, :3] = R
@@ -123,8 +127,26 @@ class AraModel(RobotModel):
 
     def _joint_frames(self, frames: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """World axes (…,6,3) and origins (…,6,3) of the joints."""
-        axes = np.einsum("...ij,...j->...i", frames[..., 1 : self.dof + 1, :3, :3], self.joint_axes)
+        R = frames[..., 1 : self.dof + 1, :3, :3]
+        unit = self._unit_axes
+        if unit is None:
+            axes = np.einsum("...ij,...j->...i", R, self.joint_axes)
+        else:
+            # A joint axis along ±e_k is column k of its frame, up to sign:
+            # exactly what the product gives, without the product.
+            col, sign = unit
+            axes = np.swapaxes(R, -1, -2)[..., np.arange(self.dof), col, :] * sign[:, None]
         return axes, frames[..., 1 : self.dof + 1, :3, 3]
+
+    @cached_property
+    def _unit_axes(self) -> tuple[np.ndarray, np.ndarray] | None:
+        """(column, sign) per joint when every axis is ±e_k, else ``None``."""
+        A = np.asarray(self.joint_axes, float)
+        col = np.argmax(np.abs(A), axis=1)
+        sign = A[np.arange(len(A)), col]
+        if not np.array_equal(np.abs(sign), np.ones(len(A))) or np.count_nonzero(A) != len(A):
+            return None
+        return col, sign
 
     def jacobian(self, q: np.ndarray, link: str | None = None) -> np.ndarray:
         """6×n geometric Jacobian ``[v; ω]`` of ``link`` (default foot1_sole) in
@@ -138,7 +160,7 @@ class AraModel(RobotModel):
         axes, origins = self._joint_frames(frames)
         p_end = frames[..., k, :3, 3]
         J = np.concatenate(
-            [np.cross(axes, p_end[..., None, :] - origins), axes], axis=-1
+            [_cross(axes, p_end[..., None, :] - origins), axes], axis=-1
         )  # (…,6 joints, 6)
         J = np.swapaxes(J, -1, -2)
         if k != -1:
@@ -188,16 +210,19 @@ class AraModel(RobotModel):
             dp = T[:3, 3] - E[:, :3, 3]
             # Orientation error ½ Σ_i r_i × r_d,i (Siciliano eq. 3.85): exact
             # zero at the goal, well behaved away from 180° errors.
-            dw = 0.5 * np.cross(E[:, :3, :3], T[None, :3, :3], axis=1).sum(axis=2)
+            dw = 0.5 * _cross(E[:, :3, :3], T[None, :3, :3], axis=1).sum(axis=2)
             err = np.concatenate([dp, dw], axis=1)
-            ok = (np.linalg.norm(dp, axis=1) < tol) & (np.linalg.norm(dw, axis=1) < tol)
+            # ‖·‖ as np.linalg.norm computes it, without its dispatch.
+            ok = (np.sqrt(np.add.reduce(dp * dp, axis=1)) < tol) & (
+                np.sqrt(np.add.reduce(dw * dw, axis=1)) < tol
+            )
             idx = np.nonzero(active)[0]
             done[idx[ok]] = True
             if ok.all():
                 break
             axes, origins = self._joint_frames(frames)
             J = np.swapaxes(
-                np.concatenate([np.cross(axes, E[:, None, :3, 3] - origins), axes], axis=-1),
+                np.concatenate([_cross(axes, E[:, None, :3, 3] - origins), axes], axis=-1),
                 -1,
                 -2,
             )
@@ -247,6 +272,22 @@ class AraModel(RobotModel):
         if len(sols) == 0:
             sols = self.ik_solutions(T, q0=q0, n_seeds=192, seed=1)
         return sols[0] if len(sols) else None
+
+
+_NEXT = np.array([1, 2, 0])
+_PREV = np.array([2, 0, 1])
+
+
+def _cross(a: np.ndarray, b: np.ndarray, axis: int = -1) -> np.ndarray:
+    """``np.cross(a, b, axis=axis)`` for 3-vectors along ``axis``, with the
+    same products and differences (so the same values) but without
+    ``np.cross``'s axis shuffling, which cost more than the arithmetic in
+    the IK loop (measured: ~90 µs → ~15 µs per call at 49 × 6 vectors)."""
+    if axis == -1 or axis == a.ndim - 1:
+        return a[..., _NEXT] * b[..., _PREV] - a[..., _PREV] * b[..., _NEXT]
+    if axis == 1:
+        return a[:, _NEXT] * b[:, _PREV] - a[:, _PREV] * b[:, _NEXT]
+    raise ValueError(f"_cross: axis {axis} not supported")
 
 
 def _chain_joints(urdf_path: Path, end: str = "foot1_sole") -> tuple[str, list[Any]]:

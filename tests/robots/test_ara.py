@@ -111,3 +111,23 @@ def test_params_agree_with_urdf():
     for line in text.splitlines():
         if "=" in line and not line.lstrip().startswith("#"):
             assert "# seed" in line or "# chosen" in line, line
+
+
+@settings(max_examples=30, deadline=None)
+@given(seed=st.integers(0, 2**16), b=st.integers(1, 60))
+def test_cross_and_unit_axes_equal_the_numpy_forms(seed, b):
+    """The IK loop's shortcuts give the very values of the forms they
+    replace: ``_cross`` = ``np.cross`` (last axis and axis 1), joint axes
+    taken as frame columns = the einsum with the axis vectors."""
+    from robots.ara.model import _cross
+
+    rng = np.random.default_rng(seed)
+    a, c = rng.normal(size=(b, 6, 3)), rng.normal(size=(b, 6, 3))
+    np.testing.assert_array_equal(_cross(a, c), np.cross(a, c))
+    A, C = rng.normal(size=(b, 3, 3)), rng.normal(size=(1, 3, 3))
+    np.testing.assert_array_equal(_cross(A, C, axis=1), np.cross(A, C, axis=1))
+    frames = ARA.fk_all(rng.uniform(LO, HI, (b, 6)))
+    axes, origins = ARA._joint_frames(frames)
+    want = np.einsum("...ij,...j->...i", frames[..., 1:7, :3, :3], ARA.joint_axes)
+    np.testing.assert_array_equal(axes, want)
+    np.testing.assert_array_equal(origins, frames[..., 1:7, :3, 3])

@@ -230,3 +230,29 @@ def test_self_steps_bound_the_self_clearance_change(cx, anchor, sigma, seed):
     assert np.all(np.abs(np.diff(exact)) <= bound + 1e-12)
     other = context.checker(1 - anchor, np.eye(4) if anchor else W, None)
     np.testing.assert_allclose(other.self_steps(Q), bound, rtol=0, atol=1e-12)
+
+
+@settings(max_examples=40, deadline=None)
+@given(
+    n_pts=st.integers(1, 400),
+    spacing=st.sampled_from([0.004, 0.01, 0.03, 0.1]),
+    reach=st.floats(0.0, 0.4),
+    seed=st.integers(0, 2**16),
+)
+def test_maybe_within_is_a_superset_of_brute_force(n_pts, spacing, reach, seed):
+    """The thinned-tree test never says "far" of a centre that has an
+    obstacle point within its reach (brute force over every point), and is
+    not vacuous: a centre beyond reach + v·√3 of every point is "far"."""
+    from planners.switching.collision import _THIN_M, PointObstacles
+
+    rng = np.random.default_rng(seed)
+    pts = rng.integers(0, 12, (n_pts, 3)) * spacing + rng.normal(0, spacing / 4, (n_pts, 3))
+    obs = PointObstacles(pts)
+    centres = rng.uniform(pts.min(0) - 0.3, pts.max(0) + 0.3, (7, 5, 3))
+    radii = rng.uniform(0.0, reach, (7, 5))
+    got = obs.maybe_within(centres, radii)
+    d = np.linalg.norm(centres[..., None, :] - pts, axis=-1).min(axis=-1)
+    assert got.shape == (7, 5)
+    assert np.all(got[d < radii])  # superset: nothing within reach is called far
+    assert not np.any(got[d >= radii + _THIN_M * np.sqrt(3.0) + 1e-12])
+    assert not PointObstacles(np.zeros((0, 3))).maybe_within(centres, radii).any()
