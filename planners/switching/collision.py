@@ -159,7 +159,7 @@ class PointObstacles:
         d, _ = self._thin.query(
             centres.reshape(-1, 3), k=1, distance_upper_bound=float(r.max()) + slack
         )
-        return d.reshape(shape) - slack < r
+        return np.asarray(d).reshape(shape) - slack < r
 
 
 def self_pairs(
