@@ -376,6 +376,17 @@ class _Culling:
         return _Culling(_SelfArrays.build(robot, pairs), scene, first)
 
 
+def _points_in(F: np.ndarray, c: np.ndarray) -> np.ndarray:
+    """Points ``c`` (G,3), each in its own frame ``F`` (B,G,4,4) → (B,G,3).
+    Written out per column: ~4× faster than the einsum at these sizes."""
+    return (
+        F[..., :3, 0] * c[:, 0, None]
+        + F[..., :3, 1] * c[:, 1, None]
+        + F[..., :3, 2] * c[:, 2, None]
+        + F[..., :3, 3]
+    )
+
+
 class _Checker:
     """Batched validity of configurations for one phase (anchor + obstacles)."""
 
@@ -399,14 +410,15 @@ class _Checker:
         self.foot = np.isin(cov.link, moving_foot) & self.check
         self.rest = self.check & ~self.foot
         c = culling if culling is not None else _Culling.build(robot, pairs)
+        self._W_is_identity = bool(np.array_equal(anchor_pose, np.eye(4)))
         self.self_arrays, self.scene_groups, self._group_first = c.self_arrays, c.scene, c.first
 
     def world(self, Q: np.ndarray) -> np.ndarray:
         F = self.robot.fk_all(np.atleast_2d(Q))
         if self.anchor == 0:
-            return np.einsum("ij,bljk->blik", self.W, F)
+            return F if self._W_is_identity else self.W @ F
         rel = np.linalg.inv(F[:, -1])
-        return np.einsum("ij,bjk,blkm->blim", self.W, rel, F)
+        return (self.W @ rel)[:, None] @ F
 
     def _scene(
         self,
@@ -425,8 +437,7 @@ class _Checker:
             return np.full(len(C), np.inf)
         g_link, g_centre, g_radius, s_group = self.scene_groups
         gs = np.flatnonzero(subset[self._group_first])  # groups lie within one link
-        FG = F[:, g_link[gs]]
-        gc = np.einsum("bgij,gj->bgi", FG[..., :3, :3], g_centre[gs]) + FG[..., :3, 3]
+        gc = _points_in(F[:, g_link[gs]], g_centre[gs])
         need_group = np.zeros((len(C), len(g_link)), dtype=bool)
         # A group's spheres can be within cap only if its bounding sphere is.
         need_group[:, gs] = obs.maybe_within(gc, cap + g_radius[gs])
@@ -461,8 +472,7 @@ class _Checker:
         B = len(F)
         if len(sp.a) == 0:
             return np.full(B, np.inf)
-        Fg = F[:, sp.g_link]  # each group's centre once (blocks share groups)
-        wg = np.einsum("bgij,gj->bgi", Fg[..., :3, :3], sp.g_centre) + Fg[..., :3, 3]
+        wg = _points_in(F[:, sp.g_link], sp.g_centre)  # each group's centre once
         ca, cb = wg[:, sp.ga], wg[:, sp.gb]
         bound = np.linalg.norm(ca - cb, axis=2) - sp.rab  # (B, P) link-pair bounds
         close = bound < cap
@@ -548,17 +558,22 @@ class _Checker:
         out = np.zeros(max(len(Q) - 1, 0))
         links = sorted({(a, b) for a, b, *_ in self.pairs})
         covers = (self.robot.cover, self.robot.self_cover)
+        centres = {  # b's spheres of both covers, in b's frame
+            b: np.vstack([cov.centre[cov.link == b] for cov in covers]) for _, b in links
+        }
         for k in range(0, len(Q) - 1, _CHUNK):
             F = self.robot.fk_all(Q[k : k + _CHUNK + 1])  # chain base: relative poses only
             for a, b in links:
-                rel = np.linalg.solve(F[:, a], F[:, b])  # b's frame in a's (B,4,4)
-                for cov in covers:
-                    c = cov.centre[cov.link == b]
-                    if not len(c):
-                        continue
-                    C = np.einsum("bij,sj->bsi", rel[:, :3, :3], c) + rel[:, None, :3, 3]
-                    moved = np.sqrt(((C[1:] - C[:-1]) ** 2).sum(axis=2)).max(axis=1)
-                    out[k : k + len(moved)] = np.maximum(out[k : k + len(moved)], moved)
+                c = centres[b]
+                if not len(c):
+                    continue
+                # b's frame in a's (rigid inverse of a's frame)
+                RaT = np.swapaxes(F[:, a, :3, :3], -1, -2)
+                R = RaT @ F[:, b, :3, :3]
+                t = (RaT @ (F[:, b, :3, 3] - F[:, a, :3, 3])[..., None])[..., 0]
+                C = c @ np.swapaxes(R, -1, -2) + t[:, None]
+                moved = np.sqrt(((C[1:] - C[:-1]) ** 2).sum(axis=2)).max(axis=1)
+                out[k : k + len(moved)] = np.maximum(out[k : k + len(moved)], moved)
         return out
 
     def clearances(self, Q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
