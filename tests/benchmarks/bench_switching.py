@@ -21,15 +21,22 @@ planners run on the same targets:
 A run succeeds when a plan comes back and passes every check: joint limits,
 joint speeds, clearance ≥ 1 cm along the path, self clearance ≥ 0, feet at
 their targets.
+
+Plans run with one BLAS thread, as the server's planning workers run them
+(``server/jobs.py``); ``BENCH_BLAS_THREADS=N`` changes that (on this 2-core
+machine two threads make the small solves of the IK slower, ~2.05 s against
+~1.80 s median).
 """
 
 from __future__ import annotations
 
+import os
 import sys
 import time
 from pathlib import Path
 
 import numpy as np
+from threadpoolctl import threadpool_limits
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
 
@@ -169,6 +176,9 @@ def main() -> None:
     which = sys.argv[3].split(",") if len(sys.argv) > 3 else ["steelpath", "baseline", "plain_rrt"]
     configs = {"steelpath": JumpParams(), "baseline": BASELINE, "plain_rrt": RRT_ONLY}
     rows: dict[str, list] = {name: [] for name in which}
+    blas = int(os.environ.get("BENCH_BLAS_THREADS", "1"))
+    threadpool_limits(blas, user_api="blas")
+    print(f"BLAS threads per plan: {blas}", flush=True)
     for k, (T, pts) in enumerate(targets):
         for name in which:
             params = JumpParams(**{**configs[name].__dict__, "seed": k})
