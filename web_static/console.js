@@ -20,7 +20,9 @@ async function api(method, path, body, isForm) {
     let d = data && data.detail !== undefined ? data.detail : data;
     if (d && typeof d === "object" && d.message) d = d.message;
     if (Array.isArray(d)) d = d.map((e) => `${(e.loc || []).join(".")}: ${e.msg}`).join("\n");
-    throw new Error(`HTTP ${r.status}: ${typeof d === "string" ? d : JSON.stringify(d)}`);
+    const err = new Error(`HTTP ${r.status}: ${typeof d === "string" ? d : JSON.stringify(d)}`);
+    err.detail = data && data.detail !== undefined ? data.detail : null;
+    throw err;
   }
   return data;
 }
@@ -115,7 +117,11 @@ async function loadKinds() {
     state.kinds[k.name] = k;
     sel.append(el("option", { value: k.name }, `${k.name} — ${k.title}`));
   }
-  sel.addEventListener("change", () => { state.revising = null; showKind(); });
+  sel.addEventListener("change", () => {
+    // Another kind's params mean nothing here: start from its defaults.
+    state.revising = null; $("#params").value = ""; state.extraKeys = {};
+    showKind();
+  });
   showKind();
 }
 
@@ -123,15 +129,268 @@ function showKind() {
   const k = state.kinds[$("#kind").value];
   $("#kind-desc").textContent = k ? k.description.split("\n")[0].replaceAll("``", "") : "";
   $("#submit-plan").textContent = state.revising ? `Revise ${state.revising}` : "Plan";
+  buildForm(k);
+}
+
+// ------------------------------------------------------- params form
+// The form is built from the kind's params JSON schema (GET /kinds); the
+// JSON textarea (the "advanced" tab) holds what differs from the defaults
+// and is what gets submitted, so the two can never disagree: every form
+// edit rewrites the JSON, every valid JSON edit refills the form.
+// Units from a name's suffix (longest first): the form's labels and the
+// execution view's command lines.
+const UNITS = [
+  ["_m_s", "m/s"], ["_rad_s", "rad/s"], ["_deg_s2", "°/s²"], ["_mm_deg", "mm, °"], ["_mm", "mm"],
+  ["_m", "m"], ["_s", "s"], ["_rad", "rad"], ["_deg", "°"], ["_kg", "kg"], ["_pct", "%"], ["_hz", "Hz"],
+];
+const COMMON_FIELDS = 8;  // scalar fields shown before "More parameters"
+
+function labelOf(name, prop) {
+  const u = UNITS.find(([suffix]) => name.endsWith(suffix) && name.length > suffix.length);
+  let title = prop.title || name;
+  if (u) {  // "Voxel M" → "Voxel" (m): the suffix's words leave the title
+    const words = title.split(" ");
+    const n = u[0].split("_").length - 1;
+    if (words.length > n) title = words.slice(0, -n).join(" ");
+  }
+  return { title, unit: u ? u[1] : "" };
+}
+
+// The schema of one field with $ref / allOf resolved and Optional (anyOf
+// with null) unwrapped: { base, nullable }.
+function resolveField(prop, defs) {
+  const deref = (p) => {
+    if (p && p.$ref) return defs[p.$ref.split("/").pop()] || {};
+    if (p && p.allOf && p.allOf.length === 1) return deref(p.allOf[0]);
+    return p || {};
+  };
+  let p = deref(prop);
+  let nullable = false;
+  if (p.anyOf) {
+    const rest = p.anyOf.filter((o) => o.type !== "null");
+    nullable = rest.length < p.anyOf.length;
+    p = rest.length === 1 ? deref(rest[0]) : { anyOf: rest };
+  }
+  return { base: { ...prop, ...p, anyOf: p.anyOf }, nullable };
+}
+
+function fieldKind(base) {
+  if (base.enum) return "enum";
+  if (base.type === "boolean") return "bool";
+  if (base.type === "integer" || base.type === "number") return "number";
+  if (base.type === "string") return "string";
+  return "json";  // arrays, tuples, nested models, unions: edited as JSON
+}
+
+function buildForm(k) {
+  const box = $("#params-form");
+  box.innerHTML = "";
+  state.form = null;
+  if (!k) return;
+  const schema = k.params_schema || {};
+  const defs = schema.$defs || {};
+  const fields = [];
+  for (const [name, prop] of Object.entries(schema.properties || {})) {
+    const { base, nullable } = resolveField(prop, defs);
+    fields.push({ name, prop, base, nullable, kind: fieldKind(base), dflt: k.defaults[name] });
+  }
+  const common = fields.filter((f) => f.kind !== "json").slice(0, COMMON_FIELDS);
+  const more = fields.filter((f) => !common.includes(f));
+  for (const f of common) box.append(fieldRow(f));
+  if (more.length) {
+    const det = el("details", {}, el("summary", {}, `More parameters (${more.length})`));
+    for (const f of more) det.append(fieldRow(f));
+    box.append(det);
+  }
+  state.form = { kind: k.name, fields };
+  formFromJson();
+}
+
+function fieldRow(f) {
+  const { title, unit } = labelOf(f.name, f.prop);
+  const id = `pf-${f.name}`;
+  let input;
+  if (f.kind === "enum") {
+    input = el("select", { id });
+    if (f.nullable) input.append(el("option", { value: "" }, "— none —"));
+    for (const v of f.base.enum) input.append(el("option", { value: JSON.stringify(v) }, String(v)));
+  } else if (f.kind === "bool") {
+    input = el("input", { id, type: "checkbox" });
+  } else if (f.kind === "number") {
+    input = el("input", { id, type: "number", step: f.base.type === "integer" ? "1" : "any" });
+    const lo = f.base.minimum ?? f.base.exclusiveMinimum;
+    const hi = f.base.maximum ?? f.base.exclusiveMaximum;
+    if (lo !== undefined) input.setAttribute("min", lo);
+    if (hi !== undefined) input.setAttribute("max", hi);
+    if (f.nullable) input.setAttribute("placeholder", "automatic");
+  } else if (f.kind === "string") {
+    input = el("input", { id, type: "text" });
+    if (f.nullable) input.setAttribute("placeholder", "none");
+  } else {
+    input = el("textarea", { id, rows: "2", spellcheck: "false", class: "json-field" });
+  }
+  input.dataset.field = f.name;
+  input.addEventListener(f.kind === "enum" || f.kind === "bool" ? "change" : "input", () => jsonFromForm());
+  const row = el("label", { class: "field", for: id, "data-field": f.name },
+    el("span", { class: "name" }, title, unit ? el("span", { class: "unit" }, ` (${unit})`) : ""),
+    input,
+    el("span", { class: "hint" }, (f.prop.description || "") + rangeText(f.base)),
+    el("span", { class: "field-error" }));
+  if (f.kind === "bool") { row.insertBefore(input, row.firstChild); row.classList.add("bool"); }
+  if (f.kind === "json" && f.nullable) input.setAttribute("placeholder", "none");
+  return row;
+}
+
+function rangeText(b) {
+  const parts = [];
+  if (b.minimum !== undefined) parts.push(`≥ ${b.minimum}`);
+  if (b.exclusiveMinimum !== undefined) parts.push(`> ${b.exclusiveMinimum}`);
+  if (b.maximum !== undefined) parts.push(`≤ ${b.maximum}`);
+  if (b.exclusiveMaximum !== undefined) parts.push(`< ${b.exclusiveMaximum}`);
+  return parts.length ? ` [${parts.join(", ")}]` : "";
+}
+
+function setFieldError(name, msg) {
+  const row = document.querySelector(`#params-form .field[data-field="${name}"]`);
+  if (!row) return false;
+  row.classList.toggle("invalid", !!msg);
+  row.querySelector(".field-error").textContent = msg || "";
+  if (msg) { const d = row.closest("details"); if (d) d.open = true; }
+  return true;
+}
+
+function clearFieldErrors() {
+  for (const r of document.querySelectorAll("#params-form .field.invalid")) {
+    r.classList.remove("invalid"); r.querySelector(".field-error").textContent = "";
+  }
+  $("#form-unknown").textContent = "";
+}
+
+// One field's value from its input: { value } or { error }.
+function readField(f) {
+  const input = document.getElementById(`pf-${f.name}`);
+  if (f.kind === "bool") return { value: input.checked };
+  const raw = input.value;
+  if (f.kind === "enum") return raw === "" ? { value: null } : { value: JSON.parse(raw) };
+  if (raw.trim() === "") {
+    if (f.nullable) return { value: null };
+    if (f.kind === "string") return { value: "" };
+    return { error: "a value is required" };
+  }
+  if (f.kind === "number") {
+    const v = Number(raw);
+    if (!Number.isFinite(v)) return { error: `not a number: ${raw}` };
+    if (f.base.type === "integer" && !Number.isInteger(v)) return { error: "must be a whole number" };
+    const b = f.base;
+    if (b.minimum !== undefined && v < b.minimum) return { error: `must be ≥ ${b.minimum}` };
+    if (b.exclusiveMinimum !== undefined && v <= b.exclusiveMinimum) return { error: `must be > ${b.exclusiveMinimum}` };
+    if (b.maximum !== undefined && v > b.maximum) return { error: `must be ≤ ${b.maximum}` };
+    if (b.exclusiveMaximum !== undefined && v >= b.exclusiveMaximum) return { error: `must be < ${b.exclusiveMaximum}` };
+    return { value: v };
+  }
+  if (f.kind === "string") return { value: raw };
+  try { return { value: JSON.parse(raw) }; } catch (e) { return { error: `not valid JSON: ${e.message}` }; }
+}
+
+function writeField(f, v) {
+  const input = document.getElementById(`pf-${f.name}`);
+  if (!input) return;
+  if (f.kind === "bool") input.checked = !!v;
+  else if (f.kind === "enum") input.value = v === null || v === undefined ? "" : JSON.stringify(v);
+  else if (f.kind === "json") input.value = v === undefined || (v === null && f.nullable) ? "" : JSON.stringify(v);
+  else input.value = v === null || v === undefined ? "" : String(v);
+  input.closest(".field").classList.toggle("changed", JSON.stringify(v) !== JSON.stringify(f.dflt));
+}
+
+// Form → JSON: the fields that differ from the defaults.
+function jsonFromForm() {
+  if (!state.form) return;
+  clearFieldErrors();
+  const out = {};
+  let bad = false;
+  for (const f of state.form.fields) {
+    const r = readField(f);
+    if (r.error) { setFieldError(f.name, r.error); bad = true; continue; }
+    document.querySelector(`#params-form .field[data-field="${f.name}"]`)
+      .classList.toggle("changed", JSON.stringify(r.value) !== JSON.stringify(f.dflt));
+    if (JSON.stringify(r.value) !== JSON.stringify(f.dflt)) out[f.name] = r.value;
+  }
+  for (const [key, v] of Object.entries(state.extraKeys || {})) out[key] = v;  // shown as unknown
+  if (!bad) $("#params").value = Object.keys(out).length ? JSON.stringify(out, null, 2) : "";
+  return !bad;
+}
+
+// JSON → form: defaults overlaid with the JSON's values; unknown keys named.
+function formFromJson() {
+  if (!state.form) return;
+  const text = $("#params").value.trim();
+  let obj = {};
+  if (text) {
+    try { obj = JSON.parse(text); } catch (e) { $("#form-unknown").textContent = `JSON: ${e.message}`; return; }
+    if (obj === null || typeof obj !== "object" || Array.isArray(obj)) {
+      $("#form-unknown").textContent = "params must be a JSON object"; return;
+    }
+  }
+  clearFieldErrors();
+  const known = new Set(state.form.fields.map((f) => f.name));
+  state.extraKeys = {};
+  for (const [key, v] of Object.entries(obj)) if (!known.has(key)) state.extraKeys[key] = v;
+  const unknown = Object.keys(state.extraKeys);
+  if (unknown.length) {
+    $("#form-unknown").textContent =
+      `unknown field${unknown.length > 1 ? "s" : ""} ${unknown.map((u) => `'${u}'`).join(", ")}: ` +
+      `${state.form.kind} has no such parameter (see the form for the ones it has)`;
+  }
+  for (const f of state.form.fields) writeField(f, f.name in obj ? obj[f.name] : f.dflt);
+}
+
+function showTab(which) {
+  const json = which === "json";
+  if (!json && !$("#params-json").hidden) formFromJson();
+  if (json && !$("#params-form").hidden) jsonFromForm();
+  $("#params-json").hidden = !json;
+  $("#params-form").hidden = json;
+  $("#tab-json").classList.toggle("active", json);
+  $("#tab-form").classList.toggle("active", !json);
+  $("#tab-json").setAttribute("aria-selected", String(json));
+  $("#tab-form").setAttribute("aria-selected", String(!json));
+}
+$("#tab-form").addEventListener("click", () => showTab("form"));
+$("#tab-json").addEventListener("click", () => showTab("json"));
+$("#params").addEventListener("input", () => formFromJson());
+
+// A 422 from the server names the field: shown at the field when the form
+// has it, at the top otherwise.
+function showServerErrors(err) {
+  const detail = err.detail;
+  if (!Array.isArray(detail)) return false;
+  const known = new Set((state.form ? state.form.fields : []).map((f) => f.name));
+  if (detail.some((e) => known.has(String((e.loc || [])[0]))) && $("#params-form").hidden) {
+    showTab("form");  // the errors are shown at their fields
+  }
+  let shown = false;
+  for (const e of detail) {
+    const name = (e.loc || [])[0];
+    if (e.type === "extra_forbidden") {
+      $("#form-unknown").textContent += `unknown field '${(e.loc || []).join(".")}' `; shown = true;
+    } else if (name !== undefined && setFieldError(String(name), `${(e.loc || []).slice(1).join(".")} ${e.msg}`.trim())) {
+      shown = true;
+    }
+  }
+  return shown;
 }
 
 $("#defaults").addEventListener("click", () => {
-  const k = state.kinds[$("#kind").value];
-  if (k) $("#params").value = JSON.stringify(k.defaults, null, 2);
+  $("#params").value = "";
+  state.extraKeys = {};
+  formFromJson();
 });
 
 $("#submit-plan").addEventListener("click", async () => {
   $("#submit-error").textContent = "";
+  if (!$("#params-form").hidden && !jsonFromForm()) {
+    $("#submit-error").textContent = "fix the marked fields first"; return;
+  }
   let params = {};
   const text = $("#params").value.trim();
   if (text) {
@@ -145,7 +404,10 @@ $("#submit-plan").addEventListener("click", async () => {
     upsertPlan(plan);
     await select(plan.id);
     showInScene(plan.id);
-  } catch (e) { $("#submit-error").textContent = e.message; }
+  } catch (e) {
+    showServerErrors(e);
+    $("#submit-error").textContent = e.message;
+  }
 });
 
 // ------------------------------------------------------------------ clouds
@@ -333,9 +595,10 @@ $("#revise").addEventListener("click", () => {
   if (!p) return;
   state.revising = p.id;
   $("#kind").value = p.kind;
-  $("#params").value = JSON.stringify(p.params, null, 2);
-  showKind();
-  $("#params").focus();
+  showKind();  // rebuilds the form for the plan's kind …
+  $("#params").value = Object.keys(p.params || {}).length ? JSON.stringify(p.params, null, 2) : "";
+  formFromJson();  // … and fills it with the plan's params
+  showTab("form");
 });
 $("#delete").addEventListener("click", async () => {
   if (!confirm(`Delete plan ${state.selected}?`)) return;
@@ -470,7 +733,7 @@ const NEXT_ACTION = {
 
 // A robot command as a line: its op, then each field with the unit its name
 // carries (speeds_m_s → m/s, duration_s → s, …).
-const UNITS = [["_m_s", "m/s"], ["_rad_s", "rad/s"], ["_rad", "rad"], ["_deg", "°"], ["_mm", "mm"], ["_m", "m"], ["_s", "s"]];
+// (UNITS: the suffix table the params form uses too.)
 function describeCommand(c) {
   const num = (v) => (typeof v === "number" ? Number(v.toPrecision(4)).toString() : String(v));
   const parts = [];

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import json
+
 import math
 import os
 import shutil
@@ -73,7 +75,7 @@ def test_console_plan_approve_and_scene(browser, tmp_path: Path) -> None:
         assert "operator" in page.inner_text("#whoami")
 
         page.select_option("#kind", "demo.route")
-        page.fill("#params", '{"end": "c1"}')
+        page.fill("#pf-end", "c1")  # the form built from the kind's schema
         page.click("#submit-plan")
         # The list is re-rendered on every event: use locators, not element handles.
         page.wait_for_selector("#plans tbody tr[data-state='planned']", timeout=60_000)
@@ -199,6 +201,7 @@ def test_api_docs_render_offline(browser, tmp_path: Path) -> None:
 
 def _plan_and_approve(page, params: str) -> str:
     page.select_option("#kind", "demo.route")
+    page.click("#tab-json")
     page.fill("#params", params)
     before = set(
         page.eval_on_selector_all("#plans tbody tr", "rows => rows.map(r => r.dataset.id)")
@@ -344,4 +347,88 @@ def test_plots_have_axes_legend_hover_and_survive_200k_points(browser, tmp_path:
         assert page.locator("#d-plots .plot canvas").count() == 1
         ARTIFACTS.mkdir(exist_ok=True)
         page.locator("#d-plots").screenshot(path=str(ARTIFACTS / "console-plots.png"))
+        assert not errors, errors
+
+
+def test_params_form_from_the_kind_schema(browser, tmp_path: Path) -> None:
+    """New plan is a form built from GET /kinds' schema: labels with units,
+    bounds, enums as selects, booleans as boxes, defaults filled in; a value
+    out of bounds is marked at its field and nothing is submitted; the JSON
+    tab holds what differs from the defaults and stays in sync both ways; an
+    unknown key is named before and by the server (422), and a 422 about a
+    field is shown at that field; Revise opens the form on the plan's params."""
+    settings = make_settings(tmp_path / "var", port=free_port(), scene_port=free_port())
+    with live_server(settings) as (url, tokens, app):
+        page, errors = signed_in(browser, url, tokens["operator"])
+        page.wait_for_selector("#kind option[value='ara.navigate']", state="attached")
+        store = app.state.services.store
+
+        page.select_option("#kind", "ara.navigate")
+        voxel = page.locator("#params-form .field[data-field='voxel_m']")
+        voxel_input = page.locator("#pf-voxel_m")
+        # voxel_m is past the first eight scalar fields: folded under "More".
+        page.click("#params-form details summary")
+        assert voxel.locator(".name").inner_text() == "Voxel (m)"
+        assert voxel_input.get_attribute("type") == "number"
+        assert voxel_input.get_attribute("max") == "0.1"
+        assert voxel_input.input_value() == "0.01"
+        assert "[> 0, ≤ 0.1]" in voxel.locator(".hint").inner_text()
+        seg = page.locator("#pf-segmentation")
+        assert seg.evaluate("e => e.tagName") == "SELECT"
+        assert seg.locator("option").all_inner_texts() == ["default", "thesis"]
+        assert page.is_checked("#pf-plan_paths")
+
+        n_before = len(store.list_plans())
+        voxel_input.fill("0.5")
+        assert "must be ≤ 0.1" in voxel.locator(".field-error").inner_text()
+        page.click("#submit-plan")
+        assert "fix the marked fields" in page.inner_text("#submit-error")
+        assert len(store.list_plans()) == n_before  # nothing was submitted
+
+        voxel_input.fill("0.02")
+        page.select_option("#pf-segmentation", label="thesis")
+        page.click("#tab-json")
+        assert json.loads(page.input_value("#params")) == {
+            "voxel_m": 0.02,
+            "segmentation": "thesis",
+        }
+        # JSON → form: a valid edit refills the form, an unknown key is named.
+        page.fill("#params", '{"voxel_m": 0.03, "strat": "b1"}')
+        assert "'strat'" in page.inner_text("#form-unknown")
+        page.click("#tab-form")
+        assert voxel_input.input_value() == "0.03"
+        assert page.locator("#pf-segmentation").input_value() == '"default"'
+        page.click("#submit-plan")  # the server refuses it and names the key
+        page.wait_for_function("document.querySelector('#submit-error').textContent.includes('strat')")
+        assert "422" in page.inner_text("#submit-error")
+        assert len(store.list_plans()) == n_before
+
+        # A 422 about a known field is shown at that field.
+        page.click("#tab-json")
+        page.fill("#params", '{"voxel_m": 0.5}')
+        page.click("#submit-plan")
+        page.wait_for_selector("#params-form .field.invalid[data-field='voxel_m']")
+        assert not page.is_hidden("#params-form")
+        assert "0.1" in voxel.locator(".field-error").inner_text()
+        assert len(store.list_plans()) == n_before
+
+        # A plan from the form, then Revise opens the form on its params.
+        page.select_option("#kind", "demo.route")
+        page.fill("#pf-end", "c1")
+        page.fill("#pf-max_length_m", "12")
+        page.click("#submit-plan")
+        page.wait_for_selector("#plans tbody tr[data-state='planned']", timeout=60_000)
+        plan = next(p for p in store.list_plans() if p.kind == "demo.route")
+        # (stored with the defaults filled in)
+        assert (plan.params["end"], plan.params["max_length_m"]) == ("c1", 12)
+        assert plan.params["start"] == "a0"
+        page.locator(f"#plans tbody tr[data-id='{plan.id}']").click()
+        page.wait_for_selector("#d-checks tr[data-check='route_length']")
+        page.click("#revise")
+        assert page.input_value("#pf-end") == "c1"
+        assert page.input_value("#pf-max_length_m") == "12"
+        assert "changed" in (
+            page.locator("#params-form .field[data-field='end']").get_attribute("class") or ""
+        )
+        assert page.inner_text("#submit-plan") == f"Revise {plan.id}"
         assert not errors, errors
