@@ -658,18 +658,34 @@ state.robots = [];
 state.execution = null;
 
 async function loadRobots() {
-  state.robots = await api("GET", "/robots");
+  renderRobots(await api("GET", "/robots"));
+}
+
+// Heartbeat ages from the last statuses, ticking locally: the statuses
+// themselves come with the event stream (no polling of GET /robots).
+function heartbeatAge(r) {
+  return r.last_heartbeat ? `${Math.max(0, Date.now() / 1000 - r.last_heartbeat).toFixed(1)} s ago` : "never";
+}
+setInterval(() => {
+  for (const r of state.robots || []) {
+    const cell = document.querySelector(`#robots tr[data-robot="${r.name}"] td.hb`);
+    if (cell) cell.textContent = heartbeatAge(r);
+  }
+}, 1000);
+
+function renderRobots(robots) {
+  state.robots = robots;
   const tb = $("#robots tbody");
   tb.innerHTML = "";
   for (const r of state.robots) {
-    const hb = r.last_heartbeat ? `${Math.max(0, Date.now() / 1000 - r.last_heartbeat).toFixed(1)} s ago` : "never";
+    const hb = heartbeatAge(r);
     const faults = (r.faults ? `0x${r.faults.toString(16)}` : "none") + (r.estop_latched ? " · E-STOP latched" : "");
     const clear = el("button", { class: "secondary operator-only", onclick: () => clearEstop(r.name) }, "clear E-stop");
     clear.disabled = !r.estop_latched;
     tb.append(el("tr", { "data-robot": r.name, "data-link": r.state },
       el("td", {}, r.name), el("td", { class: `link-${r.state}` }, r.state),
       el("td", { title: r.reason }, r.url + (r.emulated ? " (emulator)" : "")),
-      el("td", {}, hb), el("td", {}, faults), el("td", {}, clear)));
+      el("td", { class: "hb" }, hb), el("td", {}, faults), el("td", {}, clear)));
   }
   renderEstopBanner();
   applyRole();
@@ -779,7 +795,9 @@ $("#audit-more").addEventListener("click", () => { auditLimit = Math.min(2000, a
 // ------------------------------------------------------------------ events
 function openEvents() {
   if (state.events) state.events.close();
-  const es = new EventSource(API + "/events");
+  // Robots' statuses ride on the stream every 3 s (event: robots).
+  const es = new EventSource(API + "/events?robots_every_s=3");
+  es.addEventListener("robots", (m) => renderRobots(JSON.parse(m.data)));
   state.events = es;
   es.onopen = () => $("#conn").classList.add("live");
   es.onerror = () => $("#conn").classList.remove("live");
@@ -813,7 +831,18 @@ function openEvents() {
       if (t === "estop") { flash(`E-STOP (${d.robot}) by ${d.by}`, true); refreshRobots(); }
       if (t === "cloud") loadClouds();
       if (t === "execution" && state.execution && d.id === state.execution.id) showExecution(d);
-      if (t === "robot") { refreshRobots(); return; }
+      if (t === "robot") {
+        // A link-state change carries the new state: no need to ask again.
+        // A state report (frequent) changes nothing the table shows.
+        if (d.report !== undefined) return;
+        const r = (state.robots || []).find((x) => x.name === d.name);
+        const linkOnly = Object.keys(d).every((k) => ["id", "ts", "name", "url", "state", "reason"].includes(k));
+        if (r && d.state && linkOnly) {
+          r.state = d.state; if (d.reason !== undefined) r.reason = d.reason;
+          renderRobots(state.robots);
+        } else refreshRobots();  // E-stop clears, take-overs: rare, read them whole
+        return;
+      }
       refreshAudit();
       document.dispatchEvent(new CustomEvent("steelpath:" + t, { detail: d }));
     });
@@ -847,7 +876,6 @@ async function start() {
   applyRole();
   const health = await fetch(API + "/health").then((r) => r.json());
   await Promise.all([loadKinds(), loadSamples(), loadClouds(), loadPlans(), loadAudit(), loadRobots(), loadProposals()]);
-  setInterval(loadRobots, 3000);  // heartbeat ages keep moving even when nothing else does
   openEvents();
   if (health.scene.running && me.role !== "viewer") $("#scene").src = "/scene/";
   else $("#scene-msg").textContent = health.scene.running ? "the scene needs the operator role" : "scene not running";

@@ -111,6 +111,9 @@ class LinkServiceClient:
         self.restarts = 0
         self._status_lock = threading.Lock()
         self._status_cache: tuple[float, list[dict[str, Any]]] | None = None
+        # Bumped whenever the cache is dropped: an answer whose round trip
+        # began before a drop (an E-stop, a link change) is not cached.
+        self._status_gen = 0
         self._execution_states: dict[Any, Any] = {}  # last state pushed per execution
         self._refresh_guard = threading.Lock()
         self._refreshing = False
@@ -260,7 +263,7 @@ class LinkServiceClient:
 
     def _on_event(self, type_: str, data: dict[str, Any]) -> None:
         if self._changes_statuses(type_, data):
-            self._status_cache = None  # the next GET /robots asks afresh
+            self._drop_statuses()  # the next GET /robots asks afresh
         if type_ == "linkservice":
             self._ready.set()
             return
@@ -274,8 +277,12 @@ class LinkServiceClient:
     # ---------------------------------------------------------------- calling
     def _call(self, op: str, args: dict[str, Any], timeout: float = RPC_TIMEOUT_S) -> Any:
         if op not in _READ_OPS:
-            self._status_cache = None  # an operator action: statuses after it are fresh
+            self._drop_statuses()  # an operator action: statuses after it are fresh
         return self._roundtrip(op, args, timeout)
+
+    def _drop_statuses(self) -> None:
+        self._status_gen += 1
+        self._status_cache = None
 
     def _roundtrip(self, op: str, args: dict[str, Any], timeout: float) -> Any:
         rpc = self._rpc
@@ -365,8 +372,10 @@ class LinkServiceClient:
             cached = self._status_cache
             if cached is not None and time.monotonic() - cached[0] < self.STATUS_TTL_S:
                 return [dict(s) for s in cached[1]]
+            gen = self._status_gen
             statuses = [dict(s) for s in self._call("robot_statuses", {})]
-            self._status_cache = (time.monotonic(), statuses)
+            if gen == self._status_gen:  # no change was pushed meanwhile
+                self._status_cache = (time.monotonic(), statuses)
             return [dict(s) for s in statuses]
 
     def set_connection(
@@ -447,6 +456,7 @@ class LinkServiceClient:
                 raise LinkServiceUnavailable(
                     f"E-stop not confirmed by the robot-link service: {exc}"
                 ) from None
+        self._drop_statuses()  # the latch is set: no status from before it is shown again
         if not reply.get("ok"):
             _raise(reply.get("error") or {})
         return list(reply.get("result") or [])

@@ -7,7 +7,8 @@ import json
 from collections.abc import AsyncIterator
 from typing import Annotated
 
-from fastapi import APIRouter, Depends, Query, Request
+from fastapi import APIRouter, Depends, HTTPException, Query, Request
+from fastapi.concurrency import run_in_threadpool
 from fastapi.responses import StreamingResponse
 
 from server.auth import Viewer, until_invalid
@@ -25,16 +26,39 @@ async def events(
     heartbeat_s: Annotated[
         float, Query(ge=0.5, le=300, description="seconds between heartbeats")
     ] = 15.0,
+    robots_every_s: Annotated[
+        float,
+        Query(
+            ge=0,
+            le=300,
+            description="also send every robot's status (as GET /robots) this often, "
+            "as `event: robots` without an id; 0 (default) never; from 0.5 s",
+        ),
+    ] = 0.0,
     once: bool = False,
 ) -> StreamingResponse:
     """A ``text/event-stream``: ``event: plan|execution|robot|estop|cloud|proposal``,
     JSON ``data``; a last ``event: auth`` when the token is revoked or expires.
     Reconnecting clients send ``Last-Event-ID`` to replay what they missed
     (from a bounded history).  ``once=true`` sends the backlog and ends (for
-    scripts and tests)."""
+    scripts and tests).  With ``robots_every_s`` the stream also carries the
+    robots' statuses (heartbeats, faults, E-stop latches), so a console
+    follows them without polling ``GET /robots``."""
+    if 0 < robots_every_s < 0.5:
+        raise HTTPException(422, detail="robots_every_s must be 0 (off) or at least 0.5 s")
     last = request.headers.get("last-event-id")
     after = int(last) if last and last.isdigit() else (0 if once else None)
     queue = services.events.subscribe(after=after)
+    loop = asyncio.get_running_loop()
+
+    async def robots_event() -> bytes | None:
+        if services.dispatch is None:
+            return None
+        recent = getattr(services.dispatch, "recent_statuses", None)
+        statuses = recent() if recent is not None else None
+        if statuses is None:
+            statuses = await run_in_threadpool(services.dispatch.robot_statuses)
+        return f"event: robots\ndata: {json.dumps(statuses)}\n\n".encode()
 
     async def stream() -> AsyncIterator[bytes]:
         # Ends the stream (with a final ``event: auth``) once the token is
@@ -42,12 +66,19 @@ async def events(
         invalid = asyncio.create_task(until_invalid(services.store, who))
         try:
             yield b": steelpath event stream\n\n"
+            next_robots = loop.time() if robots_every_s and not once else None
             while True:
+                if next_robots is not None and loop.time() >= next_robots:
+                    snapshot = await robots_event()
+                    if snapshot is not None:
+                        yield snapshot
+                    next_robots = loop.time() + robots_every_s
+                wait = 0.05 if once else heartbeat_s
+                if next_robots is not None:
+                    wait = min(wait, max(0.0, next_robots - loop.time()))
                 get = asyncio.ensure_future(queue.get())
                 done, _ = await asyncio.wait(
-                    {get, invalid},
-                    timeout=0.05 if once else heartbeat_s,
-                    return_when=asyncio.FIRST_COMPLETED,
+                    {get, invalid}, timeout=wait, return_when=asyncio.FIRST_COMPLETED
                 )
                 if get not in done:
                     get.cancel()  # a cancelled Queue.get leaves its item queued
@@ -58,6 +89,8 @@ async def events(
                 if get not in done:
                     if once:
                         return
+                    if next_robots is not None and loop.time() >= next_robots:
+                        continue  # the robots' statuses are due: no heartbeat needed
                     yield b": heartbeat\n\n"
                     if await request.is_disconnected():
                         return

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import json
-
 import math
 import os
 import shutil
@@ -399,7 +398,9 @@ def test_params_form_from_the_kind_schema(browser, tmp_path: Path) -> None:
         assert voxel_input.input_value() == "0.03"
         assert page.locator("#pf-segmentation").input_value() == '"default"'
         page.click("#submit-plan")  # the server refuses it and names the key
-        page.wait_for_function("document.querySelector('#submit-error').textContent.includes('strat')")
+        page.wait_for_function(
+            "document.querySelector('#submit-error').textContent.includes('strat')"
+        )
         assert "422" in page.inner_text("#submit-error")
         assert len(store.list_plans()) == n_before
 
@@ -431,4 +432,28 @@ def test_params_form_from_the_kind_schema(browser, tmp_path: Path) -> None:
             page.locator("#params-form .field[data-field='end']").get_attribute("class") or ""
         )
         assert page.inner_text("#submit-plan") == f"Revise {plan.id}"
+        assert not errors, errors
+
+
+def test_console_follows_robots_on_the_event_stream(browser, tmp_path: Path) -> None:
+    """No polling: after the first load the robots' table is fed by the
+    event stream's `robots` snapshots, so an idle console sends no
+    GET /robots (the access log once grew ~9,300 lines a session)."""
+    settings = make_settings(tmp_path / "var", port=free_port(), scene_port=free_port())
+    with live_server(settings) as (url, tokens, app):
+        page, errors = signed_in(browser, url, tokens["viewer"])
+        page.wait_for_selector("#robots tbody tr[data-robot]")
+        names = set(
+            page.eval_on_selector_all("#robots tbody tr", "rs => rs.map(r => r.dataset.robot)")
+        )
+        assert names == {r["name"] for r in app.state.services.dispatch.robot_statuses()}
+        polled: list[str] = []
+        page.on("request", lambda r: polled.append(r.url) if "/api/v1/robots" in r.url else None)
+        # The table is re-rendered from the stream: mark it and watch it go.
+        page.evaluate("document.querySelector('#robots tbody tr').dataset.mark = '1'")
+        page.wait_for_function(
+            "!document.querySelector('#robots tbody tr[data-mark]')", timeout=10_000
+        )
+        page.wait_for_timeout(7_000)
+        assert polled == [], polled
         assert not errors, errors
