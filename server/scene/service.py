@@ -25,6 +25,7 @@ import numpy as np
 from server.lifecycle import PlanState
 from server.scene.context import Animation, DrawContext, current_scene_client
 from server.scene.drawers import drawer_for, robot_for
+from server.scene.framing import BoundsRecorder, apply_view, framing
 from server.scene.proposals import ProposalBook
 from server.scene.wsguard import TicketDesk, guarded_viser_start
 from server.store import PlanRecord, Store
@@ -91,6 +92,10 @@ class SceneService:
         # viser silently moves to the next free port: read back what it got.
         self.port = int(self._server.get_port())
         self._server.scene.set_up_direction("+z")
+        # The control panel starts minimized (one click opens it): it covered
+        # a third of the console's scene view.
+        with contextlib.suppress(AttributeError):  # viser without panel placement
+            self._server.gui.main_panel.minimize()
         self._server.scene.add_grid("/grid", width=10.0, height=10.0, cell_size=0.25, plane="xy")
         self._anim_thread = threading.Thread(target=self._animate, name="scene-anim", daemon=True)
         self._anim_thread.start()
@@ -145,8 +150,9 @@ class SceneService:
             draw = None
         if draw is None:
             return
+        recorder = BoundsRecorder(self._server.scene)
         ctx = DrawContext(
-            scene=self._server.scene,
+            scene=recorder,
             gui=self._server.gui,
             root="/plan",
             propose=lambda patch: self._on_propose(plan.id, patch),
@@ -162,6 +168,18 @@ class SceneService:
             )
         self._animations = list(ctx.animations)
         self._gui_handles = list(ctx.gui_handles)
+        self._frame(recorder.points)
+
+    def _frame(self, points: list[np.ndarray] | np.ndarray) -> None:
+        """Fit every viewer's camera to what was just drawn."""
+        view = framing(points, float(self._server.initial_camera.fov))
+        if view is not None:
+            apply_view(self._server, view)
+            self.current["view"] = {
+                "look_at": [round(float(v), 4) for v in view.look_at],
+                "position": [round(float(v), 4) for v in view.position],
+                "radius_m": round(view.radius, 4),
+            }
 
     def show_cloud(self, cloud_id: str) -> dict[str, Any]:
         rec = self.store.get_cloud(cloud_id)
@@ -187,6 +205,7 @@ class SceneService:
                 precision="float32",
                 position=tuple(center),
             )
+            self._frame(pts)
         return {"shown": rec.id, "points_drawn": len(pts)}
 
     def update_live_robot(self, robot: str, q: np.ndarray) -> None:
