@@ -648,6 +648,7 @@ async function decideProposal(id, action) {
       flash(`proposal ${id} accepted: planning ${r.id}`);
       upsertPlan(r);
       await select(r.id);
+      showInScene(r.id);  // the new plan is the selected one in both
     } else flash(`proposal ${id} dismissed`);
   } catch (e) { flash(e.message, true); }
   loadProposals();

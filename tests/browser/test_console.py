@@ -122,6 +122,12 @@ def test_console_plan_approve_and_scene(browser, tmp_path: Path) -> None:
         page.wait_for_selector("#proposals tr[data-proposal]", state="detached")
         (child,) = app.state.services.store.list_plans(parent_id=plan_id)
         assert child.params["start"] == "b1" and child.created_by.startswith("live-operator")
+        # … and the scene shows the new plan too: one selection in both.
+        for _ in range(50):
+            if app.state.services.scene.current.get("plan_id") == child.id:
+                break
+            page.wait_for_timeout(100)
+        assert app.state.services.scene.current.get("plan_id") == child.id
 
         # The E-stop answers and is recorded.
         page.click("#estop")
