@@ -486,6 +486,54 @@ async function select(id) {
   const p = await api("GET", `/plans/${id}`);
   upsertPlan(p);
   renderDetail(p);
+  renderComparison(p);
+}
+
+// A revision beside its parent: the params that changed, every check whose
+// verdict or value changed (a FAIL → PASS is better, PASS → FAIL worse) and
+// every metric both report, with the difference.  Metrics carry no "better"
+// direction in their schema, so only checks are judged.
+async function renderComparison(p) {
+  const box = $("#d-compare");
+  box.hidden = true;
+  if (!p.parent_id) return;
+  let parent;
+  try { parent = await api("GET", `/plans/${p.parent_id}`); } catch (e) { return; }
+  if (state.selected !== p.id) return;  // another plan was selected meanwhile
+  $("#d-compare-parent").textContent = parent.id;
+  const tb = box.querySelector("tbody");
+  tb.innerHTML = "";
+  const row = (cls, name, a, b, change, verdict) => {
+    const tr = el("tr", { class: cls, "data-compare": name },
+      el("td", {}, name), el("td", {}, a), el("td", {}, b), el("td", {}, change));
+    if (verdict) tr.dataset.verdict = verdict;
+    tb.append(tr);
+  };
+  const json = (v) => (v === undefined ? "–" : JSON.stringify(v));
+  const keys = new Set([...Object.keys(parent.params || {}), ...Object.keys(p.params || {})]);
+  for (const k of [...keys].sort()) {
+    const a = (parent.params || {})[k], b = (p.params || {})[k];
+    if (JSON.stringify(a) !== JSON.stringify(b)) row("param", `params.${k}`, json(a), json(b), "changed");
+  }
+  const pc = Object.fromEntries((parent.checks || []).map((c) => [c.name, c]));
+  for (const c of p.checks || []) {
+    const o = pc[c.name];
+    if (!o) { row("check", c.name, "–", c.passed ? "PASS" : "FAIL", "new check"); continue; }
+    if (o.passed !== c.passed) {
+      const better = c.passed;
+      row(`check ${better ? "better" : "worse"}`, c.name, o.passed ? "PASS" : "FAIL",
+        c.passed ? "PASS" : "FAIL", better ? "better: now passes" : "worse: now fails", better ? "better" : "worse");
+    } else if (typeof c.value === "number" && typeof o.value === "number" && c.value !== o.value) {
+      row("check", c.name, fmt(o.value), fmt(c.value), `${c.value > o.value ? "+" : ""}${fmt(c.value - o.value)}`);
+    }
+  }
+  const pm = parent.metrics || {};
+  for (const [k, v] of Object.entries(p.metrics || {}).sort()) {
+    if (typeof v !== "number" || typeof pm[k] !== "number" || v === pm[k]) continue;
+    row("metric", k, fmt(pm[k]), fmt(v), `${v > pm[k] ? "+" : ""}${fmt(v - pm[k])}`);
+  }
+  if (!tb.children.length) row("same", "no difference", "", "", "");
+  box.hidden = false;
 }
 
 function renderDetail(p) {

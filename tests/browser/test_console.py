@@ -6,6 +6,7 @@ import json
 import math
 import os
 import shutil
+import time
 from pathlib import Path
 
 import httpx
@@ -462,4 +463,53 @@ def test_console_follows_robots_on_the_event_stream(browser, tmp_path: Path) -> 
         )
         page.wait_for_timeout(7_000)
         assert polled == [], polled
+        assert not errors, errors
+
+
+def test_a_revision_is_compared_with_its_parent(browser, tmp_path: Path) -> None:
+    """The detail of a revision lists what changed against its parent: the
+    params, checks that flipped (judged better / worse) and metric changes."""
+    settings = make_settings(tmp_path / "var", port=free_port(), scene_port=free_port())
+    with live_server(settings) as (url, tokens, _app):
+        h = {"Authorization": f"Bearer {tokens['operator']}"}
+
+        def wait(pid: str) -> dict:
+            for _ in range(300):
+                p = httpx.get(f"{url}/api/v1/plans/{pid}", headers=h).json()
+                if p["state"] not in ("queued", "planning"):
+                    return p
+                time.sleep(0.1)
+            raise AssertionError(f"{pid} still planning")
+
+        r = httpx.post(
+            f"{url}/api/v1/plans",
+            json={"kind": "demo.route", "params": {"end": "c1", "max_length_m": 0.5}},
+            headers=h,
+        )
+        parent = wait(r.json()["id"])
+        assert not next(c for c in parent["checks"] if c["name"] == "route_length")["passed"]
+        r = httpx.post(
+            f"{url}/api/v1/plans/{parent['id']}/revise",
+            json={"params": {"max_length_m": 10}},
+            headers=h,
+        )
+        assert r.status_code in (200, 201, 202), r.text
+        child = wait(r.json()["id"])
+        page, errors = signed_in(browser, url, tokens["viewer"])
+        page.wait_for_selector(f"#plans tbody tr[data-id='{child['id']}']")
+        page.locator(f"#plans tbody tr[data-id='{child['id']}']").click()
+        page.wait_for_selector("#d-compare:not([hidden])")
+        assert parent["id"] in page.inner_text("#d-compare summary")
+        check = page.locator("#d-compare tr[data-compare='route_length']")
+        assert check.get_attribute("data-verdict") == "better"
+        assert "FAIL" in check.inner_text() and "PASS" in check.inner_text()
+        param = page.locator("#d-compare tr[data-compare='params.max_length_m']").inner_text()
+        assert "0.5" in param and "10" in param
+        # The parent itself has nothing to compare with.
+        page.locator(f"#plans tbody tr[data-id='{parent['id']}']").click()
+        page.wait_for_function(
+            f"document.querySelector('#d-title').textContent.startsWith('{parent['id']}')"
+        )
+        page.wait_for_timeout(300)
+        assert page.is_hidden("#d-compare")
         assert not errors, errors
