@@ -513,3 +513,40 @@ def test_a_revision_is_compared_with_its_parent(browser, tmp_path: Path) -> None
         page.wait_for_timeout(300)
         assert page.is_hidden("#d-compare")
         assert not errors, errors
+
+
+@pytest.mark.parametrize("width", [1280, 1920])
+def test_no_horizontal_overflow(browser, tmp_path: Path, width: int) -> None:
+    """From 1280 to 1920 px the console fits its width, with a plan, its
+    detail, its form and its comparison open (screenshots in the artifacts)."""
+    settings = make_settings(tmp_path / "var", port=free_port(), scene_port=free_port())
+    with live_server(settings) as (url, tokens, _app):
+        page, errors = signed_in(browser, url, tokens["operator"])
+        page.set_viewport_size({"width": width, "height": 1000})
+        page.wait_for_selector("#kind option[value='ara.navigate']", state="attached")
+        page.select_option("#kind", "ara.navigate")
+        page.click("#params-form details summary")  # every field of the longest form
+        page.select_option("#kind", "demo.route")
+        page.click("#submit-plan")
+        page.wait_for_selector("#plans tbody tr[data-state='planned']", timeout=60_000)
+        page.locator("#plans tbody tr[data-state='planned']").first.click()
+        page.wait_for_selector("#d-checks tr[data-check='route_length']")
+        page.click("#revise")
+        page.fill("#pf-max_length_m", "11")
+        page.click("#submit-plan")
+        page.wait_for_function(
+            "document.querySelectorAll('#plans tbody tr[data-state=planned]').length >= 2",
+            timeout=60_000,
+        )
+        page.wait_for_selector("#d-compare:not([hidden])")
+        overflow = page.evaluate("() => [document.documentElement.scrollWidth, window.innerWidth]")
+        ARTIFACTS.mkdir(exist_ok=True)
+        page.screenshot(path=str(ARTIFACTS / f"console-{width}.png"), full_page=True)
+        assert overflow[0] <= overflow[1], f"{width} px: page is {overflow[0]} px wide"
+        wide = page.evaluate(
+            """() => [...document.querySelectorAll('#app *')]
+                .filter(e => e.getBoundingClientRect().right > window.innerWidth + 1)
+                .map(e => e.id || e.tagName).slice(0, 5)"""
+        )
+        assert wide == [], wide
+        assert not errors, errors
