@@ -131,7 +131,9 @@ def cluster_geometry(
             boundary = _hull_polygon(pts)
         else:
             bpts = (
-                ncbe_boundary(uv[idx], sliding_factor=sliding_factor_m) if len(idx) >= 3 else uv[idx]
+                ncbe_boundary(uv[idx], sliding_factor=sliding_factor_m)
+                if len(idx) >= 3
+                else uv[idx]
             )
             boundary = star_polygon(bpts, centre)
         out.append(

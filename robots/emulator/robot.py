@@ -131,7 +131,9 @@ class StopEvent:
     """The robot stopped moving (or was told to while idle): when and why."""
 
     t: float  # time.monotonic() at the moment motion stopped
-    reason: str  # "estop" | "watchdog" | "link_lost" | "link_reset" | "abort" | "fault" | "shutdown"
+    reason: (
+        str  # "estop" | "watchdog" | "link_lost" | "link_reset" | "abort" | "fault" | "shutdown"
+    )
     moving: bool  # a command was executing
     index: int  # the command interrupted, −1 when none
 
@@ -569,9 +571,7 @@ class SimRobot:
 
     def report_due(self, now: float) -> bool:
         """A state report is owed and may go out at ``now`` (see ``min_report_gap_s``)."""
-        return self.changed and (
-            self.urgent or now - self._last_report >= self.min_report_gap_s
-        )
+        return self.changed and (self.urgent or now - self._last_report >= self.min_report_gap_s)
 
     def report_at(self) -> float | None:
         """When an owed progress report may go out; ``None`` when none is owed."""

@@ -112,9 +112,7 @@ class DispatchEngine:
         self._streamers: dict[str, Streamer] = {}
         # Latest report per robot, written to the store by the mirror thread:
         # the link I/O thread only drops it here (a dict store, never blocks).
-        self._mirror_q: queue.SimpleQueue[tuple[str, dict[str, Any]] | None] = (
-            queue.SimpleQueue()
-        )
+        self._mirror_q: queue.SimpleQueue[tuple[str, dict[str, Any]] | None] = queue.SimpleQueue()
         self._mirror_thread: threading.Thread | None = None
 
     # ------------------------------------------------------------- lifecycle
@@ -242,8 +240,10 @@ class DispatchEngine:
         r.link.clear_estop()
         if r.link.state in CONNECTED_STATES:
             r.link.wait_for(
-                lambda lk: lk.last_report is not None
-                and not int(lk.last_report.faults) & int(FaultFlag.ESTOP),
+                lambda lk: (
+                    lk.last_report is not None
+                    and not int(lk.last_report.faults) & int(FaultFlag.ESTOP)
+                ),
                 wait_s,
             )
         self.store.audit(actor, "robot", name, "clear-estop")

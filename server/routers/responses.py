@@ -143,7 +143,9 @@ class AllowFromSchema:
             if message["type"] == "http.response.start" and message["status"] == 405:
                 allowed = self._allowed(scope["path"])
                 if allowed:
-                    headers = [(k, v) for k, v in message.get("headers", []) if k.lower() != b"allow"]
+                    headers = [
+                        (k, v) for k, v in message.get("headers", []) if k.lower() != b"allow"
+                    ]
                     message = {**message, "headers": [*headers, (b"allow", allowed.encode())]}
             await send(message)
 
