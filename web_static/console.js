@@ -311,9 +311,9 @@ function jsonFromForm() {
   for (const f of state.form.fields) {
     const r = readField(f);
     if (r.error) { setFieldError(f.name, r.error); bad = true; continue; }
-    document.querySelector(`#params-form .field[data-field="${f.name}"]`)
-      .classList.toggle("changed", JSON.stringify(r.value) !== JSON.stringify(f.dflt));
-    if (JSON.stringify(r.value) !== JSON.stringify(f.dflt)) out[f.name] = r.value;
+    const changed = JSON.stringify(r.value) !== JSON.stringify(f.dflt);
+    document.querySelector(`#params-form .field[data-field="${f.name}"]`).classList.toggle("changed", changed);
+    if (changed) out[f.name] = r.value;
   }
   for (const [key, v] of Object.entries(state.extraKeys || {})) out[key] = v;  // shown as unknown
   if (!bad) $("#params").value = Object.keys(out).length ? JSON.stringify(out, null, 2) : "";
@@ -848,7 +848,12 @@ function openEvents() {
   const es = new EventSource(API + "/events?robots_every_s=3");
   es.addEventListener("robots", (m) => renderRobots(JSON.parse(m.data)));
   state.events = es;
-  es.onopen = () => $("#conn").classList.add("live");
+  es.onopen = () => {
+    $("#conn").classList.add("live");
+    // What changed before this (re)connection was not streamed to us: the
+    // list read at start-up can predate a plan's last event.
+    loadPlans().catch(() => {});
+  };
   es.onerror = () => $("#conn").classList.remove("live");
   let auditTimer = null;
   const refreshAudit = () => { clearTimeout(auditTimer); auditTimer = setTimeout(loadAudit, 300); };

@@ -8,10 +8,10 @@ from collections.abc import AsyncIterator
 from typing import Annotated
 
 from fastapi import APIRouter, Depends, HTTPException, Query, Request
-from fastapi.concurrency import run_in_threadpool
 from fastapi.responses import StreamingResponse
 
 from server.auth import Viewer, until_invalid
+from server.routers.robots import statuses_now
 from server.services import Services, get_services
 
 router = APIRouter(tags=["events"])
@@ -54,10 +54,7 @@ async def events(
     async def robots_event() -> bytes | None:
         if services.dispatch is None:
             return None
-        recent = getattr(services.dispatch, "recent_statuses", None)
-        statuses = recent() if recent is not None else None
-        if statuses is None:
-            statuses = await run_in_threadpool(services.dispatch.robot_statuses)
+        statuses = await statuses_now(services.dispatch)
         return f"event: robots\ndata: {json.dumps(statuses)}\n\n".encode()
 
     async def stream() -> AsyncIterator[bytes]:

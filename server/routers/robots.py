@@ -78,7 +78,13 @@ async def list_robots(services: Svc, _: Viewer) -> list[dict[str, Any]]:
     per robot; a recent shared answer comes straight from the event loop
     (at most 2 s old, and dropped at once on a link, E-stop or execution
     state change), refreshed in the background."""
-    eng = engine(services)
+    return await statuses_now(engine(services))
+
+
+async def statuses_now(eng: LinkServiceClient) -> list[dict[str, Any]]:
+    """Every robot's status: the recent shared answer when there is one (no
+    waiting), else one round trip off the event loop.  ``GET /robots`` and
+    the event stream's ``robots`` snapshots both read it here."""
     recent = getattr(eng, "recent_statuses", None)
     statuses = recent() if recent is not None else None
     if statuses is not None:
