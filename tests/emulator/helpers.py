@@ -68,6 +68,20 @@ class RawHost:
         self.sent.append(wire)
         self.sock.sendall(wire)
 
+    def send_until_hung_up(self, wires: list[bytes]) -> int:
+        """Send ``wires`` in order until the robot hangs up; how many went out.
+
+        A robot that refuses a frame may close the connection at once, so the
+        next write can fail with a broken pipe or a reset: that is its answer,
+        not a test error.
+        """
+        for n, wire in enumerate(wires):
+            try:
+                self.send_wire(wire)
+            except (BrokenPipeError, ConnectionResetError):
+                return n
+        return len(wires)
+
     def send(self, msg: Message, seq: int = 0) -> None:
         """``msg`` sealed with the session (a fresh counter)."""
         assert self.mac is not None, "no session"

@@ -175,9 +175,9 @@ def test_replayed_session_into_a_new_connection_moves_nothing() -> None:
         assert rec.frames_of(MsgType.AUTH) and rec.frames_of(MsgType.CMD_WHEELS)
         # Every byte the authorised host sent, HELLO and AUTH included, into a new connection.
         with RawHost(emu.address) as attacker:
-            for wire in rec.writes:
-                if cobs_decode(wire[:-1])[1] != MsgType.ESTOP:
-                    attacker.send_wire(wire)
+            replay = [w for w in rec.writes if cobs_decode(w[:-1])[1] != MsgType.ESTOP]
+            sent = attacker.send_until_hung_up(replay)
+            assert sent >= 2  # at least HELLO and the old AUTH reached it
             assert attacker.closed_by_peer(5)  # the old AUTH fails against a fresh nonce
             got = [m for m in attacker.messages(0.2) if not isinstance(m, Challenge)]
             assert got == []
