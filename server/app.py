@@ -152,7 +152,7 @@ def create_app(settings: Settings | None = None, *, start_scene: bool | None = N
                 # for the console; an operator accepts it over REST, which plans.
                 bus.publish("proposal", proposal)
 
-            scene = SceneService(store, settings.scene_port, propose)
+            scene = SceneService(store, settings.scene_port, propose, publish=bus.publish)
             scene.start()
             services.scene = scene
             jobs.on_finished.append(scene.plan_finished)

@@ -667,6 +667,29 @@ async function showInScene(id) {
   } catch (e) { $("#scene-msg").textContent = e.message; }
 }
 
+// -------------------------------------------------------------- measuring
+// Shift-clicks in the scene pick points; the server pairs them and sends a
+// `measurement` event per pick (GET /scene holds the last one).
+const fmtPoint = (p) => `(${p.map((v) => v.toFixed(3)).join(", ")}) m`;
+function showMeasurement(m) {
+  const text = $("#measure-text");
+  $("#measure-clear").hidden = !m || m.state === "missed";
+  if (!m) { text.textContent = "shift-click two points in the scene"; text.className = "muted"; return; }
+  if (m.state === "missed") { text.textContent = "no drawn point under the cursor: shift-click on the cloud or the plan"; text.className = "muted"; return; }
+  if (m.state === "first") { text.textContent = `first point ${fmtPoint(m.point_m)}: shift-click the second`; text.className = ""; return; }
+  text.textContent = `${Math.round(m.distance_mm).toLocaleString("en-US")} mm  from ${fmtPoint(m.a_m)} to ${fmtPoint(m.b_m)}`;
+  text.className = "measure-value";
+}
+async function loadMeasurement() {
+  try {
+    const s = await api("GET", "/scene");
+    showMeasurement(s.measurement ? { state: "measured", ...s.measurement } : null);
+  } catch (e) { /* the scene is optional */ }
+}
+$("#measure-clear").onclick = async () => {
+  try { await api("DELETE", "/scene/measurement"); showMeasurement(null); } catch (e) { flash(e.message, true); }
+};
+
 // -------------------------------------------------------- scene proposals
 // Scene clicks (start/end vertex, surface…) only propose; an operator decides here.
 async function loadProposals() {
@@ -870,6 +893,7 @@ function openEvents() {
     if (!["planning"].includes(d.state)) refreshAudit();
   });
   es.addEventListener("proposal", () => loadProposals());
+  es.addEventListener("measurement", (m) => showMeasurement(JSON.parse(m.data)));
   // The server ends the stream when this session's token is revoked or expires.
   es.addEventListener("auth", (m) => {
     es.close();
@@ -929,7 +953,7 @@ async function start() {
   $("#logout").hidden = false;
   applyRole();
   const health = await fetch(API + "/health").then((r) => r.json());
-  await Promise.all([loadKinds(), loadSamples(), loadClouds(), loadPlans(), loadAudit(), loadRobots(), loadProposals()]);
+  await Promise.all([loadKinds(), loadSamples(), loadClouds(), loadPlans(), loadAudit(), loadRobots(), loadProposals(), loadMeasurement()]);
   openEvents();
   if (health.scene.running && me.role !== "viewer") $("#scene").src = "/scene/";
   else $("#scene-msg").textContent = health.scene.running ? "the scene needs the operator role" : "scene not running";

@@ -37,7 +37,7 @@ async def events(
     ] = 0.0,
     once: bool = False,
 ) -> StreamingResponse:
-    """A ``text/event-stream``: ``event: plan|execution|robot|estop|cloud|proposal``,
+    """A ``text/event-stream``: ``event: plan|execution|robot|estop|cloud|proposal|measurement``,
     JSON ``data``; a last ``event: auth`` when the token is revoked or expires.
     Reconnecting clients send ``Last-Event-ID`` to replay what they missed
     (from a bounded history).  ``once=true`` sends the backlog and ends (for

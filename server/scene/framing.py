@@ -19,6 +19,11 @@ import numpy as np
 
 #: Points kept per recorded call (evenly thinned), so recording stays cheap.
 _PER_CALL = 2_000
+#: Calls whose points a measuring pick may land on (drawn geometry; labels,
+#: frames and the like only mark a place and are left out).
+_PICKABLE = frozenset(
+    {"add_point_cloud", "add_line_segments", "add_batched_meshes_simple", "add_mesh_simple"}
+)
 #: Direction from the content's centre to the camera (front-left, above; z up).
 _VIEW_DIR = np.array([-0.55, -1.0, 0.75]) / np.linalg.norm([-0.55, -1.0, 0.75])
 #: Smallest half-size framed (m): a single marker is not filled to the edges.
@@ -55,6 +60,8 @@ class BoundsRecorder:
         self._scene = scene
         self._frames: dict[str, np.ndarray] = {}
         self.points: list[np.ndarray] = []
+        #: Drawn geometry's points, unthinned (world frame), for the measuring tool.
+        self.pickable: list[np.ndarray] = []
 
     def __getattr__(self, name: str) -> Any:
         attr = getattr(self._scene, name)
@@ -89,13 +96,24 @@ class BoundsRecorder:
         if pts is None and method in ("add_point_cloud", "add_line_segments") and len(args) > 1:
             pts = args[1]
         if pts is None:
+            pts = kwargs.get("batched_positions")  # instanced meshes: one point each
+        if method in _PICKABLE:
+            pick = pts if pts is not None else kwargs.get("vertices")
+            if pick is not None:
+                self.pickable.append(self._world(pick, world))
+        if pts is None:
             pts = np.zeros((1, 3))  # the node's origin
+        W = self._world(pts, world)
+        if len(W) > _PER_CALL:
+            W = W[:: int(np.ceil(len(W) / _PER_CALL))]
+        if len(W):
+            self.points.append(W)
+
+    @staticmethod
+    def _world(pts: Any, world: np.ndarray) -> np.ndarray:
         P = np.asarray(pts, dtype=float).reshape(-1, 3)
         P = P[np.isfinite(P).all(axis=1)]
-        if len(P) > _PER_CALL:
-            P = P[:: int(np.ceil(len(P) / _PER_CALL))]
-        if len(P):
-            self.points.append(P @ world[:3, :3].T + world[:3, 3])
+        return P @ world[:3, :3].T + world[:3, 3]
 
 
 def framing(points: list[np.ndarray] | np.ndarray, fov_rad: float) -> View | None:

@@ -201,7 +201,17 @@ def scene_state(services: Svc, _: Viewer) -> dict[str, Any]:
         "path": "/scene/",
         "current": scene.current,
         "proposals": [p.public() for p in scene.proposals.list("pending")],
+        "measurement": scene.measurer.public(),
     }
+
+
+@api_router.delete("/measurement", status_code=204, responses=errors(401, 403))
+def clear_measurement(services: Svc, _: Operator) -> Response:
+    """Forget the last measurement and any first pick; remove its markers."""
+    scene = services.scene
+    if scene is not None:
+        scene.clear_measurement()
+    return Response(status_code=204)
 
 
 @api_router.post("/show")

@@ -26,6 +26,7 @@ from server.lifecycle import PlanState
 from server.scene.context import Animation, DrawContext, current_scene_client
 from server.scene.drawers import drawer_for, robot_for
 from server.scene.framing import BoundsRecorder, apply_view, framing
+from server.scene.measure import Measurer
 from server.scene.proposals import ProposalBook
 from server.scene.wsguard import TicketDesk, guarded_viser_start
 from server.store import PlanRecord, Store
@@ -36,6 +37,8 @@ MAX_CLOUD_POINTS = 300_000
 
 #: Told of every new proposal (``Proposal.public()``), e.g. to publish it.
 ProposeFn = Callable[[dict[str, Any]], None]
+#: Publishes a scene event (type, data) to the console, e.g. a measuring pick.
+PublishFn = Callable[[str, dict[str, Any]], object]
 
 
 class SceneService:
@@ -46,6 +49,7 @@ class SceneService:
         propose: ProposeFn,
         *,
         proposals: ProposalBook | None = None,
+        publish: PublishFn | None = None,
     ) -> None:
         self.store = store
         self.requested_port = port
@@ -62,6 +66,8 @@ class SceneService:
         self.current: dict[str, Any] = {}
         self._live: dict[str, Any] = {}
         self.proposals = proposals if proposals is not None else ProposalBook()
+        self._publish = publish
+        self.measurer = Measurer()
 
     # -------------------------------------------------------------- lifecycle
     @property
@@ -97,6 +103,8 @@ class SceneService:
         with contextlib.suppress(AttributeError):  # viser without panel placement
             self._server.gui.main_panel.minimize()
         self._server.scene.add_grid("/grid", width=10.0, height=10.0, cell_size=0.25, plane="xy")
+        # Shift-click measures (plain clicks stay the drawers' pickers).
+        self._server.scene.on_click(modifier="shift")(self._on_measure_click)
         self._anim_thread = threading.Thread(target=self._animate, name="scene-anim", daemon=True)
         self._anim_thread.start()
         log.info("viser scene on 127.0.0.1:%s", self.port)
@@ -112,7 +120,7 @@ class SceneService:
     # ---------------------------------------------------------------- drawing
     def _clear(self) -> None:
         scene = self._server.scene
-        for name in ("/plan", "/cloud"):
+        for name in ("/plan", "/cloud", "/measure"):
             scene.remove_by_name(name)
         for h in self._gui_handles:
             with contextlib.suppress(Exception):  # already gone with its client
@@ -169,6 +177,7 @@ class SceneService:
         self._animations = list(ctx.animations)
         self._gui_handles = list(ctx.gui_handles)
         self._frame(recorder.points)
+        self.measurer.set_points(recorder.pickable)
 
     def _frame(self, points: list[np.ndarray] | np.ndarray) -> None:
         """Fit every viewer's camera to what was just drawn."""
@@ -206,7 +215,52 @@ class SceneService:
                 position=tuple(center),
             )
             self._frame(pts)
+            self.measurer.set_points([pts])
         return {"shown": rec.id, "points_drawn": len(pts)}
+
+    # -------------------------------------------------------------- measuring
+    def _on_measure_click(self, event: Any) -> None:
+        """A shift-click: pick the drawn point under the cursor; the second
+        pick of a client closes a measurement (drawn, and published)."""
+        try:
+            result = self.measurer.click(event.client_id, event.ray_origin, event.ray_direction)
+        except ValueError:  # a degenerate ray from a client: nothing to pick
+            return
+        if result["state"] != "missed" and self.running:
+            with self._lock:
+                self._draw_measure(result)
+        if self._publish is not None:
+            try:
+                self._publish("measurement", result)
+            except Exception:  # publishing must not break viser's callback thread
+                log.exception("publishing a measurement failed")
+
+    def _draw_measure(self, result: dict[str, Any]) -> None:
+        scene = self._server.scene
+        view = self.current.get("view") or {}
+        r = max(0.005, 0.006 * float(view.get("radius_m", 1.0)))
+        colour = (255, 60, 200)
+        if result["state"] == "first":
+            scene.remove_by_name("/measure")
+            scene.add_icosphere("/measure/a", radius=r, color=colour, position=result["point_m"])
+            return
+        a, b = np.asarray(result["a_m"]), np.asarray(result["b_m"])
+        scene.add_icosphere("/measure/a", radius=r, color=colour, position=tuple(a))
+        scene.add_icosphere("/measure/b", radius=r, color=colour, position=tuple(b))
+        scene.add_line_segments(
+            "/measure/line", points=np.array([[a, b]], dtype=np.float32), colors=colour
+        )
+        scene.add_label(
+            "/measure/label",
+            text=f"{result['distance_mm']:.0f} mm",
+            position=tuple((a + b) / 2.0),
+        )
+
+    def clear_measurement(self) -> None:
+        self.measurer.clear()
+        if self.running:
+            with self._lock:
+                self._server.scene.remove_by_name("/measure")
 
     def update_live_robot(self, robot: str, q: np.ndarray) -> None:
         """Show the robot's *reported* joints beside the planned ghost (orange)."""

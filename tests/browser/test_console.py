@@ -130,6 +130,39 @@ def test_console_plan_approve_and_scene(browser, tmp_path: Path) -> None:
             page.wait_for_timeout(100)
         assert app.state.services.scene.current.get("plan_id") == child.id
 
+        # Measuring.  A real shift-click on viser's canvas reaches the server and
+        # the console answers (a first point, or nothing under the cursor).
+        assert page.inner_text("#measure-text").startswith("shift-click two points")
+        canvas = frame.locator("canvas[data-engine^='three']").first
+        box = canvas.bounding_box()
+        assert box is not None
+        canvas.click(modifiers=["Shift"], position={"x": box["width"] / 2, "y": box["height"] / 2})
+        page.wait_for_function(
+            "!document.querySelector('#measure-text').textContent.startsWith('shift-click two')"
+        )
+        # Two picks aimed at drawn vertices (rays straight down onto them): the
+        # console shows the server's distance in mm.
+        import numpy as np
+
+        xyz = child.result["nodes"]
+        for name in ("a0", "c2"):
+            scene._on_measure_click(
+                types.SimpleNamespace(
+                    client_id=99,
+                    ray_origin=tuple(np.asarray(xyz[name]) + [0.0, 0.0, 3.0]),
+                    ray_direction=(0.0, 0.0, -1.0),
+                )
+            )
+        measured = scene.measurer.public()
+        assert measured is not None
+        true_mm = 1000 * float(np.linalg.norm(np.subtract(xyz["a0"], xyz["c2"])))
+        assert abs(measured["distance_mm"] - true_mm) < 30  # a vertex or the route just above it
+        shown = f"{round(measured['distance_mm']):,} mm"
+        page.wait_for_function(
+            f"document.querySelector('#measure-text').textContent.startsWith({shown!r})"
+        )
+        assert page.is_visible("#measure-clear")
+
         # The E-stop answers and is recorded.
         page.click("#estop")
         page.wait_for_function(
