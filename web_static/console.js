@@ -3,7 +3,7 @@
 
 const API = "/api/v1";
 const $ = (sel) => document.querySelector(sel);
-const state = { kinds: {}, plans: new Map(), selected: null, revising: null, me: null, events: null };
+const state = { kinds: {}, plans: new Map(), selected: null, revising: null, me: null, events: null, clouds: [] };
 
 async function api(method, path, body, isForm) {
   const opts = { method, credentials: "same-origin", headers: {} };
@@ -174,8 +174,10 @@ function resolveField(prop, defs) {
   return { base: { ...prop, ...p, anyOf: p.anyOf }, nullable };
 }
 
-function fieldKind(base) {
+function fieldKind(base, name) {
   if (base.enum) return "enum";
+  // A stored cloud is picked from the list, not typed as an id.
+  if (name === "cloud_id" && base.type === "string") return "cloud";
   if (base.type === "boolean") return "bool";
   if (base.type === "integer" || base.type === "number") return "number";
   if (base.type === "string") return "string";
@@ -192,7 +194,7 @@ function buildForm(k) {
   const fields = [];
   for (const [name, prop] of Object.entries(schema.properties || {})) {
     const { base, nullable } = resolveField(prop, defs);
-    fields.push({ name, prop, base, nullable, kind: fieldKind(base), dflt: k.defaults[name] });
+    fields.push({ name, prop, base, nullable, kind: fieldKind(base, name), dflt: k.defaults[name] });
   }
   const common = fields.filter((f) => f.kind !== "json").slice(0, COMMON_FIELDS);
   const more = fields.filter((f) => !common.includes(f));
@@ -214,6 +216,9 @@ function fieldRow(f) {
     input = el("select", { id });
     if (f.nullable) input.append(el("option", { value: "" }, "— none —"));
     for (const v of f.base.enum) input.append(el("option", { value: JSON.stringify(v) }, String(v)));
+  } else if (f.kind === "cloud") {
+    input = el("select", { id, class: "cloud-picker" });
+    fillCloudPicker(input, f.nullable);
   } else if (f.kind === "bool") {
     input = el("input", { id, type: "checkbox" });
   } else if (f.kind === "number") {
@@ -230,7 +235,8 @@ function fieldRow(f) {
     input = el("textarea", { id, rows: "2", spellcheck: "false", class: "json-field" });
   }
   input.dataset.field = f.name;
-  input.addEventListener(f.kind === "enum" || f.kind === "bool" ? "change" : "input", () => jsonFromForm());
+  const onChange = ["enum", "bool", "cloud"].includes(f.kind);
+  input.addEventListener(onChange ? "change" : "input", () => jsonFromForm());
   const row = el("label", { class: "field", for: id, "data-field": f.name },
     el("span", { class: "name" }, title, unit ? el("span", { class: "unit" }, ` (${unit})`) : ""),
     input,
@@ -272,6 +278,7 @@ function readField(f) {
   if (f.kind === "bool") return { value: input.checked };
   const raw = input.value;
   if (f.kind === "enum") return raw === "" ? { value: null } : { value: JSON.parse(raw) };
+  if (f.kind === "cloud") return raw === "" ? (f.nullable ? { value: null } : { error: "pick a cloud" }) : { value: raw };
   if (raw.trim() === "") {
     if (f.nullable) return { value: null };
     if (f.kind === "string") return { value: "" };
@@ -297,7 +304,12 @@ function writeField(f, v) {
   if (!input) return;
   if (f.kind === "bool") input.checked = !!v;
   else if (f.kind === "enum") input.value = v === null || v === undefined ? "" : JSON.stringify(v);
-  else if (f.kind === "json") input.value = v === undefined || (v === null && f.nullable) ? "" : JSON.stringify(v);
+  else if (f.kind === "cloud") {
+    const id = v === null || v === undefined ? "" : String(v);
+    // An id not (or no longer) listed stays selectable, so revising keeps it.
+    if (id && ![...input.options].some((o) => o.value === id)) input.append(el("option", { value: id }, `${id} (not in the list)`));
+    input.value = id;
+  } else if (f.kind === "json") input.value = v === undefined || (v === null && f.nullable) ? "" : JSON.stringify(v);
   else input.value = v === null || v === undefined ? "" : String(v);
   input.closest(".field").classList.toggle("changed", JSON.stringify(v) !== JSON.stringify(f.dflt));
 }
@@ -418,8 +430,24 @@ async function loadSamples() {
   for (const [name, kind] of Object.entries(samples)) sel.append(el("option", { value: name }, `${name} (${kind})`));
 }
 
+// The form's cloud field: the stored clouds (newest first), or none — the
+// kind's own built-in scene.
+function fillCloudPicker(sel, nullable) {
+  const keep = sel.value;
+  sel.innerHTML = "";
+  sel.append(el("option", { value: "" }, nullable ? "— none: the kind's built-in scene —" : "— pick a cloud —"));
+  for (const c of state.clouds) sel.append(el("option", { value: c.id }, `${c.name} · ${c.n_points.toLocaleString("en-US")} pts · ${c.id}`));
+  if (keep && ![...sel.options].some((o) => o.value === keep)) sel.append(el("option", { value: keep }, `${keep} (not in the list)`));
+  sel.value = keep;
+}
+
 async function loadClouds() {
   const clouds = await api("GET", "/clouds?limit=20");
+  state.clouds = clouds;
+  for (const f of (state.form ? state.form.fields : []).filter((x) => x.kind === "cloud")) {
+    const sel = document.getElementById(`pf-${f.name}`);
+    if (sel) fillCloudPicker(sel, f.nullable);
+  }
   const ul = $("#clouds");
   ul.innerHTML = "";
   for (const c of clouds) {

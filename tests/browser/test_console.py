@@ -417,6 +417,24 @@ def test_params_form_from_the_kind_schema(browser, tmp_path: Path) -> None:
         assert seg.locator("option").all_inner_texts() == ["default", "thesis"]
         assert page.is_checked("#pf-plan_paths")
 
+        # The cloud is picked from the stored clouds, not typed as an id: a
+        # sample loaded now appears in the picker, and picking it sets cloud_id.
+        picker = page.locator("#pf-cloud_id")
+        assert picker.evaluate("e => e.tagName") == "SELECT"
+        assert picker.input_value() == ""  # none: the kind's built-in scene
+        page.click("#load-sample")
+        page.wait_for_function("document.querySelector('#cloud-msg').textContent.includes('stored')")
+        (cloud,) = store.list_clouds()
+        page.wait_for_selector(f"#pf-cloud_id option[value='{cloud.id}']", state="attached")
+        page.select_option("#pf-cloud_id", cloud.id)
+        page.click("#tab-json")
+        assert json.loads(page.input_value("#params")) == {"cloud_id": cloud.id}
+        page.click("#tab-form")
+        page.select_option("#pf-cloud_id", "")
+        page.click("#tab-json")
+        assert json.loads(page.input_value("#params") or "{}") == {}
+        page.click("#tab-form")
+
         n_before = len(store.list_plans())
         voxel_input.fill("0.5")
         assert "must be ≤ 0.1" in voxel.locator(".field-error").inner_text()
