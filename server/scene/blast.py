@@ -21,6 +21,7 @@ from server.scene.common import (
     rotation_to_wxyz,
 )
 from server.scene.context import DrawContext
+from server.scene.obstacle_editor import ObstacleEditor
 
 LIFT = 0.003  # overlays this far off the steel, toward the nozzle
 PLAYBACK_SPEEDUP = 4.0
@@ -102,15 +103,22 @@ def draw(ctx: DrawContext, plan: PlanView) -> None:
         f"{root}/labels/start", text="start", position=tuple(centers[order[0]] + 8 * lift)
     )
 
-    # obstacles
+    # obstacles: drawn, and editable in the scene (a proposal with new boxes)
+    drawn, editable = [], []
     for i, b in enumerate(res.get("boxes", [])):
-        scene.add_box(
-            f"{root}/obstacles/box{i}",
-            color=STEEL_RGB,
-            dimensions=tuple(2.0 * np.asarray(b["half"])),
-            position=tuple(b["center"]),
-            opacity=0.3,
+        c, h = np.asarray(b["center"], dtype=float), np.asarray(b["half"], dtype=float)
+        drawn.append(
+            scene.add_box(
+                f"{root}/obstacles/box{i}",
+                color=STEEL_RGB,
+                dimensions=tuple(2.0 * h),
+                position=tuple(c),
+                opacity=0.3,
+            )
         )
+        editable.append((c - h, c + h, str(b.get("name", ""))))
+    middle = np.asarray(centers, dtype=float).mean(axis=0) if len(centers) else base[:3, 3]
+    ctx.tools["obstacles"] = ObstacleEditor(ctx, editable, middle, static=drawn)
     if "obstacle_points" in plan.arrays:
         pts = plan.array("obstacle_points")
         scene.add_point_cloud(

@@ -43,6 +43,8 @@ class DrawContext:
     - ``add_urdf(robot, name)``: a ``viser.extras.ViserUrdf`` of a robot
       description under ``root``; call ``update_cfg(q)`` on it.
     - ``animate(duration_s, update)``: register a looping animation callback.
+    - ``tools``: interactive editors the drawer made, by name (the scene
+      keeps them while the plan is shown).
     """
 
     scene: Any
@@ -53,6 +55,8 @@ class DrawContext:
     lock: threading.RLock = field(default_factory=threading.RLock)
     animations: list[Animation] = field(default_factory=list)
     gui_handles: list[Any] = field(default_factory=list)
+    #: Interactive tools a drawer set up (e.g. ``"obstacles"``), kept by the scene.
+    tools: dict[str, Any] = field(default_factory=dict)
 
     def add_urdf(self, robot: str, name: str, root_pose: np.ndarray | None = None) -> Any:
         from viser.extras import ViserUrdf

@@ -60,6 +60,7 @@ class SceneService:
         self._server: Any = None
         self._animations: list[Animation] = []
         self._gui_handles: list[Any] = []
+        self.tools: dict[str, Any] = {}
         self._follow: str | None = None
         self._stop = threading.Event()
         self._anim_thread: threading.Thread | None = None
@@ -128,6 +129,7 @@ class SceneService:
         self._gui_handles = []
         self._animations = []
         self._live = {}
+        self.tools = {}
 
     def show_plan(self, plan_id: str) -> dict[str, Any]:
         """Draw a stored plan (its kind's drawer); follow it if still planning."""
@@ -176,6 +178,7 @@ class SceneService:
             )
         self._animations = list(ctx.animations)
         self._gui_handles = list(ctx.gui_handles)
+        self.tools = dict(ctx.tools)
         self._frame(recorder.points)
         self.measurer.set_points(recorder.pickable)
 

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import socket
 import time
+import types
+from typing import Any
 
 import numpy as np
 import pytest
@@ -44,7 +46,9 @@ def test_defaults_plan_the_seed_surface_1(api) -> None:
     assert m["disc_radius_mm"] == 40.0
     # The motion metrics, recomputed here from the stored arrays the robot
     # would run (not read back from the planner's own statistics).
-    arr = {k: _array(api, plan["id"], k) for k in ("q", "times", "disc_centers", "order", "clearance")}
+    arr = {
+        k: _array(api, plan["id"], k) for k in ("q", "times", "disc_centers", "order", "clearance")
+    }
     q, t = arr["q"], arr["times"]
     assert len(q) == len(t) == len(arr["clearance"]) == m["waypoints"]
     assert (np.diff(t) > 0).all()
@@ -152,3 +156,80 @@ def test_scene_draws_surface_discs_obstacles_and_animated_arm(make_api) -> None:
     p0 = np.array(tool.position)
     time.sleep(0.6)
     assert not np.allclose(np.array(tool.position), p0)
+
+
+def _press(handle: Any) -> None:
+    """A button press as viser delivers it (the handle's click callbacks)."""
+    for cb in handle._impl.update_cb:
+        cb(types.SimpleNamespace(client_id=5, client=None, target=handle))
+
+
+def test_obstacles_edited_in_the_scene_become_a_proposal_and_a_plan(make_api) -> None:
+    """Edit obstacles: the plan's boxes get gizmos; one is moved and resized,
+    one added, one removed; Propose sends exactly those boxes, and the plan
+    accepted from it avoids them."""
+    sapi = make_api(scene_port=free_port())
+    parent = sapi.wait(sapi.submit("blast", {"seed_surface": 3})["id"], timeout=240)
+    sapi.post("/api/v1/scene/show", json={"plan_id": parent["id"]})
+    service = sapi.services.scene
+    ed = service.tools["obstacles"]
+    n0 = len(parent["result"]["boxes"])
+    assert n0 >= 1 and ed.boxes == [] and ed.propose_button.disabled
+    box0 = service.server.scene.get_handle_by_name("/plan/obstacles/box0")
+    assert box0.visible
+
+    ed.edit_box.value = True  # the checkbox, as a client ticks it
+    assert len(ed.boxes) == n0 and not ed.propose_button.disabled
+    assert not box0.visible  # the drawn copy is hidden while editing
+    # Untouched, the editable boxes are the plan's own.
+    for got, b in zip(ed.current(), parent["result"]["boxes"], strict=True):
+        c, h = np.array(b["center"]), np.array(b["half"])
+        assert np.allclose(got["lo_m"], c - h, atol=1e-4)
+        assert np.allclose(got["hi_m"], c + h, atol=1e-4)
+
+    # Move the first box 0.1 m in x (a gizmo drag) and make it 0.05 m tall.
+    ed.select(0)
+    ed.boxes[0].gizmo.position = tuple(np.asarray(ed.boxes[0].gizmo.position) + [0.1, 0, 0])
+    size = ed.boxes[0].size.copy()
+    ed.size_input.value = (float(size[0]), float(size[1]), 0.05)
+    # Add a box (at the surface's middle), then remove the last of the plan's.
+    _press(ed.add_button)
+    assert len(ed.boxes) == n0 + 1 and ed.selected == n0
+    # (put where the arm never goes: dropped 3 m below the surface's middle)
+    new = ed.boxes[-1].gizmo
+    new.position = tuple(np.asarray(new.position) - [0.0, 0.0, 3.0])
+    if n0 > 1:
+        ed.select(n0 - 1)
+        _press(ed.remove_button)
+        assert len(ed.boxes) == n0
+    want = ed.current()
+    assert want[0]["hi_m"][2] - want[0]["lo_m"][2] == pytest.approx(0.05, abs=1e-4)
+    c0 = np.array(parent["result"]["boxes"][0]["center"])
+    assert (np.array(want[0]["lo_m"]) + want[0]["hi_m"]) / 2 == pytest.approx(
+        c0 + [0.1, 0, 0], abs=1e-4
+    )
+    assert want[-1]["hi_m"][0] - want[-1]["lo_m"][0] == pytest.approx(0.2, abs=1e-4)
+
+    _press(ed.propose_button)
+    (prop,) = sapi.get("/api/v1/scene/proposals?state=pending", "viewer").json()
+    assert prop["id"] == ed.last_proposal and prop["patch"] == {"obstacles": want}
+    r = sapi.post(f"/api/v1/scene/proposals/{prop['id']}/accept", "operator")
+    assert r.status_code == 202, r.text
+    child = sapi.wait(r.json()["id"], timeout=240)
+    assert child["params"]["obstacles"] == want and child["parent_id"] == parent["id"]
+    failed = [c["message"] for c in child["checks"] if not c["passed"]]
+    assert child["state"] == "planned" and failed == [], failed
+    got = child["result"]["boxes"]
+    assert len(got) == len(want)
+    for b, w in zip(got, want, strict=True):
+        lo = np.array(b["center"]) - b["half"]
+        hi = np.array(b["center"]) + b["half"]
+        assert np.allclose(lo, w["lo_m"], atol=1e-6) and np.allclose(hi, w["hi_m"], atol=1e-6)
+
+    # Editing off: the gizmos go, the drawn boxes come back.
+    sapi.post("/api/v1/scene/show", json={"plan_id": parent["id"]})
+    ed = service.tools["obstacles"]
+    ed.edit_box.value = True
+    ed.edit_box.value = False
+    assert ed.boxes == [] and ed.propose_button.disabled
+    assert service.server.scene.get_handle_by_name("/plan/obstacles/box0").visible
