@@ -66,6 +66,7 @@ class SceneService:
         self._anim_thread: threading.Thread | None = None
         self.current: dict[str, Any] = {}
         self._live: dict[str, Any] = {}
+        self._live_cfg: dict[str, np.ndarray] = {}
         self.proposals = proposals if proposals is not None else ProposalBook()
         self._publish = publish
         self.measurer = Measurer()
@@ -129,6 +130,7 @@ class SceneService:
         self._gui_handles = []
         self._animations = []
         self._live = {}
+        self._live_cfg = {}
         self.tools = {}
 
     def show_plan(self, plan_id: str) -> dict[str, Any]:
@@ -275,9 +277,33 @@ class SceneService:
                 handle = self._add_live(robot)
                 if handle is None:
                     return
-            names = handle.get_actuated_joint_names()
+            names = list(handle.get_actuated_joint_names())
+            cfg = self._live_cfg.get(robot)
+            if cfg is None or len(cfg) != len(names):
+                cfg = np.zeros(len(names))
+            q = np.asarray(q, dtype=float).ravel()
             if len(q) == len(names):
-                handle.update_cfg(np.asarray(q, dtype=float))
+                cfg = q.copy()
+            else:
+                # The robot reports its own joints (CMBOT: the 7-DoF arm of a
+                # 12-joint URDF): placed by name, the others keep their pose.
+                index = {n: i for i, n in enumerate(names)}
+                reported = self._reported_joints(robot)
+                if len(reported) != len(q) or not all(n in index for n in reported):
+                    return
+                cfg = cfg.copy()
+                cfg[[index[n] for n in reported]] = q
+            self._live_cfg[robot] = cfg
+            handle.update_cfg(cfg)
+
+    @staticmethod
+    def _reported_joints(robot: str) -> list[str]:
+        from robots import load_robot
+
+        try:
+            return list(load_robot(robot).joint_names)
+        except ValueError:
+            return []
 
     def _add_live(self, robot: str) -> Any:
         from pathlib import Path
