@@ -655,6 +655,16 @@ function renderPlots(plots) {
   }
 }
 
+// Charts follow the page's width (a window resized, a console on a wider screen).
+let plotResize = null;
+window.addEventListener("resize", () => {
+  clearTimeout(plotResize);
+  plotResize = setTimeout(() => {
+    const w = Math.max(320, $("#d-plots").clientWidth - 10);
+    for (const u of state.uplots || []) if (Math.abs(u.width - w) > 2) u.setSize({ width: w, height: u.height });
+  }, 150);
+});
+
 async function act(path, body) {
   try {
     const r = await api("POST", path, body);
@@ -959,7 +969,7 @@ function openEvents() {
 // What a viewer's token may not do stays on screen but disabled, with the
 // reason on hover; the E-stop button (operator) is absent for a viewer.
 const OPERATOR_CONTROLS = ["#submit-plan", "#load-sample", "#upload-cloud", "#approve", "#dispatch",
-  "#cancel", "#revise", "#delete", "#x-pause", "#x-resume", "#x-abort"];
+  "#cancel", "#revise", "#delete", "#x-pause", "#x-resume", "#x-abort", "#show", "#measure-clear"];
 
 function applyRole() {
   if (!state.me || state.me.role !== "viewer") return;
@@ -984,7 +994,12 @@ async function start() {
   await Promise.all([loadKinds(), loadSamples(), loadClouds(), loadPlans(), loadAudit(), loadRobots(), loadProposals(), loadMeasurement()]);
   openEvents();
   if (health.scene.running && me.role !== "viewer") $("#scene").src = "/scene/";
-  else $("#scene-msg").textContent = health.scene.running ? "the scene needs the operator role" : "scene not running";
+  else {
+    // No empty black box: say why there is no scene, where it would be.
+    $("#scene-msg").textContent = health.scene.running ? "the scene needs the operator role" : "scene not running";
+    $("#scene").hidden = true;
+    $("#measure").hidden = true;
+  }
 }
 
 start().catch((e) => { if (e.message !== "not signed in") console.error(e); });

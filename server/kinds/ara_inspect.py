@@ -42,6 +42,9 @@ class AraInspectParams(StrictParams):
     sample: str = Field(
         "scan_warren",
         description=f"synthetic TLS scan when no cloud_id: one of {', '.join(SCAN_SAMPLES)}",
+        # Listed in the schema so the console offers a choice; refused with
+        # the list of names in validate() (a 422 naming the samples).
+        json_schema_extra={"enum": list(SCAN_SAMPLES)},
     )
     sample_seed: int = Field(0, ge=0, description="generator seed of the sample scan")
     crop_box_m: Box | None = Field(

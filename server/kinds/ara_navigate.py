@@ -49,7 +49,11 @@ class AraNavigateParams(StrictParams):
         "cloud, which may be in any frame; the plan's summary says which",
     )
     sample: str = Field(
-        "cross", description=f"sample structure when no cloud_id: one of {', '.join(SHAPES)}"
+        "cross",
+        description=f"sample structure when no cloud_id: one of {', '.join(SHAPES)}",
+        # Listed in the schema so the console offers a choice; refused with
+        # the list of names in validate() (a 422 naming the samples).
+        json_schema_extra={"enum": list(SHAPES)},
     )
     sample_seed: int = Field(0, ge=0, description="generator seed of the sample structure")
     start: int | None = Field(None, ge=0, description="start vertex id (None: a leaf at one end)")

@@ -35,6 +35,9 @@ class AraSwitchParams(StrictParams):
     sample: str = Field(
         "perpendicular",
         description=f"synthetic scan when no cloud_id: one of {', '.join(SCENES)}",
+        # Listed in the schema so the console offers a choice; refused with
+        # the list of names in validate() (a 422 naming the samples).
+        json_schema_extra={"enum": list(SCENES)},
     )
     sample_seed: int = Field(0, ge=0, description="noise seed of the synthetic scan")
     camera_to_base: list[list[float]] | None = Field(

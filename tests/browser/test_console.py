@@ -18,7 +18,30 @@ from tests.support.live import free_port, live_server
 CHROMIUM = shutil.which("chromium") or "/usr/bin/chromium"
 ARTIFACTS = Path(__file__).resolve().parents[2] / "test-artifacts"
 
+DOCS = Path(__file__).resolve().parents[2] / "docs"
+
 pytestmark = pytest.mark.browser
+
+
+def screens(page, name: str, focus: str | None = None) -> None:
+    """The page at 1280 and 1920 px wide (1000 px tall), ``focus`` scrolled
+    into view (else the top of the page), saved as test-artifacts/NAME-WIDTH.png, and into docs/ with
+    STEELPATH_DOCS_SCREENSHOTS=1 (how the README's screenshots are made)."""
+    size = page.viewport_size
+    ARTIFACTS.mkdir(exist_ok=True)
+    for width in (1280, 1920):
+        page.set_viewport_size({"width": width, "height": 1000})
+        page.wait_for_timeout(400)  # let the layout and charts settle
+        if focus is not None:
+            page.locator(focus).first.scroll_into_view_if_needed()
+        else:
+            page.evaluate("window.scrollTo(0, 0)")
+        path = ARTIFACTS / f"{name}-{width}.png"
+        page.screenshot(path=str(path))
+        if os.environ.get("STEELPATH_DOCS_SCREENSHOTS"):
+            shutil.copy(path, DOCS / path.name)
+    page.set_viewport_size(size)
+
 
 CHROMIUM_ARGS = [
     "--no-sandbox",
@@ -162,6 +185,7 @@ def test_console_plan_approve_and_scene(browser, tmp_path: Path) -> None:
             f"document.querySelector('#measure-text').textContent.startsWith({shown!r})"
         )
         assert page.is_visible("#measure-clear")
+        screens(page, "console-measure", focus="#measure")
 
         # The E-stop answers and is recorded.
         page.click("#estop")
@@ -209,10 +233,13 @@ def test_viewer_gets_a_read_only_console(browser, tmp_path: Path) -> None:
         page.wait_for_selector(f"#plans tbody tr[data-id='{pid}'][data-state='planned']")
         page.locator(f"#plans tbody tr[data-id='{pid}']").click()
         page.wait_for_selector("#d-checks tr[data-check='route_length']")
-        for sel in ("#approve", "#revise", "#delete", "#cancel", "#dispatch"):
+        for sel in ("#approve", "#revise", "#delete", "#cancel", "#dispatch", "#show"):
             assert page.is_disabled(sel), sel
         assert "operator role" in (page.get_attribute("#approve", "title") or "")
         assert store.get_plan(pid).state == "planned"
+        assert not page.is_visible("#scene")  # no empty box: the reason instead
+        assert page.inner_text("#scene-msg") in ("scene not running", "the scene needs the operator role")
+        screens(page, "console-viewer")
         assert not errors, errors
         # the operator's console: E-stop on screen, Plan and Approve enabled
         op, _ = signed_in(browser, url, tokens["operator"])
@@ -324,6 +351,7 @@ def test_dispatch_to_emulator_then_estop(browser, tmp_path: Path) -> None:
         assert "console E-stop button" in banner and "by " in banner, banner
         ARTIFACTS.mkdir(exist_ok=True)
         page.screenshot(path=str(ARTIFACTS / "console-dispatch.png"), full_page=True)
+        screens(page, "console-estop")
         # Clear all asks first: dismissed, nothing changes; accepted, all clear.
         page.once("dialog", lambda d: d.dismiss())
         page.click("#estop-clear-all")
@@ -384,6 +412,12 @@ def test_plots_have_axes_legend_hover_and_survive_200k_points(browser, tmp_path:
         assert 0 < shown["shown"] <= 4000
         assert shown["max"] == pytest.approx(50 + math.sin(123457 / 500))  # the spike survives
         assert page.locator("#d-plots .plot canvas").count() == 1
+        # A wider window widens the charts with it.
+        narrow = page.evaluate("state.uplots[0].width")
+        page.set_viewport_size({"width": 1920, "height": 1000})
+        page.wait_for_function(f"state.uplots[0].width > {narrow} + 100")
+        box_w = page.evaluate("document.querySelector('#d-plots').clientWidth")
+        assert abs(page.evaluate("state.uplots[0].width") - (box_w - 10)) <= 2
         ARTIFACTS.mkdir(exist_ok=True)
         page.locator("#d-plots").screenshot(path=str(ARTIFACTS / "console-plots.png"))
         assert not errors, errors
@@ -415,6 +449,8 @@ def test_params_form_from_the_kind_schema(browser, tmp_path: Path) -> None:
         seg = page.locator("#pf-segmentation")
         assert seg.evaluate("e => e.tagName") == "SELECT"
         assert seg.locator("option").all_inner_texts() == ["default", "thesis"]
+        # The sample structures are a choice too (the schema lists them).
+        assert "warren" in page.locator("#pf-sample option").all_inner_texts()
         assert page.is_checked("#pf-plan_paths")
 
         # The cloud is picked from the stored clouds, not typed as an id: a
@@ -423,7 +459,9 @@ def test_params_form_from_the_kind_schema(browser, tmp_path: Path) -> None:
         assert picker.evaluate("e => e.tagName") == "SELECT"
         assert picker.input_value() == ""  # none: the kind's built-in scene
         page.click("#load-sample")
-        page.wait_for_function("document.querySelector('#cloud-msg').textContent.includes('stored')")
+        page.wait_for_function(
+            "document.querySelector('#cloud-msg').textContent.includes('stored')"
+        )
         (cloud,) = store.list_clouds()
         page.wait_for_selector(f"#pf-cloud_id option[value='{cloud.id}']", state="attached")
         page.select_option("#pf-cloud_id", cloud.id)

@@ -15,7 +15,12 @@ from typing import Any
 
 import pytest
 
-from tests.browser.test_console import ARTIFACTS, browser, signed_in  # noqa: F401 (fixture)
+from tests.browser.test_console import (  # noqa: F401 (browser: a fixture)
+    ARTIFACTS,
+    browser,
+    screens,
+    signed_in,
+)
 from tests.conftest import make_settings
 from tests.support.live import free_port, live_server
 
@@ -122,6 +127,8 @@ def test_kind_from_the_form_to_a_completed_run(browser, server, kind: str) -> No
     progress = page.inner_text("#x-progress")
     ARTIFACTS.mkdir(exist_ok=True)
     page.screenshot(path=str(ARTIFACTS / f"every-kind-{kind}.png"))
+    if kind == "cmbot.climb":  # the execution view, for the README
+        screens(page, "console-execution", focus="#x-state")
     assert state == "completed", (state, progress)
     (ex,) = app.state.services.store.list_executions(plan_id=plan_id)
     assert ex.state == "completed" and ex.acked == ex.total and ex.robot == chosen
