@@ -335,6 +335,20 @@ def test_dispatch_to_emulator_then_estop(browser, tmp_path: Path) -> None:
         page.once("dialog", lambda d: d.dismiss())
         page.click("#x-abort")
         assert page.inner_text("#x-state") == "running"
+        # Pause holds the robot where it is; Resume continues from there.
+        page.click("#x-pause")
+        page.wait_for_function(
+            "document.querySelector('#x-state').textContent === 'paused'", timeout=30_000
+        )
+        assert page.is_enabled("#x-resume") and page.is_disabled("#x-pause")
+        page.wait_for_timeout(1500)  # the command in hand when paused may still report
+        held = app.state.services.store.list_executions(plan_id=plan2)[0].acked
+        page.wait_for_timeout(1500)
+        assert app.state.services.store.list_executions(plan_id=plan2)[0].acked == held
+        page.click("#x-resume")
+        page.wait_for_function(
+            "document.querySelector('#x-state').textContent === 'running'", timeout=30_000
+        )
         assert not page.is_visible("#audit")  # the audit log is folded by default
         page.click("#estop")
         page.wait_for_function(
