@@ -6,7 +6,8 @@ for viser's ``SceneApi`` and notes, for every ``add_*`` call, where the node's
 points lie in the world frame (its own position/orientation and those of the
 frames it is named under).  :func:`framing` turns those points into a view:
 look at the centre of the bulk (2nd–98th percentile box, so a stray point does
-not zoom the view out), from far enough that the box fills the field of view.
+not zoom the view out), from far enough that the box fills the field of view,
+broadside to the bulk's longest horizontal extent.
 """
 
 from __future__ import annotations
@@ -26,6 +27,8 @@ _PICKABLE = frozenset(
 )
 #: Direction from the content's centre to the camera (front-left, above; z up).
 _VIEW_DIR = np.array([-0.55, -1.0, 0.75]) / np.linalg.norm([-0.55, -1.0, 0.75])
+#: Turn from broadside towards the content's long axis (rad), for depth.
+_YAW_RAD = np.radians(25.0)
 #: Smallest half-size framed (m): a single marker is not filled to the edges.
 _MIN_RADIUS_M = 0.3
 
@@ -127,7 +130,33 @@ def framing(points: list[np.ndarray] | np.ndarray, fov_rad: float) -> View | Non
     centre = (lo + hi) / 2.0
     radius = max(float(np.linalg.norm(hi - lo)) / 2.0, _MIN_RADIUS_M)
     distance = 1.15 * radius / np.sin(max(fov_rad, 0.1) / 2.0)
-    return View(centre + _VIEW_DIR * distance, centre, radius)
+    bulk = P[np.all((lo <= P) & (hi >= P), axis=1)]
+    return View(centre + _view_direction(bulk) * distance, centre, radius)
+
+
+def _view_direction(P: np.ndarray) -> np.ndarray:
+    """Unit vector from the content to the camera: broadside to the
+    content's longest horizontal extent (a girder seen along its length
+    shows nothing), turned :data:`_YAW_RAD` towards its axis for depth and
+    raised as :data:`_VIEW_DIR` is; content with no dominant horizontal
+    axis is seen along :data:`_VIEW_DIR`."""
+    if len(P) < 3:
+        return _VIEW_DIR
+    xy = P[:, :2] - P[:, :2].mean(axis=0)
+    w, V = np.linalg.eigh(xy.T @ xy / len(xy))
+    if not w[1] > 2.0 * max(w[0], 1e-12):
+        return _VIEW_DIR
+    major = V[:, 1]
+    side = np.array([-major[1], major[0]])
+    if side @ _VIEW_DIR[:2] < 0:  # the side nearer the usual view
+        side = -side
+    if major @ _VIEW_DIR[:2] < 0:
+        major = -major
+    c, s = np.cos(_YAW_RAD), np.sin(_YAW_RAD)
+    horiz = c * side + s * major
+    flat = float(np.linalg.norm(_VIEW_DIR[:2]))
+    out = np.array([horiz[0] * flat, horiz[1] * flat, _VIEW_DIR[2]])
+    return out / np.linalg.norm(out)
 
 
 def apply_view(server: Any, view: View) -> None:

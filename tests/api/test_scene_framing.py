@@ -10,6 +10,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+import server.scene.framing as framing_module
 from server.scene.framing import BoundsRecorder, framing
 
 
@@ -108,3 +109,29 @@ def test_show_plan_and_cloud_frame_the_camera(make_api) -> None:
     look = np.asarray(sapi.get("/api/v1/scene", "viewer").json()["current"]["view"]["look_at"])
     np.testing.assert_allclose(look, [5.0, 18.0, 0.5], atol=0.1)
     np.testing.assert_allclose(cam.look_at, look, atol=1e-3)
+
+
+@settings(max_examples=40, deadline=None)
+@given(angle=st.floats(0.0, np.pi), length=st.floats(3.0, 100.0), seed=st.integers(0, 2**16))
+def test_a_long_structure_is_seen_broadside(angle, length, seed) -> None:
+    """A girder along any horizontal direction is seen from its side (the
+    camera's horizontal offset within 30° of perpendicular to it), from above."""
+    rng = np.random.default_rng(seed)
+    axis = np.array([np.cos(angle), np.sin(angle), 0.0])
+    t = rng.uniform(-length / 2, length / 2, 2000)
+    P = t[:, None] * axis + rng.normal(0, 0.1, (2000, 3))
+    view = framing([P], np.radians(60))
+    assert view is not None
+    off = view.position - view.look_at
+    horiz = off[:2] / np.linalg.norm(off[:2])
+    assert abs(horiz @ axis[:2]) <= np.sin(np.radians(30)) + 1e-9
+    assert off[2] > 0
+
+
+def test_content_without_a_long_axis_keeps_the_usual_view() -> None:
+    rng = np.random.default_rng(0)
+    P = rng.uniform(-1, 1, (2000, 3))
+    view = framing([P], np.radians(60))
+    assert view is not None
+    off = (view.position - view.look_at) / np.linalg.norm(view.position - view.look_at)
+    np.testing.assert_allclose(off, framing_module._VIEW_DIR, atol=1e-9)
