@@ -268,6 +268,11 @@ class LinkServiceClient:
             self._ready.set()
             return
         self.events.publish(type_, data)
+        if type_ == "execution" and self.scene is not None and data.get("plan_id"):
+            with contextlib.suppress(Exception):
+                self.scene.execution_progress(
+                    data["plan_id"], data["id"], str(data.get("state")), int(data.get("acked", 0))
+                )
         if type_ == "robot" and self.scene is not None:
             report = data.get("report")
             if report and "q_rad" in report:

@@ -57,6 +57,9 @@ class DrawContext:
     gui_handles: list[Any] = field(default_factory=list)
     #: Interactive tools a drawer set up (e.g. ``"obstacles"``), kept by the scene.
     tools: dict[str, Any] = field(default_factory=dict)
+    #: The robots drawn with :meth:`add_urdf`: node name → ViserUrdf (the
+    #: planned ghost; the scene puts the reported robot under that node).
+    robots: dict[str, Any] = field(default_factory=dict)
 
     def add_urdf(self, robot: str, name: str, root_pose: np.ndarray | None = None) -> Any:
         from viser.extras import ViserUrdf
@@ -70,11 +73,13 @@ class DrawContext:
         target = self.server if self.server is not None else _SceneOnly(self.scene)
         # ViserUrdf reads only ``target.scene``; its annotation names the two viser
         # types that have one, so the scene-only stand-in is outside it
-        return ViserUrdf(
+        handle = ViserUrdf(
             target,  # type: ignore[arg-type]
             Path(model.urdf_path),
             root_node_name=f"{self.root}/{name}",
         )
+        self.robots[f"{self.root}/{name}"] = handle
+        return handle
 
     def animate(self, duration_s: float, update: Callable[[float], None]) -> None:
         self.animations.append(Animation(max(float(duration_s), 1e-3), update))

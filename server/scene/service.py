@@ -67,6 +67,11 @@ class SceneService:
         self.current: dict[str, Any] = {}
         self._live: dict[str, Any] = {}
         self._live_cfg: dict[str, np.ndarray] = {}
+        # The planned robot (ghost) of the plan shown, and the program's
+        # command start times: an execution of the plan drives both.
+        self._ghosts: dict[str, Any] = {}
+        self._timeline: np.ndarray | None = None
+        self._driven: str | None = None  # the execution now driving the animations
         self.proposals = proposals if proposals is not None else ProposalBook()
         self._publish = publish
         self.measurer = Measurer()
@@ -132,6 +137,9 @@ class SceneService:
         self._live = {}
         self._live_cfg = {}
         self.tools = {}
+        self._ghosts = {}
+        self._timeline = None
+        self._driven = None
 
     def show_plan(self, plan_id: str) -> dict[str, Any]:
         """Draw a stored plan (its kind's drawer); follow it if still planning."""
@@ -181,6 +189,8 @@ class SceneService:
         self._animations = list(ctx.animations)
         self._gui_handles = list(ctx.gui_handles)
         self.tools = dict(ctx.tools)
+        self._ghosts = dict(ctx.robots)
+        self._timeline = _timeline(plan.program)
         self._frame(recorder.points)
         self.measurer.set_points(recorder.pickable)
 
@@ -282,11 +292,15 @@ class SceneService:
             if cfg is None or len(cfg) != len(names):
                 cfg = np.zeros(len(names))
             q = np.asarray(q, dtype=float).ravel()
+            ghost = self._ghost_cfg(names)
+            if ghost is not None:
+                cfg = ghost.copy()
             if len(q) == len(names):
                 cfg = q.copy()
             else:
                 # The robot reports its own joints (CMBOT: the 7-DoF arm of a
-                # 12-joint URDF): placed by name, the others keep their pose.
+                # 12-joint URDF): placed by name, the others as planned now
+                # (the ghost's), else where they were.
                 index = {n: i for i, n in enumerate(names)}
                 reported = self._reported_joints(robot)
                 if len(reported) != len(q) or not all(n in index for n in reported):
@@ -305,6 +319,15 @@ class SceneService:
         except ValueError:
             return []
 
+    def _ghost_cfg(self, names: list[str]) -> np.ndarray | None:
+        """The planned robot's joints now, in ``names`` order (None: no ghost
+        of that URDF)."""
+        for g in self._ghosts.values():
+            with contextlib.suppress(Exception):
+                if list(g.get_actuated_joint_names()) == names:
+                    return np.asarray(g._urdf.cfg, dtype=float)
+        return None
+
     def _add_live(self, robot: str) -> Any:
         from pathlib import Path
 
@@ -317,17 +340,48 @@ class SceneService:
             path = Path(load_robot(robot).urdf_path)
         except ValueError:
             return None
-        frame = self._server.scene.add_frame(f"/plan/live_{robot}", show_axes=False)
-        if self.current.get("base_pose") is not None:
+        # Under the planned robot's own node when the drawer made one, so the
+        # reported joints ride on the planned base as it moves (an inch-worm
+        # or a climber changes its base; the report has joints only).
+        parent = next(iter(self._ghosts), None)
+        node = f"{parent}/live" if parent is not None else f"/plan/live_{robot}"
+        frame = self._server.scene.add_frame(node, show_axes=False)
+        if parent is None and self.current.get("base_pose") is not None:
             set_frame_pose(frame, np.asarray(self.current["base_pose"], dtype=float))
         handle = ViserUrdf(
             self._server,
             path,
-            root_node_name=f"/plan/live_{robot}",
+            root_node_name=node,
             mesh_color_override=(1.0, 0.55, 0.1, 0.7),
         )
         self._live[robot] = handle
         return handle
+
+    def execution_progress(self, plan_id: str, execution_id: str, state: str, acked: int) -> None:
+        """An execution of the plan shown moved on: the planned robot (the
+        ghost) and everything animated stand where the plan is after the
+        ``acked`` commands done (by their planned durations) instead of
+        looping; a finished or stopped run holds its last pose."""
+        if not self.running or self.current.get("plan_id") != plan_id:
+            return
+        with self._lock:
+            tl = self._timeline
+            if tl is None or tl[-1] <= 0:
+                return
+            self._driven = execution_id
+            frac = float(tl[min(max(acked, 0), len(tl) - 1)] / tl[-1])
+            self.current["execution"] = {
+                "id": execution_id,
+                "state": state,
+                "acked": acked,
+                "fraction": round(frac, 4),
+            }
+            for a in list(self._animations):
+                try:
+                    a.update(frac * a.duration_s)
+                except Exception:
+                    log.exception("scene animation failed; dropping it")
+                    self._animations.remove(a)
 
     def plan_finished(self, plan_id: str) -> None:
         """Called when a plan leaves planning; redraw if it is the one followed."""
@@ -366,10 +420,20 @@ class SceneService:
         t0 = time.monotonic()
         while not self._stop.wait(0.05):
             with self._lock:
-                anims = list(self._animations)
+                # An execution of the plan drives its animations instead.
+                anims = [] if self._driven is not None else list(self._animations)
                 for a in anims:
                     try:
                         a.update((time.monotonic() - t0) % a.duration_s)
                     except Exception:
                         log.exception("scene animation failed; dropping it")
                         self._animations.remove(a)
+
+
+def _timeline(program: list[dict[str, Any]] | None) -> np.ndarray | None:
+    """Planned time (s) after each number of commands done: ``t[k]`` = the
+    sum of the first ``k`` commands' ``duration_s`` (``len + 1`` values)."""
+    if not program:
+        return None
+    d = np.array([max(float(c.get("duration_s", 0.0) or 0.0), 0.0) for c in program])
+    return np.concatenate([[0.0], np.cumsum(d)])
