@@ -10,10 +10,13 @@ program (the blasting arm's) finishes in seconds.
 
 from __future__ import annotations
 
+import time
 from collections.abc import Iterator
 from typing import Any
 
+import numpy as np
 import pytest
+from scipy.spatial.transform import Rotation
 
 from tests.browser.test_console import (  # noqa: F401 (browser: a fixture)
     ARTIFACTS,
@@ -25,6 +28,11 @@ from tests.conftest import make_settings
 from tests.support.live import free_port, live_server
 
 TIME_SCALE = 40.0
+
+#: Kinds whose start and end are picked in the scene: after the first plan,
+#: two clicks on its vertices in the viser canvas propose a revision, which is
+#: accepted in the console and carried through the rest of the flow.
+SCENE_PICKS = {"demo.route", "ara.navigate", "ara.inspect"}
 
 #: Form edits per kind (field → value typed or picked); the rest stay default.
 #: ara.inspect: the default Warren scan (seed 0) has web members (angle
@@ -49,6 +57,7 @@ def server(tmp_path_factory) -> Iterator[tuple[str, dict[str, str], Any]]:
     settings = make_settings(
         tmp_path_factory.mktemp("every") / "var",
         port=free_port(),
+        scene_port=free_port(),
         emulators=True,
         emulator_time_scale=TIME_SCALE,
     )
@@ -90,6 +99,12 @@ def test_kind_from_the_form_to_a_completed_run(browser, server, kind: str) -> No
     assert plan.kind == kind
     failed = [c.get("message") for c in plan.checks if not c.get("passed")]
     assert plan.state == "planned", (plan.state, plan.error, failed, sent)
+
+    if kind in SCENE_PICKS:
+        plan_id = _pick_start_end_in_the_scene(page, app, plan_id)
+        plan = app.state.services.store.get_plan(plan_id)
+        failed = [c.get("message") for c in plan.checks if not c.get("passed")]
+        assert plan.state == "planned", (plan.state, plan.error, failed, plan.params)
 
     # Review: the detail shows every check passing; approve it.
     page.locator(f"#plans tbody tr[data-id='{plan_id}']").click()
@@ -141,3 +156,97 @@ def test_every_kind_is_covered() -> None:
 
     shipped = {k for k in registry() if not k.startswith("test.")}
     assert shipped == set(KINDS), shipped ^ set(KINDS)
+
+
+def _world(scene: Any, name: str, points: np.ndarray) -> np.ndarray:
+    """``points`` of node ``name`` in the world frame (its own and its
+    parents' poses)."""
+    T = np.eye(4)
+    parts = name.strip("/").split("/")
+    for k in range(1, len(parts) + 1):
+        h = scene.get_handle_by_name("/" + "/".join(parts[:k]))
+        if h is None:
+            continue
+        w, x, y, z = (float(v) for v in h.wxyz)
+        M = np.eye(4)
+        M[:3, :3] = Rotation.from_quat([x, y, z, w]).as_matrix()
+        M[:3, 3] = np.asarray(h.position, dtype=float)
+        T = T @ M
+    return points @ T[:3, :3].T + T[:3, 3]
+
+
+def _pixel(cam: Any, p: np.ndarray) -> tuple[float, float, float]:
+    """Where the client's camera sees world point ``p``: (u, v) in its image
+    pixels (viser's camera frame: x right, y down, z forward) and the depth."""
+    w, x, y, z = (float(v) for v in cam.wxyz)
+    R = Rotation.from_quat([x, y, z, w]).as_matrix()
+    c = R.T @ (np.asarray(p, dtype=float) - np.asarray(cam.position, dtype=float))
+    f = (cam.image_height / 2) / np.tan(cam.fov / 2)
+    return cam.image_width / 2 + f * c[0] / c[2], cam.image_height / 2 + f * c[1] / c[2], c[2]
+
+
+def _pick_start_end_in_the_scene(page: Any, app: Any, plan_id: str) -> str:
+    """Show the plan, click two of its vertices in the viser canvas (real
+    pointer clicks), accept the proposal in the console; the revision's id."""
+    page.click("#show")
+    frame = page.wait_for_selector("#scene").content_frame()
+    canvas = frame.locator("canvas[data-engine^='three']").first
+    canvas.wait_for(timeout=60_000)
+    page.locator("#scene").scroll_into_view_if_needed()
+    service = app.state.services.scene
+    scene = service.server.scene
+    name = next(n for n in scene._handle_from_node_name if n.endswith("/vertices"))
+    handle = scene.get_handle_by_name(name)
+    pts = _world(scene, name, np.asarray(handle.batched_positions, dtype=float))
+    # The framing reaches the browser's camera; wait until the client reports it.
+    look = np.asarray(service.current["view"]["look_at"])
+    deadline = time.monotonic() + 30
+    cam = None
+    while time.monotonic() < deadline:
+        clients = list(service.server.get_clients().values())
+        if clients and np.allclose(clients[0].camera.look_at, look, atol=1e-3):
+            cam = clients[0].camera
+            break
+        time.sleep(0.2)
+    assert cam is not None, "the scene's camera never reached the framed view"
+    time.sleep(1.0)  # the last frame drawn at that view
+    px = np.array([_pixel(cam, p) for p in pts])
+    box = canvas.bounding_box()
+    assert box is not None
+    inside = np.nonzero(
+        (px[:, 2] > 0)
+        & (px[:, 0] > 20)
+        & (px[:, 0] < cam.image_width - 20)
+        & (px[:, 1] > 20)
+        & (px[:, 1] < cam.image_height - 20)
+    )[0]
+    assert len(inside) >= 2, "fewer than two vertices on screen"
+    # Two vertices far apart on screen: the first, and the farthest from it.
+    a = int(inside[0])
+    b = int(inside[np.argmax(np.linalg.norm(px[inside, :2] - px[a, :2], axis=1))])
+    for i in (a, b):
+        canvas.click(
+            position={
+                "x": px[i, 0] * box["width"] / cam.image_width,
+                "y": px[i, 1] * box["height"] / cam.image_height,
+            }
+        )
+        page.wait_for_timeout(1200)  # proposals are rate-limited per client
+    page.wait_for_selector("#proposals tr[data-proposal]", timeout=30_000)
+    (prop,) = service.proposals.list("pending")
+    assert set(prop.patch) == {"start", "end"} and prop.patch["start"] != prop.patch["end"]
+    store = app.state.services.store
+    page.click("#proposals tr[data-proposal] button.accept")
+    page.wait_for_function(
+        f"document.querySelector('#d-title').textContent.includes('revision of {plan_id}')",
+        timeout=60_000,
+    )
+    (child,) = store.list_plans(parent_id=plan_id)
+    deadline = time.monotonic() + 120
+    while store.get_plan(child.id).state in ("queued", "planning"):
+        assert time.monotonic() < deadline, "the revision never finished planning"
+        time.sleep(0.2)
+    done = store.get_plan(child.id)
+    assert (done.params["start"], done.params["end"]) == (prop.patch["start"], prop.patch["end"])
+    page.locator(f"#plans tbody tr[data-id='{child.id}']").click()
+    return child.id
