@@ -566,6 +566,13 @@ async function renderComparison(p) {
 
 function renderDetail(p) {
   $("#detail").hidden = false;
+  // The program's planned timeline: seconds done after k commands (k = 0…n).
+  state.timeline = null;
+  if (p.program) {
+    const t = [0];
+    for (const c of p.program) t.push(t[t.length - 1] + Math.max(Number(c.duration_s) || 0, 0));
+    state.timeline = { plan: p.id, t };
+  }
   $("#d-title").textContent = `${p.id} · ${p.kind}` + (p.parent_id ? ` (revision of ${p.parent_id})` : "");
   const st = $("#d-state");
   st.textContent = p.state; st.className = `state ${p.state}`;
@@ -840,8 +847,14 @@ async function showExecution(ex) {
   $("#x-id").textContent = full.id;
   const st = $("#x-state");
   st.textContent = full.state; st.className = `state ${full.state}`;
-  $("#x-progress div").style.width = `${full.progress * 100}%`;
-  $("#x-progress span").textContent = `${full.acked}/${full.total} commands`;
+  // Progress by planned time (the bar) and by command (the count).
+  const tl = state.timeline && state.timeline.plan === full.plan_id ? state.timeline.t : null;
+  const tDone = tl ? tl[Math.min(full.acked, tl.length - 1)] : null;
+  const tAll = tl ? tl[tl.length - 1] : null;
+  const frac = tl && tAll > 0 ? tDone / tAll : full.progress;
+  $("#x-progress div").style.width = `${frac * 100}%`;
+  $("#x-progress span").textContent = `${full.acked}/${full.total} commands`
+    + (tl ? ` · ${tDone.toFixed(1)} of ${tAll.toFixed(1)} s planned` : "");
   $("#x-current").textContent = full.current_command ? describeCommand(full.current_command) : "–";
   $("#x-fault").textContent = NEXT_ACTION[full.state] ? `${full.state}: ${full.fault || full.error || "no reason given"} — ${NEXT_ACTION[full.state]}` : "";
   const allowed = new Set(full.allowed_actions || []);

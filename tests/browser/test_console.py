@@ -238,7 +238,10 @@ def test_viewer_gets_a_read_only_console(browser, tmp_path: Path) -> None:
         assert "operator role" in (page.get_attribute("#approve", "title") or "")
         assert store.get_plan(pid).state == "planned"
         assert not page.is_visible("#scene")  # no empty box: the reason instead
-        assert page.inner_text("#scene-msg") in ("scene not running", "the scene needs the operator role")
+        assert page.inner_text("#scene-msg") in (
+            "scene not running",
+            "the scene needs the operator role",
+        )
         screens(page, "console-viewer")
         assert not errors, errors
         # the operator's console: E-stop on screen, Plan and Approve enabled
@@ -374,6 +377,23 @@ def test_dispatch_to_emulator_then_estop(browser, tmp_path: Path) -> None:
         page.once("dialog", lambda d: d.accept())
         page.click("#estop-clear-all")
         page.wait_for_selector("#estop-banner", state="hidden", timeout=30_000)
+
+        # Run 3: Abort, confirmed, stops the run (no E-stop latched).
+        plan3 = _plan_and_approve(page, '{"end": "c1"}')
+        page.click("#dispatch")
+        page.click("#dispatch-confirm")
+        page.wait_for_function(
+            "document.querySelector('#x-state').textContent === 'running'", timeout=30_000
+        )
+        page.once("dialog", lambda d: d.accept())
+        page.click("#x-abort")
+        page.wait_for_function(
+            "document.querySelector('#x-state').textContent === 'aborted'", timeout=30_000
+        )
+        ex3 = app.state.services.store.list_executions(plan_id=plan3)[0]
+        assert ex3.state == "aborted" and ex3.acked < ex3.total
+        assert not app.state.services.dispatch.robot_status("ara")["estop_latched"]
+        assert page.is_hidden("#estop-banner")
         emulator = app.state.services.emulators["ara"]
         assert emulator.stop_events(), "the emulator never saw the stop"
         assert not errors, errors

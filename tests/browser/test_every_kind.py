@@ -145,6 +145,12 @@ def test_kind_from_the_form_to_a_completed_run(browser, server, kind: str) -> No
     if kind == "cmbot.climb":  # the execution view, for the README
         screens(page, "console-execution", focus="#x-state")
     assert state == "completed", (state, progress)
+    # Progress by command and by planned time, both full.
+    total_s = sum(max(float(c.get("duration_s", 0.0) or 0.0), 0.0) for c in plan.program or [])
+    n = len(plan.program or [])
+    assert progress.startswith(f"{n}/{n} commands · {total_s:.1f} of {total_s:.1f} s planned"), (
+        progress
+    )
     (ex,) = app.state.services.store.list_executions(plan_id=plan_id)
     assert ex.state == "completed" and ex.acked == ex.total and ex.robot == chosen
     assert not errors, errors
