@@ -74,7 +74,7 @@ def draw(ctx: DrawContext, plan: PlanView) -> None:
         ids,
         pos + 3 * LIFT * normal,
         chosen=res,
-        radius=0.02,
+        radius=0.035,  # a target a crew can click (2 cm was a few pixels)
         label_positions=pos + 6 * LIFT * normal,
     )
 

@@ -1,4 +1,6 @@
-"""Every plan kind through the console's form, no JSON typed: plan, review,
+"""Every plan kind through the console's form, no JSON typed: a sample cloud
+loaded and picked where the kind takes one, choices picked in the scene
+(start and end vertices, blast's surface), plan, review,
 approve, dispatch to the kind's robot (the embedded emulators) and watch the
 execution to completion (issue #15 "Done when"); a kind with no robot program
 (ara.inspect's survey route) stops at approval, its Dispatch disabled.
@@ -33,6 +35,16 @@ TIME_SCALE = 40.0
 #: two clicks on its vertices in the viser canvas propose a revision, which is
 #: accepted in the console and carried through the rest of the flow.
 SCENE_PICKS = {"demo.route", "ara.navigate", "ara.inspect"}
+#: Kinds planned on a sample cloud loaded through the console and picked in
+#: the form's cloud field.  blast then picks its surface in the scene: the
+#: plane centres are clickable, and plane 1 (a web patch of the girder) is
+#: one the arm reaches (tests/api/test_blast.py).
+CLOUDS = {
+    "ara.navigate": "cross",
+    "ara.switch": "switch_perpendicular",
+    "blast": "blast_under_deck",
+}
+PLANE_PICK = 1
 
 #: Form edits per kind (field → value typed or picked); the rest stay default.
 #: ara.inspect: the default Warren scan (seed 0) has web members (angle
@@ -71,9 +83,29 @@ def server(tmp_path_factory) -> Iterator[tuple[str, dict[str, str], Any]]:
 def test_kind_from_the_form_to_a_completed_run(browser, server, kind: str) -> None:  # noqa: F811
     url, tokens, app = server
     page, errors = signed_in(browser, url, tokens["operator"], height=1100)
+    try:
+        _flow(page, errors, app, kind)
+    finally:
+        page.close()  # a page left open keeps its WebGL scene drawing
+
+
+def _flow(page: Any, errors: list[str], app: Any, kind: str) -> None:
     page.wait_for_selector(f"#kind option[value='{kind}']", state="attached")
+    if kind not in SCENE_PICKS and kind != "blast":
+        # This run does not look at the scene: software WebGL drawing it
+        # would only slow the machine the emulators run on.
+        page.evaluate("document.querySelector('#scene').src = 'about:blank'")
     page.select_option("#kind", kind)
     page.wait_for_selector("#params-form .field")
+    if kind in CLOUDS:
+        page.select_option("#sample", CLOUDS[kind])
+        page.click("#load-sample")
+        page.wait_for_function(
+            "document.querySelector('#cloud-msg').textContent.startsWith('stored')"
+        )
+        cloud_id = page.inner_text("#cloud-msg").split()[1].rstrip(":")
+        page.wait_for_selector(f"#pf-cloud_id option[value='{cloud_id}']", state="attached")
+        page.select_option("#pf-cloud_id", cloud_id)
     for field, value in EDITS.get(kind, {}).items():
         sel = f"#pf-{field}"
         if not page.is_visible(sel):
@@ -100,8 +132,10 @@ def test_kind_from_the_form_to_a_completed_run(browser, server, kind: str) -> No
     failed = [c.get("message") for c in plan.checks if not c.get("passed")]
     assert plan.state == "planned", (plan.state, plan.error, failed, sent)
 
-    if kind in SCENE_PICKS:
-        plan_id = _pick_start_end_in_the_scene(page, app, plan_id)
+    if kind in CLOUDS:
+        assert plan.params["cloud_id"] == cloud_id
+    if kind in SCENE_PICKS or kind == "blast":
+        plan_id = _pick_in_the_scene(page, app, plan_id, kind)
         plan = app.state.services.store.get_plan(plan_id)
         failed = [c.get("message") for c in plan.checks if not c.get("passed")]
         assert plan.state == "planned", (plan.state, plan.error, failed, plan.params)
@@ -123,7 +157,6 @@ def test_kind_from_the_form_to_a_completed_run(browser, server, kind: str) -> No
         # A survey route (ara.inspect) has no robot program: nothing to dispatch.
         assert page.is_disabled("#dispatch")
         assert not errors, errors
-        page.close()
         return
 
     # Dispatch to the kind's robot (preselected) and watch it complete.
@@ -154,7 +187,6 @@ def test_kind_from_the_form_to_a_completed_run(browser, server, kind: str) -> No
     (ex,) = app.state.services.store.list_executions(plan_id=plan_id)
     assert ex.state == "completed" and ex.acked == ex.total and ex.robot == chosen
     assert not errors, errors
-    page.close()
 
 
 def test_every_kind_is_covered() -> None:
@@ -191,9 +223,10 @@ def _pixel(cam: Any, p: np.ndarray) -> tuple[float, float, float]:
     return cam.image_width / 2 + f * c[0] / c[2], cam.image_height / 2 + f * c[1] / c[2], c[2]
 
 
-def _pick_start_end_in_the_scene(page: Any, app: Any, plan_id: str) -> str:
-    """Show the plan, click two of its vertices in the viser canvas (real
-    pointer clicks), accept the proposal in the console; the revision's id."""
+def _pick_in_the_scene(page: Any, app: Any, plan_id: str, kind: str) -> str:
+    """Show the plan, click in the viser canvas (real pointer clicks) two of
+    its vertices (start, end) or, for blast, a plane centre; accept the
+    proposal in the console; the revision's id."""
     page.click("#show")
     frame = page.wait_for_selector("#scene").content_frame()
     canvas = frame.locator("canvas[data-engine^='three']").first
@@ -201,7 +234,8 @@ def _pick_start_end_in_the_scene(page: Any, app: Any, plan_id: str) -> str:
     page.locator("#scene").scroll_into_view_if_needed()
     service = app.state.services.scene
     scene = service.server.scene
-    name = next(n for n in scene._handle_from_node_name if n.endswith("/vertices"))
+    suffix = "/planes" if kind == "blast" else "/vertices"
+    name = next(n for n in scene._handle_from_node_name if n.endswith(suffix))
     handle = scene.get_handle_by_name(name)
     pts = _world(scene, name, np.asarray(handle.batched_positions, dtype=float))
     # The framing reaches the browser's camera; wait until the client reports it.
@@ -226,11 +260,16 @@ def _pick_start_end_in_the_scene(page: Any, app: Any, plan_id: str) -> str:
         & (px[:, 1] > 20)
         & (px[:, 1] < cam.image_height - 20)
     )[0]
-    assert len(inside) >= 2, "fewer than two vertices on screen"
-    # Two vertices far apart on screen: the first, and the farthest from it.
-    a = int(inside[0])
-    b = int(inside[np.argmax(np.linalg.norm(px[inside, :2] - px[a, :2], axis=1))])
-    for i in (a, b):
+    if kind == "blast":
+        assert PLANE_PICK in inside, "the plane to pick is off screen"
+        clicks, keys = [PLANE_PICK], {"plane_index"}
+    else:
+        assert len(inside) >= 2, "fewer than two vertices on screen"
+        # Two vertices far apart on screen: the first, and the farthest from it.
+        a = int(inside[0])
+        b = int(inside[np.argmax(np.linalg.norm(px[inside, :2] - px[a, :2], axis=1))])
+        clicks, keys = [a, b], {"start", "end"}
+    for i in clicks:
         canvas.click(
             position={
                 "x": px[i, 0] * box["width"] / cam.image_width,
@@ -240,7 +279,11 @@ def _pick_start_end_in_the_scene(page: Any, app: Any, plan_id: str) -> str:
         page.wait_for_timeout(1200)  # proposals are rate-limited per client
     page.wait_for_selector("#proposals tr[data-proposal]", timeout=30_000)
     (prop,) = service.proposals.list("pending")
-    assert set(prop.patch) == {"start", "end"} and prop.patch["start"] != prop.patch["end"]
+    assert set(prop.patch) == keys, prop.patch
+    if kind == "blast":
+        assert prop.patch["plane_index"] == PLANE_PICK
+    else:
+        assert prop.patch["start"] != prop.patch["end"]
     store = app.state.services.store
     page.click("#proposals tr[data-proposal] button.accept")
     page.wait_for_function(
@@ -253,6 +296,7 @@ def _pick_start_end_in_the_scene(page: Any, app: Any, plan_id: str) -> str:
         assert time.monotonic() < deadline, "the revision never finished planning"
         time.sleep(0.2)
     done = store.get_plan(child.id)
-    assert (done.params["start"], done.params["end"]) == (prop.patch["start"], prop.patch["end"])
+    assert {k: done.params[k] for k in keys} == prop.patch
     page.locator(f"#plans tbody tr[data-id='{child.id}']").click()
+    page.evaluate("document.querySelector('#scene').src = 'about:blank'")  # done with it
     return child.id
