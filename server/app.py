@@ -24,7 +24,7 @@ from server.events import EventBus
 from server.jobs import JobRunner
 from server.kinds import registry
 from server.lifecycle import IllegalTransitionError
-from server.routers import clouds, events, health, plans, robots, safety, tokens
+from server.routers import clouds, events, health, plans, robots, safety, tokens, webhooks
 from server.routers.responses import conform_openapi
 from server.scene import proxy
 from server.services import Services
@@ -133,6 +133,15 @@ def create_app(settings: Settings | None = None, *, start_scene: bool | None = N
             preload=settings.job_preload,
         )
         services = Services(settings=settings, store=store, events=bus, jobs=jobs)
+        from server.store.webhooks import WebhookStore
+        from server.webhooks import WebhookDispatcher
+
+        services.webhooks = WebhookDispatcher(
+            WebhookStore(store.db),
+            backoff_s=settings.webhook_backoff_s,
+            max_attempts=settings.webhook_max_attempts,
+        ).start()
+        bus.add_listener(services.webhooks.on_event)
         app.state.services = services
         secret = bootstrap_admin(store, settings.token_file)
         if secret is not None:
@@ -197,6 +206,7 @@ def create_app(settings: Settings | None = None, *, start_scene: bool | None = N
                 services.emulators.stop()
             if services.scene is not None:
                 services.scene.stop()
+            services.webhooks.stop()
             store.close()
 
     app = FastAPI(
@@ -232,6 +242,7 @@ def create_app(settings: Settings | None = None, *, start_scene: bool | None = N
         events.router,
         safety.router,
         tokens.router,
+        webhooks.router,
     ):
         app.include_router(r, prefix=API)
     app.include_router(proxy.api_router, prefix=API)

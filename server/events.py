@@ -10,9 +10,11 @@ from __future__ import annotations
 
 import asyncio
 import itertools
+import logging
 import threading
 import time
 from collections import deque
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -32,12 +34,25 @@ class EventBus:
         self._subs: list[tuple[asyncio.AbstractEventLoop, asyncio.Queue[Event]]] = []
         self._history: deque[Event] = deque(maxlen=history)
         self._queue_size = queue_size
+        self._listeners: list[Callable[[str, dict[str, Any]], None]] = []
+
+    def add_listener(self, fn: Callable[[str, dict[str, Any]], None]) -> None:
+        """Call ``fn(type, data)`` on every publish, on the publisher's thread:
+        it must only hand the event over (e.g. put it on a queue)."""
+        with self._lock:
+            self._listeners.append(fn)
 
     def publish(self, type_: str, data: dict[str, Any]) -> Event:
         with self._lock:
             ev = Event(next(self._ids), type_, data)
             self._history.append(ev)
             subs = list(self._subs)
+            listeners = list(self._listeners)
+        for fn in listeners:
+            try:
+                fn(type_, data)
+            except Exception:  # a listener must not break the publisher
+                logging.getLogger(__name__).exception("event listener failed on %s", type_)
         for loop, q in subs:
             try:
                 loop.call_soon_threadsafe(self._offer, q, ev)

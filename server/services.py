@@ -25,6 +25,7 @@ class Services:
     emulators: Any = None  # server.linkservice.EmulatorSupervisor when built-in emulators run
     estop_handlers: list[Callable[[str | None, str], None]] = field(default_factory=list)
     token_cache: Any = None  # server.auth.TokenCache, made on first use
+    webhooks: Any = None  # server.webhooks.WebhookDispatcher
 
 
 async def get_services(request: Request) -> Services:

@@ -50,6 +50,16 @@ class Settings(BaseSettings):
         le=1000,
         description="embedded emulators run motions this much faster than real time",
     )
+    webhook_backoff_s: float = Field(
+        2.0,
+        gt=0,
+        le=3600,
+        description="first retry delay of a failed webhook delivery; doubled each attempt "
+        "(capped at 300 s) up to webhook_max_attempts",
+    )
+    webhook_max_attempts: int = Field(
+        8, ge=1, le=100, description="attempts before a webhook delivery is marked failed"
+    )
     emulator_nice: int = Field(
         0,
         ge=-20,

@@ -114,6 +114,34 @@ MIGRATIONS: list[str] = [
     """
     ALTER TABLE clouds ADD COLUMN survey TEXT NOT NULL DEFAULT '{}';
     """,
+    # 6: webhooks (admin-configured receivers) and their deliveries (retried,
+    # listed); a removed webhook keeps its row and deliveries (removed_at)
+    """
+    CREATE TABLE webhooks (
+        id TEXT PRIMARY KEY,
+        url TEXT NOT NULL,
+        events TEXT NOT NULL,
+        secret TEXT NOT NULL,
+        created_by TEXT NOT NULL,
+        created_at TEXT NOT NULL,
+        removed_at TEXT,
+        removed_by TEXT
+    );
+    CREATE TABLE webhook_deliveries (
+        id TEXT PRIMARY KEY,
+        webhook_id TEXT NOT NULL REFERENCES webhooks(id),
+        event TEXT NOT NULL,
+        payload TEXT NOT NULL,
+        state TEXT NOT NULL,
+        attempts INTEGER NOT NULL DEFAULT 0,
+        next_at REAL,
+        last_status INTEGER,
+        last_error TEXT,
+        created_at TEXT NOT NULL,
+        delivered_at TEXT
+    );
+    CREATE INDEX webhook_deliveries_due ON webhook_deliveries (state, next_at);
+    """,
 ]
 
 SCHEMA_VERSION = len(MIGRATIONS)
