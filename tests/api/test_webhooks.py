@@ -120,8 +120,8 @@ def test_only_an_admin_registers_and_bad_requests_are_named(wapi) -> None:
     assert wapi.post("/api/v1/webhooks", "operator", json={"url": url}).status_code == 403
     assert wapi.get("/api/v1/webhooks", "viewer").status_code == 403
     for body, words in (
-        ({"url": "ftp://example.org/x"}, "http:// or https://"),
-        ({"url": "not a url"}, "http:// or https://"),
+        ({"url": "ftp://example.org/x"}, "https?://"),
+        ({"url": "not a url"}, "https?://"),
         ({"url": url, "events": ["estop", "plan.done"]}, "plan.done"),
         ({"url": url, "events": []}, "at least 1"),
         ({"url": url, "secret": "mine"}, "secret"),
