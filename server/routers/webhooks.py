@@ -36,7 +36,7 @@ class WebhookRequest(BaseModel):
         description="http(s) URL that receives the POSTs",
     )
     events: list[EventName] = Field(
-        default_factory=lambda: list(WEBHOOK_EVENTS),
+        default_factory=lambda: list(get_args(EventName)),
         min_length=1,
         description=f"events to receive, of: {', '.join(WEBHOOK_EVENTS)} (default: all)",
     )
@@ -51,7 +51,7 @@ class WebhookRequest(BaseModel):
 
     @field_validator("events")
     @classmethod
-    def _once_each(cls, v: list[str]) -> list[str]:
+    def _once_each(cls, v: list[EventName]) -> list[EventName]:
         return sorted(set(v), key=WEBHOOK_EVENTS.index)
 
 
@@ -71,7 +71,7 @@ def create_webhook(req: WebhookRequest, services: Svc, who: Admin) -> dict[str, 
     """Register a receiver.  The answer holds its signing ``secret``, shown
     only here: deliveries carry ``X-SteelPath-Signature: sha256=HMAC(secret,
     "{X-SteelPath-Timestamp}.{body}")``."""
-    hook = _hooks(services).add(req.url, req.events, who.actor)
+    hook = _hooks(services).add(req.url, list(req.events), who.actor)
     return {**hook.public(), "secret": hook.secret}
 
 

@@ -13,6 +13,7 @@ from __future__ import annotations
 import json
 import secrets
 import sqlite3
+from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -123,14 +124,14 @@ class WebhookStore:
         self.db = db
 
     # ---------------------------------------------------------------- webhooks
-    def add(self, url: str, events: list[str], actor: str) -> Webhook:
+    def add(self, url: str, events: Sequence[str], actor: str) -> Webhook:
         wid = f"wh_{secrets.token_hex(6)}"
         secret = f"whsec_{secrets.token_urlsafe(24)}"
         with self.db.transaction() as conn:
             conn.execute(
                 "INSERT INTO webhooks (id, url, events, secret, created_by, created_at) "
                 "VALUES (?,?,?,?,?,?)",
-                (wid, url, json.dumps(events), secret, actor, utcnow()),
+                (wid, url, json.dumps(list(events)), secret, actor, utcnow()),
             )
             conn.execute(
                 "INSERT INTO audit_events (ts, actor, entity, entity_id, action, reason) "
