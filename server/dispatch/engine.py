@@ -480,6 +480,10 @@ class DispatchEngine:
             name, state = item
             try:
                 self.store.save_robot_state(name, state)
+                # Recorded runs (issue #16 §3): the reports of an active execution.
+                eid = self._active_execution_for(name)
+                if eid is not None:
+                    self.store.record_execution_state(eid, time.time(), state)
             except Exception:
                 log.exception("could not store state of %s", name)
             self.events.publish("robot", {"name": name, "report": state})

@@ -11,7 +11,7 @@ from pydantic import BaseModel, Field, field_validator
 from server.auth import Admin, Operator, Viewer
 from server.dispatch import DispatchError
 from server.linkservice import LinkServiceClient
-from server.routers.responses import json_response
+from server.routers.responses import errors, json_response
 from server.services import Services, get_services
 
 router = APIRouter(tags=["robots"])
@@ -163,6 +163,36 @@ async def get_execution(execution_id: str, services: Svc, _: Viewer) -> Response
     out["current_command"] = services.store.plan_command(ex.plan_id, ex.acked)
     out["audit"] = [e.public() for e in services.store.list_audit("execution", execution_id)]
     return json_response(out)
+
+
+@router.get(
+    "/executions/{execution_id}/recording.mcap",
+    responses={
+        200: {"content": {"application/octet-stream": {}}, "description": "the run as MCAP"},
+        **errors(401, 403, 404),
+    },
+)
+def execution_recording(execution_id: str, services: Svc, _: Viewer) -> Response:
+    """The run as an MCAP file (Foxglove / Lichtblick): the planned program,
+    each command at its acknowledgement, the robot's state reports while it
+    ran and the operator's actions (see :mod:`server.recording`)."""
+    import io
+
+    from server.recording import write_recording
+
+    store = services.store
+    ex = store.get_execution(execution_id)
+    plan = store.get_plan(ex.plan_id)
+    audit = store.list_audit("execution", ex.id, limit=10_000) + store.list_audit(
+        "plan", plan.id, limit=10_000
+    )
+    buf = io.BytesIO()
+    write_recording(buf, ex, plan, store.ack_times(ex.id), store.execution_states(ex.id), audit)
+    return Response(
+        buf.getvalue(),
+        media_type="application/octet-stream",
+        headers={"Content-Disposition": f'attachment; filename="{ex.id}.mcap"'},
+    )
 
 
 @router.post("/executions/{execution_id}/pause")

@@ -142,6 +142,15 @@ MIGRATIONS: list[str] = [
     );
     CREATE INDEX webhook_deliveries_due ON webhook_deliveries (state, next_at);
     """,
+    # 7: recorded runs: the robot's state reports while an execution is active
+    """
+    CREATE TABLE execution_states (
+        execution_id TEXT NOT NULL REFERENCES executions(id) ON DELETE CASCADE,
+        t REAL NOT NULL,
+        state TEXT NOT NULL
+    );
+    CREATE INDEX execution_states_by_execution ON execution_states (execution_id, t);
+    """,
 ]
 
 SCHEMA_VERSION = len(MIGRATIONS)

@@ -547,6 +547,28 @@ class Store:
         )
         return [int(r["idx"]) for r in rows]
 
+    def record_execution_state(self, execution_id: str, t: float, state: dict[str, Any]) -> None:
+        """A state report of the robot running ``execution_id`` at Unix time ``t``."""
+        with self.db.transaction() as conn:
+            conn.execute(
+                "INSERT INTO execution_states VALUES (?,?,?)", (execution_id, t, _json(state))
+            )
+
+    def execution_states(self, execution_id: str) -> list[tuple[float, dict[str, Any]]]:
+        rows = self.db.query(
+            "SELECT t, state FROM execution_states WHERE execution_id = ? ORDER BY t, rowid",
+            (execution_id,),
+        )
+        return [(float(r["t"]), json.loads(r["state"])) for r in rows]
+
+    def ack_times(self, execution_id: str) -> list[tuple[int, str]]:
+        """(command index, ISO time acknowledged) in index order."""
+        rows = self.db.query(
+            "SELECT idx, ts FROM execution_acks WHERE execution_id = ? ORDER BY idx",
+            (execution_id,),
+        )
+        return [(int(r["idx"]), str(r["ts"])) for r in rows]
+
     def save_robot_state(self, name: str, state: dict[str, Any]) -> None:
         with self.db.transaction() as conn:
             conn.execute(
