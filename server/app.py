@@ -24,7 +24,17 @@ from server.events import EventBus
 from server.jobs import JobRunner
 from server.kinds import registry
 from server.lifecycle import IllegalTransitionError
-from server.routers import clouds, events, health, plans, robots, safety, tokens, webhooks
+from server.routers import (
+    clouds,
+    events,
+    findings,
+    health,
+    plans,
+    robots,
+    safety,
+    tokens,
+    webhooks,
+)
 from server.routers.responses import conform_openapi
 from server.scene import proxy
 from server.services import Services
@@ -243,6 +253,7 @@ def create_app(settings: Settings | None = None, *, start_scene: bool | None = N
         safety.router,
         tokens.router,
         webhooks.router,
+        findings.router,
     ):
         app.include_router(r, prefix=API)
     app.include_router(proxy.api_router, prefix=API)

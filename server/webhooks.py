@@ -7,7 +7,8 @@ database), which stores them as deliveries, so from then on a delivery
 survives a restart, and posts the due ones.  An execution event becomes
 ``execution.<state>`` when its state changes to completed, faulted or
 interrupted (ack events repeat a state and are not re-sent); an E-stop
-becomes ``estop``.
+becomes ``estop``; a new finding of condition state 3 or 4
+``finding.created``.
 
 Each POST carries the JSON body ``{"id", "event", "at", "data"}`` and:
 
@@ -134,6 +135,9 @@ class WebhookDispatcher:
     def _event_name(self, type_: str, data: dict[str, Any]) -> str | None:
         if type_ == "estop":
             return "estop"
+        if type_ == "finding":
+            serious = int(data.get("condition_state", 0)) >= 3
+            return "finding.created" if data.get("action") == "created" and serious else None
         if type_ != "execution":
             return None
         eid, state = str(data.get("id", "")), str(data.get("state", ""))

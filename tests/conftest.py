@@ -75,6 +75,10 @@ class Api:
         headers = {**self.headers(role), **kw.pop("headers", {})}
         return self.client.put(path, headers=headers, **kw)
 
+    def patch(self, path: str, role: str = "operator", **kw: Any) -> Any:
+        headers = {**self.headers(role), **kw.pop("headers", {})}
+        return self.client.patch(path, headers=headers, **kw)
+
     def delete(self, path: str, role: str = "operator", **kw: Any) -> Any:
         headers = {**self.headers(role), **kw.pop("headers", {})}
         return self.client.delete(path, headers=headers, **kw)

@@ -20,7 +20,9 @@ router = APIRouter(prefix="/webhooks", tags=["webhooks"])
 
 #: http(s)://host[:port][/path…] — in the schema, so clients see the rule.
 _URL = r"^https?://[A-Za-z0-9](?:[A-Za-z0-9.-]*[A-Za-z0-9])?(?::[0-9]{1,5})?(?:[/?#]\S*)?$"
-EventName = Literal["execution.completed", "execution.faulted", "execution.interrupted", "estop"]
+EventName = Literal[
+    "execution.completed", "execution.faulted", "execution.interrupted", "estop", "finding.created"
+]
 assert set(get_args(EventName)) == set(WEBHOOK_EVENTS)
 
 Svc = Annotated[Services, Depends(get_services)]

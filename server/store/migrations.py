@@ -151,6 +151,38 @@ MIGRATIONS: list[str] = [
     );
     CREATE INDEX execution_states_by_execution ON execution_states (execution_id, t);
     """,
+    # 8: findings on the structure, and their photos (files under photos/)
+    """
+    CREATE TABLE findings (
+        id TEXT PRIMARY KEY,
+        plan_id TEXT NOT NULL,
+        member_id INTEGER,
+        face_id INTEGER,
+        cluster_id INTEGER,
+        point_m TEXT,
+        region_m TEXT,
+        type TEXT NOT NULL,
+        condition_state INTEGER NOT NULL,
+        notes TEXT NOT NULL DEFAULT '',
+        created_by TEXT NOT NULL,
+        created_at TEXT NOT NULL,
+        updated_by TEXT,
+        updated_at TEXT,
+        deleted_by TEXT,
+        deleted_at TEXT,
+        deleted_reason TEXT
+    );
+    CREATE INDEX findings_by_plan ON findings (plan_id, member_id);
+    CREATE TABLE finding_photos (
+        id TEXT PRIMARY KEY,
+        finding_id TEXT NOT NULL REFERENCES findings(id),
+        filename TEXT NOT NULL,
+        content_type TEXT NOT NULL,
+        size INTEGER NOT NULL,
+        created_by TEXT NOT NULL,
+        created_at TEXT NOT NULL
+    );
+    """,
 ]
 
 SCHEMA_VERSION = len(MIGRATIONS)

@@ -25,6 +25,7 @@ WEBHOOK_EVENTS: tuple[str, ...] = (
     "execution.faulted",
     "execution.interrupted",
     "estop",
+    "finding.created",  # condition state 3 (poor) or 4 (severe) only
 )
 
 DELIVERY_STATES: tuple[str, ...] = ("pending", "delivered", "failed")

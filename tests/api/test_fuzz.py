@@ -19,11 +19,14 @@ as a viewer.  Excluded, each for a reason that is not "it fails":
 * ``POST /estop`` and ``/robots/{robot}/estop`` are kept: they are safe with
   no robots connected and must conform too.
 
-``positive_data_acceptance`` is not applied to the three operations whose
+``positive_data_acceptance`` is not applied to the operations whose
 body is checked beyond its schema: a plan's ``kind`` and ``params`` are
 checked against the registry and the kind's own model (published by
 ``GET /kinds``, not in this operation's schema), an uploaded file against the
-cloud formats; a schema-valid but wrong body there is a documented 400/422.
+cloud formats, a finding's place against its plan's structure model (the
+member, face and cluster ids and the face's plane), a photo against the image
+formats by its content; a schema-valid but wrong body there is a documented
+400/415/422.
 """
 
 from __future__ import annotations
@@ -87,6 +90,9 @@ BEYOND_SCHEMA = {
     ("POST", "/api/v1/clouds"),
     ("POST", "/api/v1/plans"),
     ("POST", "/api/v1/plans/{plan_id}/revise"),
+    ("POST", "/api/v1/findings"),
+    ("PATCH", "/api/v1/findings/{finding_id}"),
+    ("POST", "/api/v1/findings/{finding_id}/photos"),
 }
 
 
