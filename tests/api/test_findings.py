@@ -11,7 +11,8 @@ import time
 import numpy as np
 import pytest
 
-from tests.api.test_webhooks import receiver, register, wait_for
+from tests.api.test_webhooks import receiver, register
+from tests.support.waiting import wait_for
 
 PNG = b"\x89PNG\r\n\x1a\n" + b"\x00" * 64
 JPEG = b"\xff\xd8\xff\xe0" + b"\x00" * 64

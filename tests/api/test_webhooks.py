@@ -9,7 +9,7 @@ import json
 import socket
 import threading
 import time
-from collections.abc import Callable, Iterator
+from collections.abc import Iterator
 from contextlib import contextmanager
 from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
 from typing import Any
@@ -17,6 +17,7 @@ from typing import Any
 import pytest
 
 from server.webhooks import sign, verify
+from tests.support.waiting import wait_for
 
 
 def free_port() -> int:
@@ -66,16 +67,6 @@ class Receiver:
 def receiver(port: int | None = None, statuses: list[int] | None = None) -> Iterator[Receiver]:
     with Receiver(port or free_port(), statuses) as r:
         yield r
-
-
-def wait_for(pred: Callable[[], Any], timeout: float = 15.0, what: str = "") -> Any:
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        value = pred()
-        if value:
-            return value
-        time.sleep(0.05)
-    raise AssertionError(f"timed out waiting for {what or pred}")
 
 
 def register(api, url: str, events: list[str] | None = None) -> dict[str, Any]:
