@@ -84,6 +84,11 @@ def deliveries(api, hook_id: str) -> list[dict[str, Any]]:
     return r.json()
 
 
+def first_in(ds: list[dict[str, Any]], state: str) -> dict[str, Any] | None:
+    """The newest delivery when it is in ``state`` (none yet: None)."""
+    return ds[0] if ds and ds[0]["state"] == state else None
+
+
 @pytest.fixture
 def wapi(make_api):
     return make_api(webhook_backoff_s=0.2)
@@ -194,7 +199,7 @@ def test_a_receiver_that_is_down_then_comes_back_gets_it_after_retries(wapi) -> 
     assert d["state"] == "pending" and d["last_status"] is None and "Connect" in d["last_error"]
     with receiver(port, statuses=[503]) as rx:  # back, but busy once
         d = wait_for(
-            lambda: (ds := deliveries(wapi, hook["id"]))[0]["state"] == "delivered" and ds[0],
+            lambda: first_in(deliveries(wapi, hook["id"]), "delivered"),
             timeout=30,
             what="the delivery after the receiver came back",
         )
@@ -208,7 +213,7 @@ def test_attempts_run_out_and_a_removed_webhook_gets_nothing(make_api) -> None:
         hook = register(api, rx.url, ["estop"])
         api.post("/api/v1/estop", "operator", json={})
         d = wait_for(
-            lambda: (ds := deliveries(api, hook["id"]))[0]["state"] == "failed" and ds[0],
+            lambda: first_in(deliveries(api, hook["id"]), "failed"),
             what="the delivery to fail",
         )
         assert d["attempts"] == 2 and d["last_status"] == 500 and d["last_error"] == "HTTP 500"
@@ -229,13 +234,16 @@ def test_a_pending_delivery_survives_a_restart(make_api, tmp_path) -> None:
     first = make_api(data=data, webhook_backoff_s=0.2)
     hook = register(first, f"http://127.0.0.1:{port}/hook", ["estop"])
     first.post("/api/v1/estop", "operator", json={"reason": "before restart"})
-    wait_for(lambda: deliveries(first, hook["id"])[0]["attempts"] >= 1, what="a failed attempt")
+    wait_for(
+        lambda: (ds := deliveries(first, hook["id"])) and ds[0]["attempts"] >= 1,
+        what="a failed attempt",
+    )
     first.client.__exit__(None, None, None)
     with receiver(port) as rx:
         second = make_api(data=data, webhook_backoff_s=0.2)
         wait_for(lambda: rx.got, timeout=30, what="the delivery after the restart")
         d = wait_for(
-            lambda: (ds := deliveries(second, hook["id"]))[0]["state"] == "delivered" and ds[0],
+            lambda: first_in(deliveries(second, hook["id"]), "delivered"),
             what="delivered",
         )
     assert json.loads(rx.got[0][1])["data"]["reason"] == "before restart"
