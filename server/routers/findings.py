@@ -128,6 +128,8 @@ def _get(store: FindingStore, finding_id: str) -> Finding:
 
 
 def _publish(services: Services, action: str, f: Finding) -> None:
+    if services.scene is not None:  # its markers, if its plan is shown
+        services.scene.findings_changed(f.plan_id)
     services.events.publish(
         "finding",
         {

@@ -37,6 +37,8 @@ MAX_CLOUD_POINTS = 300_000
 
 #: Told of every new proposal (``Proposal.public()``), e.g. to publish it.
 ProposeFn = Callable[[dict[str, Any]], None]
+#: Finding marker colour per condition state (good, fair, poor, severe).
+CONDITION_RGB = {1: (60, 170, 80), 2: (230, 200, 40), 3: (240, 130, 30), 4: (220, 30, 30)}
 #: Publishes a scene event (type, data) to the console, e.g. a measuring pick.
 PublishFn = Callable[[str, dict[str, Any]], object]
 
@@ -127,7 +129,7 @@ class SceneService:
     # ---------------------------------------------------------------- drawing
     def _clear(self) -> None:
         scene = self._server.scene
-        for name in ("/plan", "/cloud", "/measure"):
+        for name in ("/plan", "/cloud", "/measure", "/findings"):
             scene.remove_by_name(name)
         for h in self._gui_handles:
             with contextlib.suppress(Exception):  # already gone with its client
@@ -193,6 +195,43 @@ class SceneService:
         self._timeline = _timeline(plan.program)
         self._frame(recorder.points)
         self.measurer.set_points(recorder.pickable)
+        self._draw_findings(plan.id)
+
+    # -------------------------------------------------------------- findings
+    def _draw_findings(self, plan_id: str) -> None:
+        """The plan's findings as markers coloured by condition state, each
+        labelled with its type and condition (issue #16 §1)."""
+        from server.store.findings import CONDITION_STATES, FindingStore
+
+        scene = self._server.scene
+        scene.remove_by_name("/findings")
+        store = FindingStore(self.store.db, self.store.data_dir / "photos")
+        found = store.listed(plan_id=plan_id)
+        where, colours = [], []
+        for f in found:
+            pts = [f.point_m] if f.point_m is not None else (f.region_m or [])
+            if not pts:
+                continue
+            p = np.asarray(pts, dtype=float).mean(axis=0)
+            where.append(p)
+            colours.append(CONDITION_RGB[f.condition_state])
+            scene.add_label(
+                f"/findings/labels/{f.id}",
+                text=f"{f.type.replace('_', ' ')} ({CONDITION_STATES[f.condition_state]})",
+                position=tuple(p + [0.0, 0.0, 0.08]),
+            )
+        if where:
+            from server.scene.common import add_spheres
+
+            add_spheres(scene, "/findings/markers", np.asarray(where), radius=0.04,
+                        colors=np.asarray(colours, dtype=np.uint8))  # fmt: skip
+        self.current["findings"] = len(where)
+
+    def findings_changed(self, plan_id: str) -> None:
+        """A finding of ``plan_id`` was added, edited or withdrawn."""
+        if self.running and self.current.get("plan_id") == plan_id:
+            with self._lock:
+                self._draw_findings(plan_id)
 
     def _frame(self, points: list[np.ndarray] | np.ndarray) -> None:
         """Fit every viewer's camera to what was just drawn."""

@@ -181,3 +181,41 @@ def test_a_serious_new_finding_reaches_a_webhook(fapi) -> None:
     msg = json.loads(rx.got[0][1])
     assert msg["event"] == "finding.created" and msg["data"]["id"] == severe["id"]
     assert msg["data"]["condition_state"] == 4 and msg["data"]["type"] == "crack"
+
+
+def test_findings_are_drawn_on_their_plan_in_the_scene(make_api) -> None:
+    """Markers coloured by condition state at each finding, labelled; a new
+    finding on the plan shown appears at once, a withdrawn one goes."""
+    from server.scene.service import CONDITION_RGB
+    from tests.api.test_scene_proposals import free_port
+
+    sapi = make_api(scene_port=free_port())
+    plan = inspect_plan(sapi)
+    member, _face, point, region = on_face(plan)
+    body = {"plan_id": plan["id"], "member_id": member, "type": "corrosion"}
+    a = sapi.post("/api/v1/findings", json={**body, "point_m": point, "condition_state": 4}).json()
+    sapi.post("/api/v1/scene/show", json={"plan_id": plan["id"]})
+    scene = sapi.services.scene
+    markers = scene.server.scene.get_handle_by_name("/findings/markers")
+    assert markers is not None and scene.current["findings"] == 1
+    np.testing.assert_allclose(markers.batched_positions[0], point, atol=1e-3)
+    assert tuple(markers.batched_colors[0]) == CONDITION_RGB[4]
+    label = scene.server.scene.get_handle_by_name(f"/findings/labels/{a['id']}")
+    assert label is not None and label.text == "corrosion (severe)"
+    # A second one (a region elsewhere on the face: at its centroid), drawn
+    # without showing the plan again.
+    shift = 0.5 * (np.asarray(region[1]) - np.asarray(point))
+    moved = [list(np.asarray(p) + shift) for p in region]
+    sapi.post(
+        "/api/v1/findings",
+        json={**body, "region_m": moved, "type": "crack", "condition_state": 1},
+    )
+    assert scene.current["findings"] == 2
+    markers = scene.server.scene.get_handle_by_name("/findings/markers")
+    got = sorted(map(tuple, np.round(markers.batched_positions, 3)))
+    want = sorted(map(tuple, np.round([point, np.mean(moved, axis=0)], 3)))
+    np.testing.assert_allclose(got, want, atol=2e-3)
+    assert np.linalg.norm(shift) > 0.05
+    sapi.delete(f"/api/v1/findings/{a['id']}?reason=measured again")
+    assert scene.current["findings"] == 1
+    assert scene.server.scene.get_handle_by_name(f"/findings/labels/{a['id']}") is None
