@@ -162,7 +162,7 @@ def list_findings(
     services: Svc,
     _: Viewer,
     plan_id: str | None = None,
-    member_id: Annotated[int | None, Query(ge=0)] = None,
+    member_id: Annotated[int | None, Query(ge=0, le=10**9)] = None,
     type: FindingType | None = None,
     condition_state: Annotated[int | None, Query(ge=1, le=4)] = None,
     min_condition_state: Annotated[int | None, Query(ge=1, le=4)] = None,

@@ -117,6 +117,11 @@ class Database:
             conn.execute("PRAGMA query_only=1")
             conn.execute("PRAGMA cache_size=-1024")  # 1 MiB a thread, not the 2 MiB default
             reader = _Reader(conn)
+            # Closed when its thread's locals drop it: a connection sits in a
+            # reference cycle (its statement cache), so left to the garbage
+            # collector its file descriptors would outlive the thread, for
+            # good once gc.freeze() (server.app) has made the cycle permanent.
+            weakref.finalize(reader, conn.close)
             with self._readers_lock:
                 if self._closed:
                     conn.close()
