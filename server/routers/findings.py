@@ -22,7 +22,7 @@ from server.auth import Operator, Viewer
 from server.routers.responses import errors
 from server.services import Services, get_services
 from server.store import NotFoundError
-from server.store.findings import EDITABLE, Finding, FindingNotFoundError, FindingStore
+from server.store.findings import EDITABLE, Finding, FindingStore
 
 router = APIRouter(prefix="/findings", tags=["findings"])
 
@@ -120,13 +120,6 @@ def _locate(services: Services, f: dict[str, Any]) -> None:
         )
 
 
-def _get(store: FindingStore, finding_id: str) -> Finding:
-    try:
-        return store.get(finding_id)
-    except FindingNotFoundError as exc:
-        raise HTTPException(404, detail=str(exc)) from None
-
-
 def _publish(services: Services, action: str, f: Finding) -> None:
     if services.scene is not None:  # its markers, if its plan is shown
         services.scene.findings_changed(f.plan_id)
@@ -184,7 +177,7 @@ def list_findings(
 
 @router.get("/{finding_id}", responses=errors(401, 404))
 def get_finding(finding_id: str, services: Svc, _: Viewer) -> dict[str, Any]:
-    f = _get(_store(services), finding_id)
+    f = _store(services).get(finding_id)
     out = f.public()
     out["audit"] = [e.public() for e in services.store.list_audit("finding", finding_id)]
     return out
@@ -196,7 +189,7 @@ def edit_finding(
 ) -> dict[str, Any]:
     """Change what, how bad, the notes or the place on its face (audited)."""
     store = _store(services)
-    f = _get(store, finding_id)
+    f = store.get(finding_id)
     if f.deleted_at is not None:
         raise HTTPException(
             409, detail=f"finding {finding_id} is deleted; it can be read, not edited"
@@ -223,7 +216,7 @@ def delete_finding(
     """Withdraw it: marked deleted with who, when and why; it stays readable
     (``include_deleted``) and in the audit trail."""
     store = _store(services)
-    _get(store, finding_id)
+    store.get(finding_id)  # 404 when unknown
     out = store.delete(finding_id, who.actor, reason)
     _publish(services, "deleted", out)
     return out.public()
@@ -254,7 +247,7 @@ async def add_photo(
 ) -> dict[str, Any]:
     """Attach a photo (JPEG, PNG or WebP by its content, at most 10 MiB)."""
     store = _store(services)
-    _get(store, finding_id)
+    store.get(finding_id)  # 404 when unknown
     data = await file.read(PHOTO_MAX_BYTES + 1)
     if len(data) > PHOTO_MAX_BYTES:
         raise HTTPException(413, detail=f"photo larger than {PHOTO_MAX_BYTES} bytes")
@@ -270,8 +263,5 @@ async def add_photo(
 @router.get("/{finding_id}/photos/{photo_id}", responses=errors(401, 404))
 def get_photo(finding_id: str, photo_id: str, services: Svc, _: Viewer) -> FileResponse:
     store = _store(services)
-    try:
-        photo, path = store.photo_file(finding_id, photo_id)
-    except FindingNotFoundError as exc:
-        raise HTTPException(404, detail=str(exc)) from None
+    photo, path = store.photo_file(finding_id, photo_id)
     return FileResponse(path, media_type=photo.content_type)

@@ -8,13 +8,13 @@ from __future__ import annotations
 from typing import Annotated, Any, Literal, get_args
 from urllib.parse import urlsplit
 
-from fastapi import APIRouter, Depends, HTTPException, Query, Response
+from fastapi import APIRouter, Depends, Query, Response
 from pydantic import BaseModel, ConfigDict, Field, field_validator
 
 from server.auth import Admin
 from server.routers.responses import errors
 from server.services import Services, get_services
-from server.store.webhooks import WEBHOOK_EVENTS, WebhookNotFoundError, WebhookStore
+from server.store.webhooks import WEBHOOK_EVENTS, WebhookStore
 
 router = APIRouter(prefix="/webhooks", tags=["webhooks"])
 
@@ -61,13 +61,6 @@ def _hooks(services: Services) -> WebhookStore:
     return WebhookStore(services.store.db)
 
 
-def _get(store: WebhookStore, webhook_id: str) -> Any:
-    try:
-        return store.get(webhook_id)
-    except WebhookNotFoundError as exc:
-        raise HTTPException(404, detail=str(exc)) from None
-
-
 @router.post("", status_code=201, responses=errors(401, 403, 422))
 def create_webhook(req: WebhookRequest, services: Svc, who: Admin) -> dict[str, Any]:
     """Register a receiver.  The answer holds its signing ``secret``, shown
@@ -88,7 +81,7 @@ def list_webhooks(
 
 @router.get("/{webhook_id}", responses=errors(401, 403, 404))
 def get_webhook(webhook_id: str, services: Svc, _: Admin) -> dict[str, Any]:
-    return dict(_get(_hooks(services), webhook_id).public())
+    return _hooks(services).get(webhook_id).public()
 
 
 @router.delete("/{webhook_id}", status_code=204, responses=errors(401, 403, 404))
@@ -96,7 +89,7 @@ def remove_webhook(webhook_id: str, services: Svc, who: Admin) -> Response:
     """Stop delivering to it (its pending deliveries fail); it and its
     deliveries stay listed (``include_removed``)."""
     store = _hooks(services)
-    _get(store, webhook_id)
+    store.get(webhook_id)  # 404 when unknown
     store.remove(webhook_id, who.actor)
     return Response(status_code=204)
 
@@ -111,5 +104,5 @@ def list_deliveries(
     """Its deliveries, newest first: event, state (pending / delivered /
     failed), attempts, the last status or error, and the payload."""
     store = _hooks(services)
-    _get(store, webhook_id)
+    store.get(webhook_id)  # 404 when unknown
     return [d.public() for d in store.deliveries(webhook_id, limit)]

@@ -19,6 +19,7 @@ from pathlib import Path
 from typing import Any
 
 from server.store.database import Database, ensure_private_dir, utcnow
+from server.store.store import NotFoundError
 
 FINDING_TYPES: tuple[str, ...] = (
     "corrosion",
@@ -31,11 +32,6 @@ FINDING_TYPES: tuple[str, ...] = (
 )
 #: AASHTO-style condition states.
 CONDITION_STATES: dict[int, str] = {1: "good", 2: "fair", 3: "poor", 4: "severe"}
-
-
-class FindingNotFoundError(KeyError):
-    def __str__(self) -> str:
-        return str(self.args[0]) if self.args else "not found"
 
 
 @dataclass(frozen=True)
@@ -149,7 +145,7 @@ class FindingStore:
     def get(self, finding_id: str) -> Finding:
         r = self.db.query_one("SELECT * FROM findings WHERE id = ?", (finding_id,))
         if r is None:
-            raise FindingNotFoundError(f"no finding with id {finding_id!r}")
+            raise NotFoundError(f"no finding with id {finding_id!r}")
         return Finding.from_row(r, tuple(self.photos(finding_id)))
 
     def listed(
@@ -248,7 +244,7 @@ class FindingStore:
         for p in self.photos(finding_id):
             if p.id == photo_id:
                 return p, self.photo_dir / p.id
-        raise FindingNotFoundError(f"finding {finding_id} has no photo {photo_id!r}")
+        raise NotFoundError(f"finding {finding_id} has no photo {photo_id!r}")
 
 
 def _opt_json(v: Any) -> str | None:

@@ -18,6 +18,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from server.store.database import Database, utcnow
+from server.store.store import NotFoundError
 
 #: Events a webhook can ask for.
 WEBHOOK_EVENTS: tuple[str, ...] = (
@@ -29,11 +30,6 @@ WEBHOOK_EVENTS: tuple[str, ...] = (
 )
 
 DELIVERY_STATES: tuple[str, ...] = ("pending", "delivered", "failed")
-
-
-class WebhookNotFoundError(KeyError):
-    def __str__(self) -> str:
-        return str(self.args[0]) if self.args else "not found"
 
 
 @dataclass(frozen=True)
@@ -144,7 +140,7 @@ class WebhookStore:
     def get(self, webhook_id: str) -> Webhook:
         r = self.db.query_one("SELECT * FROM webhooks WHERE id = ?", (webhook_id,))
         if r is None:
-            raise WebhookNotFoundError(f"no webhook with id {webhook_id!r}")
+            raise NotFoundError(f"no webhook with id {webhook_id!r}")
         return Webhook.from_row(r)
 
     def listed(self, include_removed: bool = False) -> list[Webhook]:
@@ -194,7 +190,7 @@ class WebhookStore:
     def get_delivery(self, delivery_id: str) -> Delivery:
         r = self.db.query_one("SELECT * FROM webhook_deliveries WHERE id = ?", (delivery_id,))
         if r is None:
-            raise WebhookNotFoundError(f"no webhook delivery with id {delivery_id!r}")
+            raise NotFoundError(f"no webhook delivery with id {delivery_id!r}")
         return Delivery.from_row(r)
 
     def deliveries(self, webhook_id: str, limit: int = 100) -> list[Delivery]:
