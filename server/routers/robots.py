@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from typing import Annotated, Any
+from typing import Annotated, Any, Literal
 
 from fastapi import APIRouter, Depends, HTTPException, Query, Response
 from fastapi.concurrency import run_in_threadpool
@@ -168,26 +168,49 @@ async def get_execution(execution_id: str, services: Svc, _: Viewer) -> Response
 @router.get(
     "/executions/{execution_id}/recording.mcap",
     responses={
-        200: {"content": {"application/octet-stream": {}}, "description": "the run as MCAP"},
-        **errors(401, 403, 404),
+        200: {
+            "content": {"application/octet-stream": {}, "application/zip": {}},
+            "description": "the run as MCAP, or as a zipped ROS 2 bag with format=rosbag2",
+        },
+        **errors(401, 403, 404, 422),
     },
 )
-def execution_recording(execution_id: str, services: Svc, _: Viewer) -> Response:
+def execution_recording(
+    execution_id: str,
+    services: Svc,
+    _: Viewer,
+    format: Annotated[
+        Literal["mcap", "rosbag2"],
+        Query(description="mcap (default) or rosbag2: a ROS 2 bag directory, zipped"),
+    ] = "mcap",
+) -> Response:
     """The run as an MCAP file (Foxglove / Lichtblick): the planned program,
-    each command at its acknowledgement, the robot's state reports while it
-    ran and the operator's actions (see :mod:`server.recording`)."""
+    each command at its acknowledgement, the robot's state reports, link
+    frames and tool pose while it ran, the planned path, the plan's stored
+    cloud and the operator's actions; or, with ``format=rosbag2``, as a ROS 2
+    bag (joint states, tool pose, path, cloud) zipped (see
+    :mod:`server.recording`)."""
     import io
 
-    from server.recording import write_recording
+    from server.recording import plan_cloud, write_recording, write_rosbag2
 
     store = services.store
     ex = store.get_execution(execution_id)
     plan = store.get_plan(ex.plan_id)
+    cloud = plan_cloud(store, plan)
+    states = store.execution_states(ex.id)
+    if format == "rosbag2":
+        data, _counts = write_rosbag2(ex, plan, states, cloud=cloud)
+        return Response(
+            data,
+            media_type="application/zip",
+            headers={"Content-Disposition": f'attachment; filename="{ex.id}.rosbag2.zip"'},
+        )
     audit = store.list_audit("execution", ex.id, limit=10_000) + store.list_audit(
         "plan", plan.id, limit=10_000
     )
     buf = io.BytesIO()
-    write_recording(buf, ex, plan, store.ack_times(ex.id), store.execution_states(ex.id), audit)
+    write_recording(buf, ex, plan, store.ack_times(ex.id), states, audit, cloud=cloud)
     return Response(
         buf.getvalue(),
         media_type="application/octet-stream",
