@@ -14,6 +14,11 @@ Plan::
 
 ``cancelled`` extends DESIGN §4: an operator's cancel of a queued or running
 planning job is neither a planner failure nor a failed check.
+
+``archived`` (issue #16 §4) is the state of a plan imported from another
+server's export (:mod:`server.archive`): read-only history, with no
+transition out of it — it can be read, deleted or revised (a revision is a
+new plan, planned, checked and approved here), never approved or dispatched.
 """
 
 from __future__ import annotations
@@ -35,6 +40,7 @@ class PlanState(StrEnum):
     ABORTED = "aborted"
     FAULTED = "faulted"
     INTERRUPTED = "interrupted"
+    ARCHIVED = "archived"
 
 
 S = PlanState
@@ -73,13 +79,23 @@ OPERATOR_ACTIONS = frozenset(
 
 #: States in which the plan may be deleted (nothing is moving or about to).
 DELETABLE = frozenset(
-    {S.PLANNED, S.FAILED, S.REJECTED, S.CANCELLED, S.APPROVED, S.COMPLETED, S.ABORTED, S.FAULTED}
+    {
+        S.PLANNED,
+        S.FAILED,
+        S.REJECTED,
+        S.CANCELLED,
+        S.APPROVED,
+        S.COMPLETED,
+        S.ABORTED,
+        S.FAULTED,
+        S.ARCHIVED,
+    }
 )
 
 #: States of a plan whose robot motion is under way or may resume.
 ACTIVE_EXECUTION = frozenset({S.EXECUTING, S.PAUSED, S.INTERRUPTED, S.FAULTED})
 
-TERMINAL = frozenset({S.FAILED, S.REJECTED, S.CANCELLED, S.COMPLETED, S.ABORTED})
+TERMINAL = frozenset({S.FAILED, S.REJECTED, S.CANCELLED, S.COMPLETED, S.ABORTED, S.ARCHIVED})
 
 
 class IllegalTransitionError(Exception):

@@ -478,10 +478,13 @@ class Store:
         if not wanted:
             return None
         marks = ",".join("?" * len(wanted))
+        # An archived (imported) plan's executions are another server's
+        # history: never this robot's run, whatever state they ended in.
         row = self.db.query_one(
             f"SELECT id FROM executions WHERE robot = ? AND state IN ({marks}) "
+            "AND plan_id NOT IN (SELECT id FROM plans WHERE state = ?) "
             "ORDER BY created_at DESC LIMIT 1",
-            [robot, *wanted],
+            [robot, *wanted, str(PlanState.ARCHIVED)],
         )
         return str(row["id"]) if row is not None else None
 
