@@ -25,11 +25,13 @@ from server.jobs import JobRunner
 from server.kinds import registry
 from server.lifecycle import IllegalTransitionError
 from server.routers import (
+    archive,
     clouds,
     events,
     findings,
     health,
     plans,
+    reports,
     robots,
     safety,
     tokens,
@@ -152,6 +154,11 @@ def create_app(settings: Settings | None = None, *, start_scene: bool | None = N
             max_attempts=settings.webhook_max_attempts,
         ).start()
         bus.add_listener(services.webhooks.on_event)
+        from server.maintenance import OutcomeRecorder
+
+        services.outcomes = OutcomeRecorder(store, bus)
+        bus.add_listener(services.outcomes.on_event)
+        services.outcomes.catch_up()  # runs that ended while the service was down
         app.state.services = services
         secret = bootstrap_admin(store, settings.token_file)
         if secret is not None:
@@ -217,6 +224,7 @@ def create_app(settings: Settings | None = None, *, start_scene: bool | None = N
             if services.scene is not None:
                 services.scene.stop()
             services.webhooks.stop()
+            services.outcomes.stop()
             store.close()
 
     app = FastAPI(
@@ -254,6 +262,8 @@ def create_app(settings: Settings | None = None, *, start_scene: bool | None = N
         tokens.router,
         webhooks.router,
         findings.router,
+        reports.router,
+        archive.router,
     ):
         app.include_router(r, prefix=API)
     app.include_router(proxy.api_router, prefix=API)

@@ -26,6 +26,7 @@ class Services:
     estop_handlers: list[Callable[[str | None, str], None]] = field(default_factory=list)
     token_cache: Any = None  # server.auth.TokenCache, made on first use
     webhooks: Any = None  # server.webhooks.WebhookDispatcher
+    outcomes: Any = None  # server.maintenance.OutcomeRecorder
 
 
 async def get_services(request: Request) -> Services:

@@ -19,7 +19,9 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from planners.blasting.base_placement import BaseLimits, place_base
 from planners.blasting.collision import Box
+from planners.blasting.constants import NOZZLE_LENGTH_M
 from planners.blasting.pipeline import plan_blasting
 from planners.blasting.result import BlastPlan, RobotMotion
 from planners.blasting.scenes import DISC_RADIUS_M
@@ -81,12 +83,19 @@ def plan_blast_result(
     boxes: Sequence[Box] = (),
     options: BlastOptions | None = None,
     limits: BlastLimits | None = None,
+    obstacle_points: np.ndarray | None = None,
+    base_search: BaseLimits | None = None,
     progress: Callable[[float, str], None] | None = None,
 ) -> PlanResult:
     """Plan blasting of ``surface`` (or of the plane ``surface`` picks from a
     cloud) by ``arm`` (the VM-6083 model; placed here at ``robot_base_m``,
     world metres) among ``boxes`` (and, for a picked plane, the cloud's other
-    points), and return the plan in the stored form.
+    points, and ``obstacle_points`` (N,3): a scan's points off the surface's
+    plane), and return the plan in the stored form.  With ``base_search``
+    the base is searched in that region instead
+    (:func:`planners.blasting.base_placement.place_base`; ``robot_base_m``
+    then only picks the side of a picked plane) and the summary's
+    ``base_placement`` says what the search measured.
 
     ``progress`` gets 0–1 and a stage name.  Raises ``planners.errors`` types:
     :class:`~planners.errors.NoPlaneError` for a cloud without a plane,
@@ -116,6 +125,17 @@ def plan_blast_result(
     else:
         surf = surface
     cloud_obst = None if picked is None else picked.obstacle_points
+    if obstacle_points is not None:
+        extra = _off_plane(surf, obstacle_points)
+        cloud_obst = extra if cloud_obst is None else np.vstack([cloud_obst, extra])
+    placement = None
+    if base_search is not None:
+        report(0.03, "placing the base")
+        placement = place_base(
+            surf, arm, standoff_m=opt.stream_length_mm / 1000.0 + NOZZLE_LENGTH_M,
+            limits=base_search, obstacle_points=cloud_obst, boxes=boxes,
+        )  # fmt: skip
+        base_xyz = placement.base_m
     base = np.eye(4)
     base[:3, 3] = base_xyz
     robot = arm.with_base(base)
@@ -136,7 +156,9 @@ def plan_blast_result(
     tip, axis = nozzle_tip(robot.frames(motion.joint_trajectory)[:, -1])
     plane_index = surface.plane_index if isinstance(surface, PlanePick) else None
     summary = _summary(surf, base, boxes, plan, motion, picked, plane_index)
-    arrays = _arrays(plan, motion, tip, axis, picked, cloud)
+    if placement is not None:
+        summary["base_placement"] = placement.summary()
+    arrays = _arrays(plan, motion, tip, axis, picked, cloud, cloud_obst)
     checks = [
         _finite_check(c)
         for c in plan.checks(
@@ -152,6 +174,26 @@ def plan_blast_result(
         summary["metrics_not_finite"] = dropped
         metrics = {k: v for k, v in metrics.items() if k not in dropped}
     return PlanResult(summary=json_safe(summary), arrays=arrays, checks=checks, metrics=metrics)
+
+
+#: scan points within this of the surface's plane are the surface, not obstacles (m)
+ON_PLANE_M = 0.02
+#: scan points farther than this from the surface's bounding box cannot touch
+#: the arm standing at the surface (the VM-6083 reaches < 1.5 m; m)
+NEAR_M = 2.5
+
+
+def _off_plane(surf: Surface, points: np.ndarray) -> np.ndarray:
+    """The scan's points near the surface and more than :data:`ON_PLANE_M`
+    off its plane (the rest are the surface itself or out of the arm's way)."""
+    pts = np.asarray(points, dtype=float)
+    if pts.ndim != 2 or pts.shape[1] != 3 or not np.all(np.isfinite(pts)):
+        raise InvalidInputError(f"obstacle points must be finite (N, 3), got shape {pts.shape}")
+    outline, _ = outline_world(surf)
+    lo, hi = outline.min(axis=0) - NEAR_M, outline.max(axis=0) + NEAR_M
+    near = np.all((pts >= lo) & (pts <= hi), axis=1)
+    off = np.abs((pts - surf.origin) @ surf.normal) > ON_PLANE_M
+    return pts[near & off]
 
 
 def _finite_check(c: dict[str, Any]) -> Check:
@@ -239,6 +281,7 @@ def _arrays(
     axis: np.ndarray,
     picked: PickedSurface | None,
     cloud: np.ndarray | None,
+    obstacles: np.ndarray | None,
 ) -> dict[str, np.ndarray]:
     arrays: dict[str, np.ndarray] = {
         "disc_centers": plan.centers,
@@ -255,8 +298,8 @@ def _arrays(
         "nozzle_tip": tip,
         "nozzle_axis": axis,
     }
-    if picked is not None and picked.obstacle_points is not None and len(picked.obstacle_points):
-        arrays["obstacle_points"] = picked.obstacle_points
+    if obstacles is not None and len(obstacles):
+        arrays["obstacle_points"] = obstacles[thin(len(obstacles), CLOUD_POINTS_STORED)]
     if picked is not None and cloud is not None:
         sel = thin(len(cloud), CLOUD_POINTS_STORED)
         arrays["cloud_points"] = cloud[sel]

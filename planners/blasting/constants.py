@@ -8,6 +8,7 @@ from __future__ import annotations
 import numpy as np
 
 START_POSE_DEG = (0.0, -75.0, 160.0, 0.0, 30.0, 0.0)  # seed §4.2.4
+NOZZLE_LENGTH_M = 0.1  # seed §4.2.4: nozzle 100 mm along the flange z axis
 KP = (1.05, 1.10, 1.10)  # seed §4.2.5
 FOCI = ((1, 2), (3, 4), (4, -1))  # chosen: upper arm, forearm, wrist + nozzle (params.toml)
 MAX_TILT_DEG = 45.0  # seed §3.2.1: nozzle 45–90° to the surface

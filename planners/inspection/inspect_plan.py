@@ -246,6 +246,19 @@ def _coverage(model: StructureModel, plan: InspectionPlan, off_main: set[int]) -
     """Every member is driven by the main route; the others are named, with
     why: driven only by another route (the robot is carried there) or
     without a span in the member graph."""
+    close = plan.params.close_member
+    if close is not None:
+        driven = close not in off_main
+        return Check(
+            "members_covered",
+            driven,
+            float(not driven),
+            0.0,
+            f"close inspection: the route drives member {close} "
+            f"({plan.route.deadhead:.2f} m of steel to reach it)"
+            if driven
+            else f"close inspection: member {close} is not on the route",
+        )
     others = set().union(*(_driven_members(plan.graph, r) for r in plan.routes[1:]))
     left = sorted(off_main)
     carried = [m for m in left if m in others]
@@ -284,6 +297,9 @@ def _gap_explained(gap: Gap, plan: InspectionPlan, off_main: set[int]) -> bool:
     route; a gap left open must be wider than the reach, and one of its two
     pieces wholly off the main route (so the coverage check names it)."""
     reach = plan.params.jump_reach_m
+    if plan.params.close_member is not None:
+        # one member's route: a gap needs no driving, only the rule on its width
+        return gap.width_m <= reach if gap.joined else gap.width_m > reach
     if gap.joined:
         if not gap.width_m <= reach or gap.vertex_a is None or gap.vertex_b is None:
             return False

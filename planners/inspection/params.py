@@ -59,6 +59,9 @@ class InspectionParams:
       when the route is chosen (see :mod:`planners.inspection.transitions`
       for how it enters the edge weights); lengths are still reported in
       metres of steel and jumps counted separately.
+    - ``close_member``: a close inspection (issue #16 §2) — the route drives
+      from ``start`` to this member and along it
+      (:mod:`planners.inspection.close`); no other member is required.
     """
 
     foot_length_m: float = 0.18
@@ -69,8 +72,12 @@ class InspectionParams:
     jump_cost_m: float = 0.5
     placement_spacing_m: float = 0.02
     placement_headings: int = 4
+    close_member: int | None = None
 
     def __post_init__(self) -> None:
+        cm = self.close_member
+        if cm is not None and not (isinstance(cm, int) and not isinstance(cm, bool) and cm >= 0):
+            raise InvalidInputError(f"close_member must be a member id ≥ 0 or None, got {cm!r}")
         positive = {
             "foot_length_m": self.foot_length_m,
             "foot_width_m": self.foot_width_m,

@@ -33,6 +33,7 @@ from planners.errors import (
     InvalidWeightError,
     UnknownVertexError,
 )
+from planners.inspection.close import close_route
 from planners.inspection.gaps import Gap, component_gaps, join_gaps
 from planners.inspection.params import InspectionParams
 from planners.inspection.transitions import Transition, TransitionContext, route_transitions
@@ -169,12 +170,24 @@ def plan_inspection(
         order.remove(main)
         order.insert(0, main)
     routes: list[Route] = []
+    if params.close_member is not None:
+        order = order[:1]  # one route: the piece holding start (or the largest)
     for rank, i in enumerate(order):
         sub: nx.MultiGraph = nx.MultiGraph(graph.subgraph(parts[i]))
         s, e = _ends(sub, start if rank == 0 else None, end if rank == 0 else None)
-        r = plan_route(sub, s, e, weight="route_weight")
+        if params.close_member is not None:
+            r = close_route(sub, s, params.close_member, weight="route_weight")
+            need = math.fsum(
+                float(graph.edges[x]["steel_m"])
+                for x in r.edges
+                if graph.edges[x].get("kind") == "span"
+                and int(graph.edges[x]["member"]) == params.close_member
+            )
+        else:
+            r = plan_route(sub, s, e, weight="route_weight")
+            need = steel[i]
         driven = math.fsum(float(graph.edges[x]["steel_m"]) for x in r.edges)
-        routes.append(replace(r, length=driven, deadhead=driven - steel[i], lower_bound=steel[i]))
+        routes.append(replace(r, length=driven, deadhead=driven - need, lower_bound=need))
     timings["route"] = time.perf_counter() - t
 
     t = time.perf_counter()

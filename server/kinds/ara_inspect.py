@@ -67,6 +67,12 @@ class AraInspectParams(StrictParams):
         ge=0,
         description="end vertex id of the member graph (None: the free end farthest away)",
     )
+    close_member: int | None = Field(
+        None,
+        ge=0,
+        description="close inspection: drive from start to this member and along it "
+        "(None: the whole structure)",
+    )
     foot_length_m: float | None = Field(
         None, gt=0, le=2.0, description="foot (sole) length (None: ARA [foot] length_m)"
     )
@@ -134,6 +140,7 @@ def inspection_params(p: AraInspectParams) -> InspectionParams:
         jump_reach_m=ara["jump_reach_m"] if p.jump_reach_m is None else p.jump_reach_m,
         coplanar_angle_deg=p.coplanar_angle_deg,
         jump_cost_m=p.jump_cost_m,
+        close_member=p.close_member,
     )
 
 

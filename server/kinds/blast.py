@@ -18,6 +18,7 @@ import numpy as np
 from pydantic import Field, field_validator
 
 from planners.blasting import Box, Surface, scenes
+from planners.blasting.base_placement import BaseLimits
 from planners.blasting.blast_plan import BlastLimits, BlastOptions, PlanePick, plan_blast_result
 from planners.blasting.nozzle import check_stream_length
 from planners.blasting.sample_clouds import under_deck_cloud
@@ -73,6 +74,30 @@ def _channel() -> list[BoxObstacle]:
     ]
 
 
+class BaseSearch(StrictParams):
+    """Search the robot base (issue #16 §2) in a region instead of ``robot_base_m``."""
+
+    lo_m: list[float] | None = Field(
+        None,
+        min_length=3,
+        max_length=3,
+        description="region min corner (m); None: around the surface",
+    )
+    hi_m: list[float] | None = Field(
+        None,
+        min_length=3,
+        max_length=3,
+        description="region max corner (m); None: around the surface",
+    )
+    step_m: float = Field(0.1, gt=0.01, le=1.0, description="grid step of the search (m)")
+    clearance_m: float = Field(
+        0.3, ge=0, le=2.0, description="free room the base needs from scan points and boxes (m)"
+    )
+
+    def build(self) -> BaseLimits:
+        return BaseLimits(self.lo_m, self.hi_m, self.step_m, self.clearance_m)
+
+
 class BlastParams(StrictParams):
     """Surface, nozzle, sequencer, obstacles and robot base of one blasting plan."""
 
@@ -109,6 +134,14 @@ class BlastParams(StrictParams):
     cloud_obstacles: bool = Field(
         True, description="with cloud_id: the cloud's other points are obstacles"
     )
+    obstacle_cloud_id: str | None = Field(
+        None,
+        description="id of a stored cloud whose points off the surface's plane are obstacles "
+        "(with polygon: e.g. the scan of the structure a finding's surface is on)",
+    )
+    base_search: BaseSearch | None = Field(
+        None, description="search the base in a region (then robot_base_m is not used)"
+    )
     robot_base_m: list[float] = Field(
         [v / 1000.0 for v in scenes.ROBOT_BASE_MM], min_length=3, max_length=3,
         description="robot base position [x, y, z] (m), seed (500, 375, 370) mm",
@@ -132,6 +165,8 @@ def validate(p: BlastParams) -> None:
         raise InvalidInputError("give seed_surface (1–3), a polygon or a cloud_id")
     for b in p.obstacles or []:
         Box.from_bounds(b.lo_m, b.hi_m)
+    if p.base_search is not None:
+        p.base_search.build()
 
 
 def _surface(p: BlastParams, ctx: JobContext) -> Surface | PlanePick:
@@ -166,6 +201,10 @@ def run(p: BlastParams, ctx: JobContext) -> KindOutput:
             _surface(p, ctx), arm, robot_base_m=p.robot_base_m,
             boxes=[Box.from_bounds(b.lo_m, b.hi_m, b.name) for b in obstacles],
             options=options, limits=limits, progress=ctx.progress,
+            obstacle_points=(
+                None if p.obstacle_cloud_id is None else ctx.load_cloud(p.obstacle_cloud_id)
+            ),
+            base_search=None if p.base_search is None else p.base_search.build(),
         )  # fmt: skip
     except NoPlaneError as exc:
         if p.cloud_id is None:

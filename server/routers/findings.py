@@ -14,15 +14,23 @@ from __future__ import annotations
 from typing import Annotated, Any, Literal
 
 import numpy as np
-from fastapi import APIRouter, Depends, File, Form, HTTPException, Query, UploadFile
+from fastapi import APIRouter, Depends, File, Form, HTTPException, Query, Response, UploadFile
 from fastapi.responses import FileResponse
 from pydantic import BaseModel, ConfigDict, Field
 
 from server.auth import Operator, Viewer
+from server.maintenance import (
+    MaintenanceError,
+    blast_params,
+    inspect_params,
+    maintenance_view,
+)
+from server.routers.plans import submit_plan
 from server.routers.responses import errors
 from server.services import Services, get_services
 from server.store import NotFoundError
 from server.store.findings import EDITABLE, Finding, FindingStore
+from server.store.maintenance import MaintenanceStore
 
 router = APIRouter(prefix="/findings", tags=["findings"])
 
@@ -120,6 +128,14 @@ def _locate(services: Services, f: dict[str, Any]) -> None:
         )
 
 
+def _view(services: Services, f: Finding) -> dict[str, Any]:
+    """The finding as REST shows it, with its maintenance plans
+    (:func:`server.maintenance.maintenance_view`)."""
+    out = f.public()
+    out["maintenance_plans"], out["awaiting_review"] = maintenance_view(services.store, f.id)
+    return out
+
+
 def _publish(services: Services, action: str, f: Finding) -> None:
     if services.scene is not None:  # its markers, if its plan is shown
         services.scene.findings_changed(f.plan_id)
@@ -147,7 +163,7 @@ def create_finding(req: FindingCreate, services: Svc, who: Operator) -> dict[str
     _locate(services, fields)
     f = _store(services).add(fields, who.actor)
     _publish(services, "created", f)
-    return f.public()
+    return _view(services, f)
 
 
 @router.get("", responses=errors(401, 422))
@@ -172,13 +188,13 @@ def list_findings(
         include_deleted=include_deleted,
         limit=limit,
     )
-    return [f.public() for f in rows]
+    return [_view(services, f) for f in rows]
 
 
 @router.get("/{finding_id}", responses=errors(401, 404))
 def get_finding(finding_id: str, services: Svc, _: Viewer) -> dict[str, Any]:
     f = _store(services).get(finding_id)
-    out = f.public()
+    out = _view(services, f)
     out["audit"] = [e.public() for e in services.store.list_audit("finding", finding_id)]
     return out
 
@@ -202,8 +218,10 @@ def edit_finding(
     if any(k in changes for k in ("point_m", "region_m", "face_id")):
         _locate(services, {**f.public(), **changes})
     out = store.update(finding_id, changes, who.actor)
+    if "condition_state" in changes:  # answers a run's request, even unchanged
+        MaintenanceStore(services.store.db).reviewed(finding_id)
     _publish(services, "edited", out)
-    return out.public()
+    return _view(services, out)
 
 
 @router.delete("/{finding_id}", responses=errors(401, 403, 404, 422))
@@ -219,7 +237,65 @@ def delete_finding(
     store.get(finding_id)  # 404 when unknown
     out = store.delete(finding_id, who.actor, reason)
     _publish(services, "deleted", out)
-    return out.public()
+    return _view(services, out)
+
+
+class MaintenancePlanRequest(BaseModel):
+    model_config = ConfigDict(extra="forbid", allow_inf_nan=False)
+
+    kind: Literal["blast", "ara.inspect"] = Field(
+        ..., description="blast: sand-blast the finding's region; ara.inspect: drive to its member"
+    )
+    patch_m: float = Field(
+        0.3,
+        gt=0.02,
+        le=5.0,
+        description="blast: side of the square around a point-only finding (m)",
+    )
+    start: int | None = Field(
+        None,
+        ge=0,
+        le=10**9,
+        description="ara.inspect: start vertex (None: the source plan's start)",
+    )
+    params: dict[str, Any] = Field(
+        default_factory=dict, description="more params of the kind (checked as POST /plans checks)"
+    )
+
+
+@router.post("/{finding_id}/plan", status_code=202, responses=errors(401, 403, 404, 409, 422))
+def plan_from_finding(
+    finding_id: str,
+    req: MaintenancePlanRequest,
+    services: Svc,
+    who: Operator,
+    response: Response,
+) -> dict[str, Any]:
+    """Make a maintenance plan from the finding (issue #16 §2): a ``blast``
+    plan of its region on its face with the base searched near it, or a
+    close-inspection ``ara.inspect`` route to its member.  The plan is linked
+    to the finding; the finding lists it with its state and, once run, what
+    the run achieved."""
+    f = _store(services).get(finding_id)
+    if f.deleted_at is not None:
+        raise HTTPException(409, detail=f"finding {finding_id} is deleted: plan from a live one")
+    try:
+        if req.kind == "blast":
+            params = blast_params(
+                services.store, f, who.actor, patch_m=req.patch_m, overrides=req.params
+            )
+        else:
+            start = req.start
+            if start is None:
+                start = services.store.get_plan(f.plan_id, result=False).params.get("start")
+            params = inspect_params(services.store, f, who.actor, start=start, overrides=req.params)
+    except MaintenanceError as exc:
+        raise _bad(exc.field, str(exc)) from None
+    plan = submit_plan(services, req.kind, params, who.actor)
+    MaintenanceStore(services.store.db).link(f.id, plan.id, req.kind, who.actor)
+    _publish(services, "planned", f)
+    response.headers["Location"] = f"/api/v1/plans/{plan.id}"
+    return {**plan.public(), "finding_id": f.id}
 
 
 _MAGIC = (

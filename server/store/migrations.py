@@ -183,6 +183,24 @@ MIGRATIONS: list[str] = [
         created_at TEXT NOT NULL
     );
     """,
+    # 9: maintenance plans made from a finding, and what their runs achieved
+    """
+    CREATE TABLE finding_plans (
+        plan_id TEXT PRIMARY KEY,
+        finding_id TEXT NOT NULL REFERENCES findings(id),
+        kind TEXT NOT NULL,
+        created_by TEXT NOT NULL,
+        created_at TEXT NOT NULL,
+        execution_id TEXT,
+        outcome TEXT,
+        coverage_pct REAL,
+        spots_done INTEGER,
+        spots_planned INTEGER,
+        review_requested_at TEXT,
+        reviewed_at TEXT
+    );
+    CREATE INDEX finding_plans_by_finding ON finding_plans (finding_id);
+    """,
 ]
 
 SCHEMA_VERSION = len(MIGRATIONS)
