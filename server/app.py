@@ -31,6 +31,7 @@ from server.routers import (
     findings,
     health,
     plans,
+    replay,
     reports,
     robots,
     safety,
@@ -264,6 +265,7 @@ def create_app(settings: Settings | None = None, *, start_scene: bool | None = N
         findings.router,
         reports.router,
         archive.router,
+        replay.router,
     ):
         app.include_router(r, prefix=API)
     app.include_router(proxy.api_router, prefix=API)

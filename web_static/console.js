@@ -515,6 +515,8 @@ async function select(id) {
   upsertPlan(p);
   renderDetail(p);
   renderComparison(p);
+  // findings.js and replay.js follow the selected plan
+  document.dispatchEvent(new CustomEvent("steelpath:selected", { detail: p }));
 }
 
 // A revision beside its parent: the params that changed, every check whose
@@ -954,7 +956,7 @@ function openEvents() {
   });
   let robotTimer = null;
   const refreshRobots = () => { if (!robotTimer) robotTimer = setTimeout(() => { robotTimer = null; loadRobots(); }, 500); };
-  for (const t of ["estop", "cloud", "execution", "robot"]) {
+  for (const t of ["estop", "cloud", "execution", "robot", "finding"]) {
     es.addEventListener(t, (m) => {
       const d = JSON.parse(m.data);
       if (t === "estop") { flash(`E-STOP (${d.robot}) by ${d.by}`, true); refreshRobots(); }
