@@ -214,3 +214,23 @@ def test_a_crack_finding_asks_for_a_close_inspection_of_its_member(inspected) ->
     assert route["length_m"] <= plan["result"]["route"]["length_m"]
     got = api.get(f"/api/v1/findings/{f['id']}").json()
     assert got["maintenance_plans"][0]["kind"] == "ara.inspect"
+
+
+def test_spots_count_only_acknowledged_way_points() -> None:
+    from server.maintenance import spots_acknowledged
+
+    # way-points 0..4 (joints commands), nozzle commands between; spots per way-point
+    program = [
+        {"op": "joints"},  # 0: wp0, approach
+        {"op": "joints"},  # 1: wp1, spot 0
+        {"op": "nozzle"},  # 2
+        {"op": "joints"},  # 3: wp2, spot 0 again
+        {"op": "joints"},  # 4: wp3, spot 1
+        {"op": "joints"},  # 5: wp4, spot 2
+        {"op": "stop"},
+    ]
+    spot = np.array([-1, 0, 0, 1, 2])
+    assert spots_acknowledged(program, [], spot) == (0, 3)
+    assert spots_acknowledged(program, [0, 1, 2], spot) == (1, 3)
+    assert spots_acknowledged(program, [0, 1, 2, 3, 4], spot) == (2, 3)
+    assert spots_acknowledged(program, list(range(7)), spot) == (3, 3)
