@@ -29,6 +29,7 @@ from server.routers import (
     clouds,
     events,
     findings,
+    foxglove,
     health,
     plans,
     replay,
@@ -212,6 +213,11 @@ def create_app(settings: Settings | None = None, *, start_scene: bool | None = N
             dispatch.estop(robot, reason)
 
         services.estop_handlers.append(estop_robots)
+        if settings.foxglove_port:
+            from server.foxglove_live import FoxgloveLive
+
+            services.foxglove = FoxgloveLive(store, settings.foxglove_port).start()
+            bus.add_listener(services.foxglove.on_event)
         jobs.start()
         _freeze_startup_objects()
         try:
@@ -224,6 +230,8 @@ def create_app(settings: Settings | None = None, *, start_scene: bool | None = N
                 services.emulators.stop()
             if services.scene is not None:
                 services.scene.stop()
+            if services.foxglove is not None:
+                services.foxglove.stop()
             services.webhooks.stop()
             services.outcomes.stop()
             store.close()
@@ -270,6 +278,7 @@ def create_app(settings: Settings | None = None, *, start_scene: bool | None = N
         app.include_router(r, prefix=API)
     app.include_router(proxy.api_router, prefix=API)
     app.include_router(proxy.proxy_router)
+    app.include_router(foxglove.router)  # /foxglove: a websocket at the root, like /scene
     conform_openapi(app)  # every route's error codes in /openapi.json (issue #12 §5)
 
     @app.get("/", include_in_schema=False)

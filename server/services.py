@@ -27,6 +27,7 @@ class Services:
     token_cache: Any = None  # server.auth.TokenCache, made on first use
     webhooks: Any = None  # server.webhooks.WebhookDispatcher
     outcomes: Any = None  # server.maintenance.OutcomeRecorder
+    foxglove: Any = None  # server.foxglove_live.FoxgloveLive (STEELPATH_FOXGLOVE_PORT)
 
 
 async def get_services(request: Request) -> Services:

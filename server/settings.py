@@ -28,6 +28,14 @@ class Settings(BaseSettings):
         le=65535,
         description="port of the in-process viser scene (bound to 127.0.0.1; 0 disables it)",
     )
+    foxglove_port: int = Field(
+        0,
+        ge=0,
+        le=65535,
+        description="port of the live Foxglove WebSocket server (always bound to 127.0.0.1; "
+        "remote users connect through the authenticated proxy at /foxglove); 0 (the default) "
+        "leaves it off",
+    )
     max_upload_mb: float = Field(256.0, gt=0, description="largest accepted cloud upload (MiB)")
     token_file: Path | None = Field(
         None,

@@ -38,7 +38,6 @@ written (the same counts the MCAP summary holds).
 
 from __future__ import annotations
 
-import base64
 import json
 from collections.abc import Sequence
 from typing import IO, Any
@@ -46,53 +45,26 @@ from typing import IO, Any
 import numpy as np
 from mcap.writer import CompressionType, Writer
 
-from server.recording import schemas
-from server.recording.channels import (
-    WORLD_FRAME,
-    PlanCloud,
-    iso_ns,
-    planned_path,
-    quaternion,
-    robot_frames,
-    stamp,
+from server.recording.channels import PlanCloud, iso_ns, planned_path, robot_frames
+from server.recording.messages import (
+    CHANNELS,
+    INFO,
+    WARNING,
+    acked_msg,
+    cloud_msg,
+    log_msg,
+    path_msg,
+    program_msgs,
+    state_msg,
+    tf_msg,
+    tool_pose_msg,
 )
 from server.store.records import AuditEvent, ExecutionRecord, PlanRecord
-
-CHANNELS: dict[str, tuple[str, dict[str, Any]]] = {
-    "/plan/program": ("steelpath.PlannedCommand", schemas.PLANNED),
-    "/commands/acknowledged": ("steelpath.AcknowledgedCommand", schemas.ACKED),
-    "/robot/state": ("steelpath.RobotState", schemas.STATE),
-    "/operator": ("foxglove.Log", schemas.LOG),
-    "/tf": ("foxglove.FrameTransforms", schemas.FRAME_TRANSFORMS),
-    "/robot/tool_pose": ("foxglove.PoseInFrame", schemas.POSE_IN_FRAME),
-    "/plan/path": ("foxglove.PosesInFrame", schemas.POSES_IN_FRAME),
-    "/plan/cloud": ("foxglove.PointCloud", schemas.POINT_CLOUD),
-}
 
 #: Audit actions logged as warnings.
 _WARN = {"estop", "abort", "fault", "interrupt"}
 
 __all__ = ["CHANNELS", "iso_ns", "write_recording"]
-
-
-def _time(ns: int) -> dict[str, int]:
-    sec, nsec = stamp(ns)
-    return {"sec": sec, "nsec": nsec}
-
-
-def _pose(T: np.ndarray) -> dict[str, dict[str, float]]:
-    x, y, z, w = quaternion(T[:3, :3])
-    p = [float(v) for v in T[:3, 3]]
-    return {
-        "position": {"x": p[0], "y": p[1], "z": p[2]},
-        "orientation": {"x": x, "y": y, "z": z, "w": w},
-    }
-
-
-def _point(xyz: np.ndarray) -> dict[str, dict[str, float]]:
-    T = np.eye(4)
-    T[:3, 3] = xyz
-    return _pose(T)
 
 
 def _log_line(e: AuditEvent) -> dict[str, Any]:
@@ -101,14 +73,7 @@ def _log_line(e: AuditEvent) -> dict[str, Any]:
         words.append(f"{e.from_state or '–'} → {e.to_state or '–'}")
     if e.reason:
         words.append(f"({e.reason})")
-    return {
-        "timestamp": _time(iso_ns(e.ts)),
-        "level": 3 if e.action in _WARN else 2,
-        "message": " ".join(words),
-        "name": e.entity,
-        "file": "",
-        "line": 0,
-    }
+    return log_msg(iso_ns(e.ts), WARNING if e.action in _WARN else INFO, " ".join(words), e.entity)
 
 
 def write_recording(
@@ -186,58 +151,22 @@ def write_recording(
         data = json.dumps(msg, separators=(",", ":"), allow_nan=False).encode()
         w.add_message(ids[topic], log_time=t_ns, data=data, publish_time=t_ns, sequence=seq)
 
-    t = 0.0
-    for i, c in enumerate(program):
-        d = max(float(c.get("duration_s", 0.0) or 0.0), 0.0)
-        put(
-            "/plan/program",
-            start_ns,
-            {"index": i, "planned_start_s": t, "duration_s": d, "command": c},
-        )
-        t += d
+    for msg in program_msgs(program):
+        put("/plan/program", start_ns, msg)
     if path is not None:
-        msg = {
-            "timestamp": _time(start_ns),
-            "frame_id": WORLD_FRAME,
-            "poses": [_point(p) for p in path],
-        }
-        put("/plan/path", start_ns, msg)
+        put("/plan/path", start_ns, path_msg(start_ns, path))
     if cloud.points is not None:
-        put(
-            "/plan/cloud",
-            start_ns,
-            {
-                "timestamp": _time(start_ns),
-                "frame_id": WORLD_FRAME,
-                "pose": _point(np.zeros(3)),
-                "point_stride": 12,
-                "fields": [
-                    {"name": n, "offset": 4 * k, "type": schemas.FLOAT32}
-                    for k, n in enumerate("xyz")
-                ],
-                "data": base64.b64encode(cloud.points.astype("<f4").tobytes()).decode(),
-            },
-        )
+        put("/plan/cloud", start_ns, cloud_msg(start_ns, cloud.points))
     for idx, ts in acks:
-        c = program[idx] if 0 <= idx < len(program) else {}
-        put(
-            "/commands/acknowledged",
-            iso_ns(ts),
-            {"index": idx, "op": str(c.get("op", "")), "command": c},
-        )
+        put("/commands/acknowledged", iso_ns(ts), acked_msg(program, idx))
     for ns, st, fs in samples:
-        put("/robot/state", ns, {"robot": execution.robot, **st})
+        put("/robot/state", ns, state_msg(execution.robot, st))
         if fs is None or frames is None:
             continue
-        tfs = []
-        for parent, child, T in fs.transforms:
-            pose = _pose(T)
-            tfs.append({"timestamp": _time(ns), "parent_frame_id": parent, "child_frame_id": child,
-                        "translation": pose["position"], "rotation": pose["orientation"]})  # fmt: skip
-        put("/tf", ns, {"transforms": tfs})
-        if np.isfinite(fs.tip_pose).all():
-            put("/robot/tool_pose", ns,
-                {"timestamp": _time(ns), "frame_id": frames.base, "pose": _pose(fs.tip_pose)})  # fmt: skip
+        put("/tf", ns, tf_msg(ns, fs))
+        tool = tool_pose_msg(ns, frames.base, fs)
+        if tool is not None:
+            put("/robot/tool_pose", ns, tool)
     for e in sorted(audit, key=lambda a: (a.ts, a.id)):
         put("/operator", iso_ns(e.ts), _log_line(e))
     w.finish()
