@@ -746,12 +746,14 @@ async function loadProposals() {
   tb.innerHTML = "";
   const canDecide = state.me && state.me.role !== "viewer";
   for (const p of items) {
-    const accept = el("button", { class: "accept", onclick: () => decideProposal(p.id, "accept") }, "Accept");
+    // A finding proposal (Ctrl/Cmd-click on a face) asks what was found first (findings.js).
+    const finding = p.action === "finding" && typeof window.openFindingForm === "function";
+    const accept = el("button", { class: "accept", onclick: () => (finding ? window.openFindingForm(p) : decideProposal(p.id, "accept")) }, finding ? "Accept…" : "Accept");
     const dismiss = el("button", { class: "secondary dismiss", onclick: () => decideProposal(p.id, "dismiss") }, "Dismiss");
     accept.disabled = dismiss.disabled = !canDecide;
     tb.append(el("tr", { "data-proposal": p.id },
       el("td", {}, p.created_at.replace("T", " ").slice(11, 19)),
-      el("td", {}, `${p.kind} from ${p.plan_id}`),
+      el("td", {}, finding ? `finding on ${p.plan_id}` : `${p.kind} from ${p.plan_id}`),
       el("td", {}, el("code", {}, JSON.stringify(p.patch))),
       el("td", { class: "muted" }, p.source),
       el("td", { class: "actions" }, accept, " ", dismiss)));

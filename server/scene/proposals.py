@@ -67,6 +67,10 @@ class Proposal:
     decided_by: str | None = None
     decided_at: float | None = None
     result_plan_id: str | None = None
+    #: ``revise``: a new revision of ``plan_id`` with ``patch``; ``finding``:
+    #: a finding at the place in ``patch`` (:mod:`server.scene.finding_pick`).
+    action: str = "revise"
+    result_finding_id: str | None = None
     _mono: float = field(default=0.0, repr=False)
 
     def public(self) -> dict[str, Any]:
@@ -81,6 +85,8 @@ class Proposal:
             "decided_by": self.decided_by,
             "decided_at": None if self.decided_at is None else _iso(self.decided_at),
             "result_plan_id": self.result_plan_id,
+            "action": self.action,
+            "result_finding_id": self.result_finding_id,
         }
 
 
@@ -109,7 +115,14 @@ class ProposalBook:
 
     # ---------------------------------------------------------------- intake
     def propose(
-        self, plan_id: str, kind: str, patch: dict[str, Any], *, client: Any, source: str
+        self,
+        plan_id: str,
+        kind: str,
+        patch: dict[str, Any],
+        *,
+        client: Any,
+        source: str,
+        action: str = "revise",
     ) -> Proposal | None:
         """Record a proposal, or drop it (``None``, logged) when over a limit."""
         now = self._clock()
@@ -138,6 +151,7 @@ class ProposalBook:
                 patch=dict(patch),
                 source=source,
                 created=time.time(),
+                action=action,
                 _mono=now,
             )
             self._items[p.id] = p
@@ -169,10 +183,12 @@ class ProposalBook:
             p.state = ACCEPTING
             return p
 
-    def finish_accept(self, proposal_id: str, plan_id: str, actor: str) -> Proposal:
+    def finish_accept(
+        self, proposal_id: str, plan_id: str | None, actor: str, *, finding_id: str | None = None
+    ) -> Proposal:
         with self._lock:
             p = self._items[proposal_id]
-            p.state, p.result_plan_id = ACCEPTED, plan_id
+            p.state, p.result_plan_id, p.result_finding_id = ACCEPTED, plan_id, finding_id
             p.decided_by, p.decided_at = actor, time.time()
             return p
 

@@ -16,8 +16,11 @@ The websocket route also
 - closes the connection (code 1008) once its token is revoked or expires.
 
 Scene proposals (``/api/v1/scene/proposals``): viewers list them, operators
-accept (the plan is submitted through ``submit_plan`` as that operator) or
-dismiss them.
+accept (the plan is submitted through ``submit_plan`` as that operator; a
+*finding* proposal's accept carries the finding's type, condition state and
+notes and creates it as ``POST /api/v1/findings`` does) or dismiss them.
+``POST /api/v1/scene/frame`` points the viewers' camera at a place or a
+finding.
 """
 
 from __future__ import annotations
@@ -32,10 +35,11 @@ import httpx
 import websockets
 from fastapi import APIRouter, Depends, HTTPException, Query, Request, Response, WebSocket
 from fastapi.responses import RedirectResponse
-from pydantic import BaseModel, model_validator
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
 from starlette.websockets import WebSocketDisconnect
 
 from server.auth import Operator, TokenRefused, Viewer, resolve, until_invalid
+from server.routers.findings import FindingType
 from server.routers.responses import errors
 from server.scene.proposals import STATES, ProposalBook, ProposalDecidedError
 from server.scene.wsguard import TICKET_HEADER
@@ -262,19 +266,74 @@ def _require_book(services: Services) -> ProposalBook:
     return book
 
 
+class FindingFields(BaseModel):
+    """What an operator says about a finding proposal's place when accepting it."""
+
+    model_config = ConfigDict(extra="forbid", allow_inf_nan=False)
+
+    type: FindingType
+    condition_state: int = Field(..., ge=1, le=4, description="1 good, 2 fair, 3 poor, 4 severe")
+    notes: str = Field("", max_length=5000)
+
+
+def _accept_finding(
+    services: Services, book: ProposalBook, proposal_id: str, fields: FindingFields | None, who: Any
+) -> dict[str, Any]:
+    """A finding proposal accepted: the finding, made by ``POST /api/v1/findings``'s code."""
+    from server.routers.findings import FindingCreate, create_finding
+
+    if fields is None:
+        raise HTTPException(
+            422,
+            detail=[
+                {
+                    "loc": ["body"],
+                    "msg": "a finding proposal is accepted with its type and condition_state",
+                    "type": "missing",
+                }
+            ],
+        )
+    proposal = book.begin_accept(proposal_id)
+    try:
+        try:
+            req = FindingCreate(plan_id=proposal.plan_id, **proposal.patch, **fields.model_dump())
+        except ValidationError as exc:
+            raise HTTPException(422, detail=exc.errors(include_url=False)) from None
+        finding = create_finding(req, services, who)
+    except BaseException:
+        book.abort_accept(proposal_id)
+        raise
+    proposal = book.finish_accept(proposal_id, None, who.actor, finding_id=finding["id"])
+    if services.scene is not None:
+        services.scene.proposal_decided(proposal_id)
+    services.events.publish("proposal", proposal.public())
+    return {**finding, "proposal_id": proposal.id}
+
+
 @api_router.post(
     "/proposals/{proposal_id}/accept",
     status_code=202,
     responses=errors(401, 403, 404, 409, 422),
 )
 def accept_proposal(
-    proposal_id: str, services: Svc, who: Operator, response: Response
+    proposal_id: str,
+    services: Svc,
+    who: Operator,
+    response: Response,
+    finding: FindingFields | None = None,
 ) -> dict[str, Any]:
-    """Make the proposed plan (a revision of the plan it derives from) as this operator."""
+    """Make the proposed plan (a revision of the plan it derives from) as this
+    operator; for a finding proposal (``action: finding``), the finding at its
+    place with the body's type, condition state and notes (201)."""
     from server.routers.plans import submit_plan
 
     book = _require_book(services)
     try:
+        if book.get(proposal_id).action == "finding":
+            out = _accept_finding(services, book, proposal_id, finding, who)
+            response.status_code = 201
+            response.headers["Location"] = f"/api/v1/findings/{out['id']}"
+            return out
         proposal = book.begin_accept(proposal_id)
     except ProposalDecidedError as exc:
         raise _decided(exc) from None
@@ -310,5 +369,57 @@ def dismiss_proposal(proposal_id: str, services: Svc, who: Operator) -> dict[str
         proposal = _require_book(services).dismiss(proposal_id, who.actor)
     except ProposalDecidedError as exc:
         raise _decided(exc) from None
+    if services.scene is not None:
+        services.scene.proposal_decided(proposal_id)
     services.events.publish("proposal", proposal.public())
     return proposal.public()
+
+
+# ----------------------------------------------------------------- framing
+class FrameRequest(BaseModel):
+    model_config = ConfigDict(extra="forbid", allow_inf_nan=False)
+
+    point_m: tuple[float, float, float] | None = Field(None, description="look here (world, m)")
+    finding_id: str | None = Field(None, description="look at this finding's place")
+
+    @model_validator(mode="after")
+    def _one(self) -> FrameRequest:
+        if (self.point_m is None) == (self.finding_id is None):
+            raise ValueError("give exactly one of point_m or finding_id")
+        return self
+
+
+def _finding_place(services: Services, finding_id: str) -> tuple[list[float], Any]:
+    """A finding's point (or its region's centre) and its face's normal, if any."""
+    import numpy as np
+
+    from server.routers.findings import _store
+
+    f = _store(services).get(finding_id)
+    pts = [f.point_m] if f.point_m is not None else list(f.region_m or [])
+    if not pts:
+        raise HTTPException(422, detail=f"finding {finding_id} has no place to look at")
+    point = np.asarray(pts, dtype=float).mean(axis=0).tolist()
+    normal = None
+    if f.face_id is not None:
+        with contextlib.suppress(Exception):  # the plan's model gone: the usual direction
+            res = services.store.get_plan(f.plan_id).result or {}
+            member = next(m for m in res.get("members", []) if m["id"] == f.member_id)
+            normal = next(g["normal"] for g in member["faces"] if g["id"] == f.face_id)
+    return point, normal
+
+
+@api_router.post("/frame", responses=errors(401, 403, 404, 422, 503))
+def scene_frame(req: FrameRequest, services: Svc, _: Operator) -> dict[str, Any]:
+    """Point every viewer's camera at a place (``point_m``) or a finding
+    (from in front of its face), about 1.6 m of the structure in view."""
+    scene = services.scene
+    if scene is None or not scene.running:
+        raise HTTPException(503, detail="the 3D scene is not running")
+    normal = None
+    if req.finding_id is not None:
+        point, normal = _finding_place(services, req.finding_id)
+    else:
+        assert req.point_m is not None
+        point = list(req.point_m)
+    return {"framed": point, "view": scene.frame_point(point, normal)}

@@ -25,6 +25,8 @@ import numpy as np
 from server.lifecycle import PlanState
 from server.scene.context import Animation, DrawContext, current_scene_client
 from server.scene.drawers import drawer_for, robot_for
+from server.scene.finding_pick import MODIFIER as FINDING_MODIFIER
+from server.scene.finding_pick import FindingPicker, point_view
 from server.scene.framing import BoundsRecorder, apply_view, framing
 from server.scene.measure import Measurer
 from server.scene.proposals import ProposalBook
@@ -74,9 +76,12 @@ class SceneService:
         self._ghosts: dict[str, Any] = {}
         self._timeline: np.ndarray | None = None
         self._driven: str | None = None  # the execution now driving the animations
+        # The replay robot of a recorded run (server.scene.replay), if shown.
+        self._replay: dict[str, Any] = {}
         self.proposals = proposals if proposals is not None else ProposalBook()
         self._publish = publish
         self.measurer = Measurer()
+        self.finding_picker = FindingPicker()
 
     # -------------------------------------------------------------- lifecycle
     @property
@@ -114,6 +119,8 @@ class SceneService:
         self._server.scene.add_grid("/grid", width=10.0, height=10.0, cell_size=0.25, plane="xy")
         # Shift-click measures (plain clicks stay the drawers' pickers).
         self._server.scene.on_click(modifier="shift")(self._on_measure_click)
+        # Ctrl/Cmd-click on a face of an ara.inspect plan proposes a finding there.
+        self._server.scene.on_click(modifier=FINDING_MODIFIER)(self._on_finding_click)
         self._anim_thread = threading.Thread(target=self._animate, name="scene-anim", daemon=True)
         self._anim_thread.start()
         log.info("viser scene on 127.0.0.1:%s", self.port)
@@ -142,6 +149,8 @@ class SceneService:
         self._ghosts = {}
         self._timeline = None
         self._driven = None
+        self._replay = {}
+        self.finding_picker.set_plan(None)
 
     def show_plan(self, plan_id: str) -> dict[str, Any]:
         """Draw a stored plan (its kind's drawer); follow it if still planning."""
@@ -195,6 +204,7 @@ class SceneService:
         self._timeline = _timeline(plan.program)
         self._frame(recorder.points)
         self.measurer.set_points(recorder.pickable)
+        self.finding_picker.set_plan(plan)
         self._draw_findings(plan.id)
 
     # -------------------------------------------------------------- findings
@@ -232,6 +242,49 @@ class SceneService:
         if self.running and self.current.get("plan_id") == plan_id:
             with self._lock:
                 self._draw_findings(plan_id)
+
+    def _on_finding_click(self, event: Any) -> None:
+        """A Ctrl/Cmd-click: propose a finding at the face under the cursor
+        (:mod:`server.scene.finding_pick`); off every face, nothing."""
+        place = self.finding_picker.pick(event.ray_origin, event.ray_direction)
+        if place is None:
+            log.info("finding click of scene client %s is on no face", event.client_id)
+            return
+        patch = {k: place[k] for k in ("member_id", "face_id", "point_m")}
+        token = current_scene_client.set(event.client_id)
+        try:
+            pid = self._on_propose(place["plan_id"], patch, action="finding")
+        finally:
+            current_scene_client.reset(token)
+        if pid is not None and self.running:
+            with self._lock:  # a white marker until the proposal is decided
+                self._server.scene.add_icosphere(
+                    f"/findings/proposed/{pid}",
+                    radius=0.03,
+                    color=(255, 255, 255),
+                    position=tuple(place["point_m"]),
+                )
+
+    def proposal_decided(self, proposal_id: str) -> None:
+        """A finding proposal was accepted or dismissed: its marker goes."""
+        if not self.running:
+            return
+        with self._lock:
+            handle = self._server.scene.get_handle_by_name(f"/findings/proposed/{proposal_id}")
+            if handle is not None:
+                handle.remove()
+
+    def frame_point(self, point: Any, normal: Any | None = None) -> dict[str, Any]:
+        """Move every viewer's camera to look at ``point`` (a finding's place)."""
+        view = point_view(point, float(self._server.initial_camera.fov), normal)
+        with self._lock:
+            apply_view(self._server, view)
+            self.current["view"] = {
+                "look_at": [round(float(v), 4) for v in view.look_at],
+                "position": [round(float(v), 4) for v in view.position],
+                "radius_m": round(view.radius, 4),
+            }
+        return dict(self.current["view"])
 
     def _frame(self, points: list[np.ndarray] | np.ndarray) -> None:
         """Fit every viewer's camera to what was just drawn."""
@@ -436,7 +489,9 @@ class SceneService:
         """Redraw ``plan_id`` when it finishes planning (an accepted proposal)."""
         self._follow = plan_id
 
-    def _on_propose(self, plan_id: str, patch: dict[str, Any]) -> str | None:
+    def _on_propose(
+        self, plan_id: str, patch: dict[str, Any], action: str = "revise"
+    ) -> str | None:
         """A scene interaction: record a proposal (never a plan); its id or None if dropped."""
         client = current_scene_client.get()
         try:
@@ -445,7 +500,9 @@ class SceneService:
             log.warning("scene proposal for missing plan %s dropped", plan_id)
             return None
         source = "scene" if client is None else f"scene client {client}"
-        proposal = self.proposals.propose(plan_id, kind, patch, client=client, source=source)
+        proposal = self.proposals.propose(
+            plan_id, kind, patch, client=client, source=source, action=action
+        )
         if proposal is None:
             return None
         try:

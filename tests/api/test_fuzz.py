@@ -13,7 +13,7 @@ as a viewer.  Excluded, each for a reason that is not "it fails":
 * ``PUT /robots/{name}/connection``: it makes the server open serial ports
   and TCP connections to fuzzed URLs, i.e. to arbitrary hosts (tests use
   loopback only); its validation is tested in tests/api/test_dispatch.py;
-* ``POST /scene/show``: the 3D scene is off here (running viser per test is
+* ``POST /scene/show`` and ``POST /scene/frame``: the 3D scene is off here (running viser per test is
   heavy), and without it the route answers its documented 503 by design,
   which the server-error check counts as a failure;
 * ``POST /estop`` and ``/robots/{robot}/estop`` are kept: they are safe with
@@ -85,6 +85,8 @@ schema = (
     .exclude(method="DELETE", path="/api/v1/tokens/{token_id}")
     .exclude(method="PUT", path="/api/v1/robots/{name}/connection")
     .exclude(method="POST", path="/api/v1/scene/show")
+    .exclude(method="POST", path="/api/v1/scene/frame")  # 503 without the scene; tested in
+    # tests/api/test_scene_findings.py
 )
 BEYOND_SCHEMA = {
     ("POST", "/api/v1/clouds"),
