@@ -13,6 +13,8 @@ import numpy as np
 import pytest
 
 from tests.api.test_finding_plans import _patch
+from tests.api.test_scene_findings import _web, ctrl_click
+from tests.api.test_scene_proposals import camera_message, raw_viser, wait_for
 from tests.browser.test_console import browser, screens, signed_in  # noqa: F401 (fixture)
 from tests.conftest import make_settings
 from tests.support.live import free_port, live_server
@@ -52,6 +54,15 @@ def _inspection_with_two_findings(url: str, token: str) -> tuple[dict, dict, dic
     shown = httpx.post(f"{url}/api/v1/scene/show", json={"plan_id": pid}, headers=h)
     assert shown.status_code == 200, shown.text
     return plan, rust.json(), crack.json()
+
+
+def _findings(url: str, h: dict, plan_id: str) -> list[dict]:
+    return httpx.get(f"{url}/api/v1/findings?plan_id={plan_id}", headers=h).json()
+
+
+def _pending_in(url: str, h: dict) -> dict | None:
+    got = httpx.get(f"{url}/api/v1/scene/proposals?state=pending", headers=h).json()
+    return got[0] if got else None
 
 
 def _rows(page) -> list[str]:
@@ -119,10 +130,63 @@ def test_findings_list_filters_frames_and_makes_a_blast_plan(browser, tmp_path: 
             timeout=30_000,
         )
         blast_id = page.evaluate("state.selected")
-        assert f"{blast_id} · blast" in page.inner_text("#d-title")
+        # select() sets state.selected before the detail is drawn: wait for it
+        page.wait_for_function(
+            f"document.querySelector('#d-title').textContent.includes('{blast_id} · blast')"
+        )
         # Back on the inspection, the finding lists its blast plan.
         page.locator(f"#plans tbody tr[data-id='{plan['id']}']").click()
         page.wait_for_selector(f"tr[data-finding='{rust['id']}'] a.f-plan[data-plan='{blast_id}']")
+
+        # A Ctrl-click on a face in the scene proposes a finding; the console's
+        # Accept… asks what it is and creates it on the plan.
+        h = {"Authorization": f"Bearer {tokens['operator']}"}
+        httpx.post(f"{url}/api/v1/scene/show", json={"plan_id": plan["id"]}, headers=h)
+        member, face, c, n = _web(plan)
+        with raw_viser(scene.port, scene.issue_ticket()) as ws:
+            ws.recv(timeout=10)
+            ws.send(camera_message())
+            ws.send(ctrl_click(c + 0.5 * n, -n))
+            prop = wait_for(lambda: _pending_in(url, h), 10)
+        assert prop is not None and prop["action"] == "finding"
+        page.wait_for_selector(f"tr[data-proposal='{prop['id']}'] button.accept")
+        page.locator(f"tr[data-proposal='{prop['id']}'] button.accept").click()
+        page.wait_for_selector("#finding-form form")
+        page.select_option("#finding-form select[name=type]", "section_loss")
+        page.select_option("#finding-form select[name=condition_state]", "4")
+        page.fill("#finding-form textarea[name=notes]", "flange thinned at the bolt row")
+        page.locator("#finding-form button[type=submit]").click()
+        page.wait_for_selector("#finding-form", state="detached")
+        page.wait_for_function(
+            "document.querySelectorAll('#findings-box tr[data-finding]').length == 3"
+        )
+        made = [f for f in _findings(url, h, plan["id"]) if f["type"] == "section_loss"]
+        assert len(made) == 1 and made[0]["condition_state"] == 4
+        assert (made[0]["member_id"], made[0]["face_id"]) == (member, face["id"])
+        new_row = f"tr[data-finding='{made[0]['id']}']"
+        assert "4 severe" in page.inner_text(new_row)
+
+        # Close inspection of that member: an ara.inspect plan made and selected.
+        page.locator(f"{new_row} button.f-inspect").click()
+        page.wait_for_function(
+            f"state.selected && state.selected !== '{plan['id']}'"
+            " && (state.plans.get(state.selected) || {}).kind === 'ara.inspect'",
+            timeout=30_000,
+        )
+        close_id = page.evaluate("state.selected")
+        close = httpx.get(f"{url}/api/v1/plans/{close_id}", headers=h).json()
+        assert close["params"]["close_member"] == member
+
+        # A withdrawn finding shows only with the "withdrawn" toggle, marked.
+        httpx.delete(f"{url}/api/v1/findings/{crack['id']}?reason=duplicate", headers=h)
+        page.locator(f"#plans tbody tr[data-id='{plan['id']}']").click()
+        page.wait_for_function(
+            "document.querySelectorAll('#findings-box tr[data-finding]').length == 2"
+        )
+        page.check("#f-withdrawn")
+        page.wait_for_selector(f"tr.withdrawn[data-finding='{crack['id']}']")
+        assert "withdrawn by" in page.inner_text(f"tr[data-finding='{crack['id']}']")
+        page.uncheck("#f-withdrawn")
         assert not errors, errors
 
         # A viewer reads the list; every finding button is disabled, with why.
