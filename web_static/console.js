@@ -575,7 +575,8 @@ function renderDetail(p) {
     for (const c of p.program) t.push(t[t.length - 1] + Math.max(Number(c.duration_s) || 0, 0));
     state.timeline = { plan: p.id, t };
   }
-  $("#d-title").textContent = `${p.id} · ${p.kind}` + (p.parent_id ? ` (revision of ${p.parent_id})` : "");
+  $("#d-title").textContent = `${p.id} · ${p.kind}` + (p.parent_id ? ` (revision of ${p.parent_id})` : "")
+    + (p.finding_id ? ` (from finding ${p.finding_id})` : "");
   const st = $("#d-state");
   st.textContent = p.state; st.className = `state ${p.state}`;
   $("#d-progress div").style.width = `${(p.progress || 0) * 100}%`;

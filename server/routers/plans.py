@@ -19,6 +19,7 @@ from server.routers.responses import AUTH, errors, json_text
 from server.services import Services, get_services
 from server.store import NotFoundError, PlanRecord
 from server.store.database import utcnow
+from server.store.maintenance import MaintenanceStore
 
 log = logging.getLogger(__name__)
 
@@ -160,6 +161,9 @@ async def get_plan(plan_id: str, services: Svc, _: Viewer) -> Response:
     out["revisions"] = [
         p.id for p in services.store.list_plans(parent_id=plan_id, limit=500, summary=True)
     ]
+    # a maintenance plan made from a finding links back to it (issue #16 §2)
+    link = MaintenanceStore(services.store.db).of_plan(plan_id)
+    out["finding_id"] = None if link is None else link.finding_id
     head = json_text(out)
     body = f'{head[:-1]},"result":{result_json},"program":{program_json}}}'
     return Response(body.encode("utf-8"), media_type="application/json")

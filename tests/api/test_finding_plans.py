@@ -120,6 +120,9 @@ def test_a_corrosion_finding_becomes_a_blast_plan_run_and_its_coverage_comes_bac
     cloud = api.get(f"/api/v1/clouds/{blast['params']['obstacle_cloud_id']}").json()
     assert cloud["n_points"] > 1000 and "sample" in cloud["name"]
 
+    # The plan links back to its finding.
+    assert api.get(f"/api/v1/plans/{blast['id']}", "viewer").json()["finding_id"] == f["id"]
+    assert api.get(f"/api/v1/plans/{plan['id']}", "viewer").json()["finding_id"] is None
     linked = api.get(f"/api/v1/findings/{f['id']}", "viewer").json()
     assert [p["plan_id"] for p in linked["maintenance_plans"]] == [blast["id"]]
     assert linked["maintenance_plans"][0]["state"] == "planned"

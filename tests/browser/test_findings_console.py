@@ -132,7 +132,8 @@ def test_findings_list_filters_frames_and_makes_a_blast_plan(browser, tmp_path: 
         blast_id = page.evaluate("state.selected")
         # select() sets state.selected before the detail is drawn: wait for it
         page.wait_for_function(
-            f"document.querySelector('#d-title').textContent.includes('{blast_id} · blast')"
+            "document.querySelector('#d-title').textContent"
+            f".includes('{blast_id} · blast (from finding {rust['id']})')"
         )
         # Back on the inspection, the finding lists its blast plan.
         page.locator(f"#plans tbody tr[data-id='{plan['id']}']").click()
