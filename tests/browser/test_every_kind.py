@@ -234,6 +234,13 @@ def _pick_in_the_scene(page: Any, app: Any, plan_id: str, kind: str) -> str:
     page.locator("#scene").scroll_into_view_if_needed()
     service = app.state.services.scene
     scene = service.server.scene
+    # the show runs on the server while the page loads: wait until it is drawn and framed
+    deadline = time.monotonic() + 60
+    while time.monotonic() < deadline:
+        now = dict(service.current)
+        if now.get("plan_id") == plan_id and "view" in now:
+            break
+        time.sleep(0.1)
     suffix = "/planes" if kind == "blast" else "/vertices"
     name = next(n for n in scene._handle_from_node_name if n.endswith(suffix))
     handle = scene.get_handle_by_name(name)
