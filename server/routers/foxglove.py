@@ -33,20 +33,18 @@ expires.
 
 from __future__ import annotations
 
-import asyncio
-import contextlib
 import logging
 
 import websockets
 from fastapi import APIRouter, WebSocket
 from fastapi.responses import JSONResponse
 from starlette.concurrency import run_in_threadpool
-from starlette.websockets import WebSocketDisconnect
 from websockets.typing import Subprotocol
 
-from server.auth import COOKIE, Principal, TokenRefused, resolve, until_invalid
+from server.auth import COOKIE, Principal, TokenRefused, resolve
 from server.scene.proxy import same_origin
 from server.services import Services
+from server.wsrelay import relay
 
 log = logging.getLogger(__name__)
 
@@ -130,44 +128,4 @@ async def foxglove_socket(websocket: WebSocket) -> None:
         return
     await websocket.accept(subprotocol=chosen)
 
-    async def client_to_upstream() -> None:
-        while True:
-            msg = await websocket.receive()
-            if msg["type"] == "websocket.disconnect":
-                return
-            if msg.get("bytes") is not None:
-                await upstream.send(msg["bytes"])
-            elif msg.get("text") is not None:
-                await upstream.send(msg["text"])
-
-    async def upstream_to_client() -> None:
-        async for data in upstream:
-            if isinstance(data, bytes):
-                await websocket.send_bytes(data)
-            else:
-                await websocket.send_text(data)
-
-    invalid = asyncio.create_task(until_invalid(services.store, who))
-    tasks = [
-        asyncio.create_task(client_to_upstream()),
-        asyncio.create_task(upstream_to_client()),
-        invalid,
-    ]
-    reason = ""
-    try:
-        await asyncio.wait(tasks, return_when=asyncio.FIRST_COMPLETED)
-        if invalid.done() and not invalid.cancelled() and invalid.exception() is None:
-            reason = invalid.result()
-            log.info("closing Foxglove websocket of %s: %s", who.actor, reason)
-    finally:
-        for t in tasks:
-            t.cancel()
-        for t in tasks:
-            with contextlib.suppress(asyncio.CancelledError, WebSocketDisconnect, Exception):
-                await t
-        await upstream.close()
-        with contextlib.suppress(Exception):
-            if reason:
-                await websocket.close(code=1008, reason=reason)
-            else:
-                await websocket.close()
+    await relay(websocket, upstream, services.store, who, "Foxglove")

@@ -25,7 +25,6 @@ finding.
 
 from __future__ import annotations
 
-import asyncio
 import contextlib
 import logging
 from typing import Annotated, Any, Literal
@@ -36,15 +35,15 @@ import websockets
 from fastapi import APIRouter, Depends, HTTPException, Query, Request, Response, WebSocket
 from fastapi.responses import RedirectResponse
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
-from starlette.websockets import WebSocketDisconnect
 
-from server.auth import Operator, TokenRefused, Viewer, resolve, until_invalid
+from server.auth import Operator, TokenRefused, Viewer, resolve
 from server.routers.findings import FindingType
 from server.routers.responses import errors
 from server.scene.proposals import STATES, ProposalBook, ProposalDecidedError
 from server.scene.wsguard import TICKET_HEADER
 from server.services import Services, get_services
 from server.store import NotFoundError
+from server.wsrelay import relay
 
 log = logging.getLogger(__name__)
 
@@ -141,47 +140,7 @@ async def scene_socket(websocket: WebSocket) -> None:
         return
     await websocket.accept(subprotocol=upstream.subprotocol)
 
-    async def client_to_upstream() -> None:
-        while True:
-            msg = await websocket.receive()
-            if msg["type"] == "websocket.disconnect":
-                return
-            if msg.get("bytes") is not None:
-                await upstream.send(msg["bytes"])
-            elif msg.get("text") is not None:
-                await upstream.send(msg["text"])
-
-    async def upstream_to_client() -> None:
-        async for data in upstream:
-            if isinstance(data, bytes):
-                await websocket.send_bytes(data)
-            else:
-                await websocket.send_text(data)
-
-    invalid = asyncio.create_task(until_invalid(services.store, principal))
-    tasks = [
-        asyncio.create_task(client_to_upstream()),
-        asyncio.create_task(upstream_to_client()),
-        invalid,
-    ]
-    reason = ""
-    try:
-        await asyncio.wait(tasks, return_when=asyncio.FIRST_COMPLETED)
-        if invalid.done() and not invalid.cancelled() and invalid.exception() is None:
-            reason = invalid.result()
-            log.info("closing scene websocket of %s: %s", principal.actor, reason)
-    finally:
-        for t in tasks:
-            t.cancel()
-        for t in tasks:
-            with contextlib.suppress(asyncio.CancelledError, WebSocketDisconnect, Exception):
-                await t
-        await upstream.close()
-        with contextlib.suppress(Exception):
-            if reason:
-                await websocket.close(code=1008, reason=reason)
-            else:
-                await websocket.close()
+    await relay(websocket, upstream, services.store, principal, "scene")
 
 
 class ShowRequest(BaseModel):
