@@ -248,25 +248,14 @@ def _replay_handle(scene: SceneService, robot: str) -> Any:
     """The replay robot's ViserUrdf (made on first use, kept until cleared)."""
     from pathlib import Path
 
-    from viser.extras import ViserUrdf
-
     from robots import load_robot
-    from server.scene.context import set_frame_pose
 
     held = scene._replay
     if held.get("robot") == robot and held.get("handle") is not None:
         return held["handle"]
     clear(scene)
-    parent = next(iter(scene._ghosts), None)
-    node = f"{parent}/replay" if parent is not None else f"/plan/replay_{robot}"
-    frame = scene.server.scene.add_frame(node, show_axes=False)
-    if parent is None and scene.current.get("base_pose") is not None:
-        set_frame_pose(frame, np.asarray(scene.current["base_pose"], dtype=float))
-    handle = ViserUrdf(
-        scene.server,
-        Path(load_robot(robot).urdf_path),
-        root_node_name=node,
-        mesh_color_override=REPLAY_RGBA,
+    node, handle = scene.attach_urdf(
+        robot, Path(load_robot(robot).urdf_path), "replay", REPLAY_RGBA
     )
     scene._replay = {"robot": robot, "node": node, "handle": handle}
     return handle

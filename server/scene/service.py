@@ -18,6 +18,7 @@ import logging
 import threading
 import time
 from collections.abc import Callable
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -421,33 +422,35 @@ class SceneService:
         return None
 
     def _add_live(self, robot: str) -> Any:
-        from pathlib import Path
-
-        from viser.extras import ViserUrdf
 
         from robots import load_robot
-        from server.scene.context import set_frame_pose
 
         try:
             path = Path(load_robot(robot).urdf_path)
         except ValueError:
             return None
-        # Under the planned robot's own node when the drawer made one, so the
-        # reported joints ride on the planned base as it moves (an inch-worm
-        # or a climber changes its base; the report has joints only).
+        _, handle = self.attach_urdf(robot, path, "live", (1.0, 0.55, 0.1, 0.7))
+        self._live[robot] = handle
+        return handle
+
+    def attach_urdf(
+        self, robot: str, path: Path, name: str, rgba: tuple[float, float, float, float]
+    ) -> tuple[str, Any]:
+        """A tinted copy of ``robot``'s URDF (the live or a replayed robot):
+        its node name and ViserUrdf.  Under the planned robot's own node when
+        the drawer made one, so the reported joints ride on the planned base
+        as it moves (an inch-worm or a climber changes its base; a report has
+        joints only)."""
+        from viser.extras import ViserUrdf
+
+        from server.scene.context import set_frame_pose
+
         parent = next(iter(self._ghosts), None)
-        node = f"{parent}/live" if parent is not None else f"/plan/live_{robot}"
+        node = f"{parent}/{name}" if parent is not None else f"/plan/{name}_{robot}"
         frame = self._server.scene.add_frame(node, show_axes=False)
         if parent is None and self.current.get("base_pose") is not None:
             set_frame_pose(frame, np.asarray(self.current["base_pose"], dtype=float))
-        handle = ViserUrdf(
-            self._server,
-            path,
-            root_node_name=node,
-            mesh_color_override=(1.0, 0.55, 0.1, 0.7),
-        )
-        self._live[robot] = handle
-        return handle
+        return node, ViserUrdf(self._server, path, root_node_name=node, mesh_color_override=rgba)
 
     def execution_progress(self, plan_id: str, execution_id: str, state: str, acked: int) -> None:
         """An execution of the plan shown moved on: the planned robot (the
