@@ -19,13 +19,14 @@ serve: install
 install-test: $(BIN)/python
 	$(BIN)/pip install --quiet -e '.[test]'
 
-# Debian's Chromium drives the browser test; docker-compose validates docker/compose.yml.
+# Debian's Chromium drives the browser test; docker-compose validates docker/compose.yml;
+# the PostgreSQL tests start a server of Debian's postgresql package (initdb in a temp dir).
 system-test-deps:
-	@if ! command -v chromium >/dev/null 2>&1 || ! command -v docker-compose >/dev/null 2>&1; then \
+	@if ! command -v chromium >/dev/null 2>&1 || ! command -v docker-compose >/dev/null 2>&1 || ! ls /usr/lib/postgresql/*/bin/initdb >/dev/null 2>&1; then \
 	  if [ "$$(id -u)" = 0 ]; then \
-	    apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq --no-install-recommends chromium docker-compose >/dev/null; \
+	    apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq --no-install-recommends chromium docker-compose postgresql >/dev/null; \
 	  else \
-	    echo "chromium and docker-compose are missing: run 'sudo apt-get install chromium docker-compose'" >&2; exit 1; \
+	    echo "chromium, docker-compose or postgresql is missing: run 'sudo apt-get install chromium docker-compose postgresql'" >&2; exit 1; \
 	  fi; \
 	fi
 

@@ -77,6 +77,28 @@ class Settings(BaseSettings):
         "CPU of its own: ahead of the server (< 0) it takes CPU a real robot never would, the "
         "more so at a time scale of 10, where it handles ten times a real robot's command rate",
     )
+    database_url: str | None = Field(
+        None,
+        description="postgresql://user:pass@host/db selects PostgreSQL as the store (shared by "
+        "several servers and planning workers); unset keeps SQLite under the data directory",
+    )
+    dask_scheduler: str | None = Field(
+        None,
+        description="tcp://host:8786 sends planning jobs to that Dask cluster (its workers read "
+        "and write through the shared store); unset keeps the local process pool",
+    )
+    server_url: str | None = Field(
+        None,
+        description="this server's base URL as other servers sharing the store reach it "
+        "(e.g. http://10.0.0.5:8000); unset: http://<host>:<port>",
+    )
+    robot_lease_s: float = Field(
+        3.0,
+        gt=0,
+        le=60,
+        description="how long a server's ownership of a robot link lasts without renewal; "
+        "another server takes the robot over only after it has lapsed",
+    )
     log_level: str = Field("info", description="uvicorn log level")
     access_log: bool = Field(
         False,

@@ -201,6 +201,26 @@ MIGRATIONS: list[str] = [
     );
     CREATE INDEX finding_plans_by_finding ON finding_plans (finding_id);
     """,
+    # 10: beyond one machine (issue #17): planning attempts and cancel requests that any
+    # server's or Dask worker's job reads from the store; the servers sharing this store
+    # and which of them owns each robot link (a lease renewed with the heartbeat)
+    """
+    ALTER TABLE plans ADD COLUMN attempts INTEGER NOT NULL DEFAULT 0;
+    ALTER TABLE plans ADD COLUMN cancel_requested INTEGER NOT NULL DEFAULT 0;
+    ALTER TABLE plans ADD COLUMN worker TEXT;
+    CREATE TABLE servers (
+        id TEXT PRIMARY KEY,
+        url TEXT NOT NULL,
+        started_at TEXT NOT NULL,
+        heartbeat_at REAL NOT NULL
+    );
+    CREATE TABLE robot_leases (
+        name TEXT PRIMARY KEY,
+        server_id TEXT NOT NULL,
+        expires_at REAL NOT NULL,
+        taken_at TEXT NOT NULL
+    );
+    """,
 ]
 
 SCHEMA_VERSION = len(MIGRATIONS)

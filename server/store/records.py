@@ -74,6 +74,11 @@ class PlanRecord:
     program: list[dict[str, Any]] | None = None
     #: In a summary listing (no program loaded): how many commands it has.
     program_length_hint: int | None = None
+    #: Times a planning job started on this plan (a second start is a re-run
+    #: after a worker died), whether a cancel was asked, and where it ran.
+    attempts: int = 0
+    cancel_requested: int = 0
+    worker: str | None = None
     _loader: Any = field(default=None, repr=False, compare=False)
 
     @classmethod
