@@ -57,3 +57,54 @@ def test_dockerfile_installs_like_the_readme() -> None:
     assert "make serve" in readme
     assert re.search(r"^USER 10001", dockerfile, re.M), "image must not run as root"
     assert "/api/v1/health" in dockerfile
+
+
+def test_scaled_profile_validates() -> None:
+    """The scaled set-up (issue #17 §4): PostgreSQL, a Dask scheduler and two workers,
+    two API servers on one shared volume behind a reverse proxy."""
+    import yaml
+
+    r = subprocess.run(
+        [
+            _tool("docker-compose"),
+            "-f",
+            str(ROOT / "docker" / "compose.yml"),
+            "--profile",
+            "scaled",
+            "config",
+        ],
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
+    assert r.returncode == 0, r.stderr
+    services = yaml.safe_load(r.stdout)["services"]
+    scaled = {name for name, s in services.items() if "scaled" in s.get("profiles", [])}
+    assert scaled == {
+        "postgres",
+        "dask-scheduler",
+        "dask-worker-1",
+        "dask-worker-2",
+        "api-1",
+        "api-2",
+        "proxy",
+    }
+    assert "profiles" not in services["steelpath"], "the lab default must start without a profile"
+    apis = [services["api-1"], services["api-2"]]
+    for api in apis:
+        env = api["environment"]
+        assert env["STEELPATH_DATABASE_URL"].startswith("postgresql://")
+        assert env["STEELPATH_DASK_SCHEDULER"] == "tcp://dask-scheduler:8786"
+        assert api["volumes"][0].startswith("steelpath-shared:/data")
+    # exactly one server runs the embedded emulators; each advertises its own URL
+    assert sorted(a["environment"]["STEELPATH_EMULATORS"] for a in apis) == ["false", "true"]
+    assert len({a["environment"]["STEELPATH_SERVER_URL"] for a in apis}) == 2
+    for worker in ("dask-worker-1", "dask-worker-2"):
+        w = services[worker]
+        assert "tcp://dask-scheduler:8786" in w["command"]
+        assert w["environment"]["STEELPATH_DATABASE_URL"] == apis[0]["environment"][
+            "STEELPATH_DATABASE_URL"
+        ]
+    caddyfile = (ROOT / "docker" / "Caddyfile").read_text()
+    assert "api-1:8000" in caddyfile and "api-2:8000" in caddyfile
+    assert services["proxy"]["ports"]
