@@ -27,8 +27,9 @@ the service's :class:`~server.events.EventBus`:
   (``foxglove.PosesInFrame``) and ``/plan/cloud`` (``foxglove.PointCloud``,
   thinned to ≤ 200 000 points): once, when an execution starts, from the
   stored plan (:func:`~server.recording.channels.planned_path`,
-  :func:`~server.recording.channels.plan_cloud`).  A client that connects
-  later sees them at the next run's start.
+  :func:`~server.recording.channels.plan_cloud`).  They are *latched*: a
+  client that subscribes to one of them while a run goes on (a late joiner,
+  or one that reconnected) gets the running plan's messages again then.
 
 Log times are the Unix nanoseconds at which the service published the event.
 The bus listener (:meth:`FoxgloveLive.on_event`) only queues the event; a
@@ -45,7 +46,7 @@ import queue
 import threading
 import time
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, cast
 
 if TYPE_CHECKING:
     import foxglove
@@ -93,6 +94,10 @@ class FoxgloveLive:
         self._channels: dict[str, foxglove.Channel] = {}
         self._thread: threading.Thread | None = None
         self._stopped = False
+        #: topic → the messages of the last run's plan, sent again to a late subscriber
+        self._latched: dict[str, list[dict[str, Any]]] = {}
+        self._latched_run: str | None = None
+        self.resent = 0
 
     # ------------------------------------------------------------ lifecycle
     def start(self) -> FoxgloveLive:
@@ -115,7 +120,12 @@ class FoxgloveLive:
             )
         try:
             self._server = foxglove.start_server(
-                name="SteelPath", host=HOST, port=self.requested_port, context=ctx
+                name="SteelPath",
+                host=HOST,
+                port=self.requested_port,
+                context=ctx,
+                # a Protocol the SDK calls by method name; only on_subscribe is needed
+                server_listener=cast("foxglove.ServerListener", _LateJoiners(self)),
             )
         except Exception as exc:
             raise RuntimeError(
@@ -163,6 +173,16 @@ class FoxgloveLive:
         except queue.Full:
             self.dropped += 1
 
+    def subscribed(self, topic: str) -> None:
+        """A client subscribed to ``topic`` (on the SDK's thread): queue a re-send
+        of the running plan's latched messages, if it has any."""
+        if self._stopped or topic not in LATCHED:
+            return
+        try:
+            self._q.put_nowait((time.time_ns(), "resend", {"topic": topic}))
+        except queue.Full:
+            self.dropped += 1
+
     def _loop(self) -> None:
         while True:
             item = self._q.get()
@@ -170,7 +190,9 @@ class FoxgloveLive:
                 return
             ns, type_, data = item
             try:
-                if type_ == "robot":
+                if type_ == "resend":
+                    self._resend(ns, str(data["topic"]))
+                elif type_ == "robot":
                     self._report(ns, str(data["name"]), data["report"])
                 elif type_ == "execution":
                     self._execution(ns, data)
@@ -220,6 +242,8 @@ class FoxgloveLive:
             self._runs.pop(eid, None)
             if self._by_robot.get(run.robot) == eid:
                 del self._by_robot[run.robot]
+            if self._latched_run == eid:  # nothing runs that plan any more
+                self._latched, self._latched_run = {}, None
 
     def _start_run(self, ns: int, eid: str) -> _Run:
         from server.recording.channels import plan_cloud, planned_path
@@ -231,15 +255,25 @@ class FoxgloveLive:
         run = _Run(eid, plan.id, ex.robot, program, frames=self._robot_frames(ex.robot))
         self._runs[eid] = run
         self._by_robot[ex.robot] = eid
-        for msg in program_msgs(program):
-            self._log("/plan/program", ns, msg)
+        latched: dict[str, list[dict[str, Any]]] = {"/plan/program": program_msgs(program)}
         path, _ = planned_path(plan)
         if path is not None:
-            self._log("/plan/path", ns, path_msg(ns, path))
+            latched["/plan/path"] = [path_msg(ns, path)]
         cloud = plan_cloud(self.store, plan)
         if cloud.points is not None:
-            self._log("/plan/cloud", ns, cloud_msg(ns, cloud.points))
+            latched["/plan/cloud"] = [cloud_msg(ns, cloud.points)]
+        self._latched, self._latched_run = latched, eid
+        for topic, msgs in latched.items():
+            for msg in msgs:
+                self._log(topic, ns, msg)
         return run
+
+    def _resend(self, ns: int, topic: str) -> None:
+        # The SDK logs to every subscriber of the channel, so earlier ones get
+        # the same messages again: harmless for a plan that has not changed.
+        for msg in self._latched.get(topic, []):
+            self._log(topic, ns, msg)
+            self.resent += 1
 
     def _report(self, ns: int, robot: str, report: dict[str, Any]) -> None:
         from server.recording.messages import state_msg, tf_msg, tool_pose_msg
@@ -266,3 +300,18 @@ class FoxgloveLive:
         if data.get("reason"):
             words += f": {data['reason']}"
         self._log("/operator", ns, log_msg(ns, WARNING, words, "estop"))
+
+
+#: Topics whose last run's messages a late subscriber gets again.
+LATCHED = frozenset({"/plan/program", "/plan/path", "/plan/cloud"})
+
+
+class _LateJoiners:
+    """The SDK's server listener: tells :class:`FoxgloveLive` of each subscription."""
+
+    def __init__(self, live: FoxgloveLive) -> None:
+        self._live = live
+
+    def on_subscribe(self, client: Any, channel: Any) -> None:
+        self._live.subscribed(str(channel.topic))
+

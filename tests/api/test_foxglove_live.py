@@ -199,3 +199,43 @@ def test_a_run_is_published_live_through_the_proxy(fapi) -> None:
     assert len(got["/robot/tool_pose"]) == len(states)
     now = time.time_ns()
     assert all(now - 300e9 < ts <= now for ts, _ in states)
+
+
+def test_a_late_subscriber_gets_the_running_plan(fapi) -> None:
+    """/plan/program, /plan/path are latched: a client that subscribes while a run
+    is under way (here: paused) gets the running plan's messages then."""
+    assert fapi.services.dispatch.wait_connected("ara", 20)
+    plan = approved_demo(fapi)  # the whole route: long enough to pause in
+    r = fapi.post(f"/api/v1/plans/{plan['id']}/dispatch", json={"robot": "ara"})
+    assert r.status_code in (200, 201, 202), r.text
+    eid = r.json()["id"]
+    wait_execution(fapi, eid, ("running",), timeout=30)
+    r = fapi.post(f"/api/v1/executions/{eid}/pause")
+    assert r.status_code == 200, r.text
+    ex = wait_execution(fapi, eid, ("paused",), timeout=30)
+    live = fapi.services.foxglove
+    token = fapi.tokens["viewer"]
+    with fapi.client.websocket_connect(f"/foxglove?token={token}", subprotocols=[PROTO]) as ws:
+        fc = FoxgloveClient(ws)
+        fc.advertised(set(CHANNELS))
+        subs = fc.subscribe_all()
+        got: dict[str, list[dict[str, Any]]] = {}
+        deadline = time.monotonic() + 20
+        while time.monotonic() < deadline and (
+            len(got.get("/plan/program", [])) < ex["total"] or "/plan/path" not in got
+        ):
+            try:
+                m = fc.next(0.5)
+            except queue.Empty:
+                continue
+            assert m is not None, "the proxy closed the connection"
+            if isinstance(m, bytes) and m[0] == 0x01:
+                sid = struct.unpack_from("<I", m, 1)[0]
+                got.setdefault(subs[sid], []).append(json.loads(m[13:]))
+    assert [msg["index"] for msg in got["/plan/program"]] == list(range(ex["total"]))
+    assert len(got["/plan/path"]) == 1 and got["/plan/path"][0]["frame_id"] == "world"
+    assert live.resent >= ex["total"] + 1
+    r = fapi.post(f"/api/v1/executions/{eid}/abort")
+    assert r.status_code == 200, r.text
+    wait_execution(fapi, eid, ("aborted",), timeout=30)
+    assert live._latched == {}, "a finished run leaves nothing latched"
