@@ -88,7 +88,7 @@ def cmd_token(args: argparse.Namespace) -> int:
     from server.store import NotFoundError, Store
 
     settings = _settings_from(args)
-    store = Store(settings.data)
+    store = Store(settings.data, database_url=settings.database_url)
     try:
         if args.token_cmd == "create":
             name = args.name or f"{args.role} token"

@@ -42,12 +42,20 @@ class EventBus:
         with self._lock:
             self._listeners.append(fn)
 
-    def publish(self, type_: str, data: dict[str, Any]) -> Event:
+    def publish(self, type_: str, data: dict[str, Any], *, remote: bool = False) -> Event:
+        """Deliver to the subscribers (and history) and call the listeners.
+
+        ``remote``: the event was published on another server sharing the
+        PostgreSQL store and relayed here (:mod:`server.events_pg`): it reaches
+        this server's history and subscribers (the SSE streams) but not its
+        listeners, whose effects (webhook deliveries, maintenance outcomes,
+        the relay itself) happen once, on the server that published it.
+        """
         with self._lock:
             ev = Event(next(self._ids), type_, data)
             self._history.append(ev)
             subs = list(self._subs)
-            listeners = list(self._listeners)
+            listeners = [] if remote else list(self._listeners)
         for fn in listeners:
             try:
                 fn(type_, data)

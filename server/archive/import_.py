@@ -43,7 +43,6 @@ import json
 import os
 import secrets
 import shutil
-import sqlite3
 import zipfile
 import zlib
 from dataclasses import dataclass, field
@@ -65,7 +64,7 @@ from server.archive.manifest import (
 from server.lifecycle import ExecutionState, PlanState
 from server.store import Store
 from server.store.archive import ArchiveStore, IdConflictError, UnknownColumnsError
-from server.store.database import ensure_private_dir, utcnow
+from server.store.database import IntegrityError, ensure_private_dir, utcnow
 
 #: Execution states imported as ``interrupted``: the run was still going on
 #: the exporting server, and how it ended is not known here.
@@ -523,7 +522,7 @@ def import_archive(
                 409,
                 f"{exc.table} {', '.join(exc.ids)} already exist here; an import never overwrites",
             ) from None
-        except (UnknownColumnsError, sqlite3.IntegrityError) as exc:
+        except (UnknownColumnsError, IntegrityError) as exc:
             raise _bad(f"the archive's rows do not fit this server's database: {exc}") from None
         finally:
             shutil.rmtree(tmp, ignore_errors=True)

@@ -1,4 +1,4 @@
-"""Persistent state: SQLite rows + ``.npy`` arrays under the data directory."""
+"""Persistent state: rows in SQLite (or PostgreSQL) + ``.npy`` arrays under the data directory."""
 
 from server.store.records import AuditEvent, CloudRecord, ExecutionRecord, PlanRecord, TokenRecord
 from server.store.store import NotFoundError, Store, new_id

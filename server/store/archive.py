@@ -1,4 +1,4 @@
-"""Whole rows in and out of SQLite for a plan's export and import (issue #16 §4).
+"""Whole rows in and out of the store's database for a plan's export and import (issue #16 §4).
 
 Rows are read with ``SELECT *`` and written back by column name, so a column
 added to ``findings`` (or any table listed in :data:`TABLES`) by a later
@@ -10,11 +10,10 @@ carries a non-null value for a column this server's schema lacks is refused
 
 from __future__ import annotations
 
-import sqlite3
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from typing import Any
 
-from server.store.database import Database
+from server.store.database import StoreDatabase
 
 #: Tables whose rows an archive carries, with the column that keys each lookup.
 TABLES: dict[str, tuple[str, ...]] = {
@@ -51,14 +50,14 @@ def _check(table: str, column: str) -> None:
 class ArchiveStore:
     """Generic row reads and the all-or-nothing write of an import."""
 
-    def __init__(self, db: Database) -> None:
+    def __init__(self, db: StoreDatabase) -> None:
         self.db = db
 
     def columns(self, table: str) -> list[str]:
         """The table's columns in this server's schema."""
         if table not in TABLES:
             raise ValueError(f"table {table!r} is not archived")
-        return [str(r["name"]) for r in self.db.query(f"PRAGMA table_info({table})")]
+        return self.db.columns(table)
 
     def rows(self, table: str, column: str, values: Iterable[str]) -> list[dict[str, Any]]:
         """Every row of ``table`` whose ``column`` is one of ``values``, as dicts
@@ -109,7 +108,7 @@ class ArchiveStore:
                 before_commit()
 
     @staticmethod
-    def _existing(conn: sqlite3.Connection, table: str, ids: Sequence[str]) -> list[str]:
+    def _existing(conn: Any, table: str, ids: Sequence[str]) -> list[str]:
         _check(table, "id")
         if not ids:
             return []
@@ -118,9 +117,7 @@ class ArchiveStore:
         return sorted(str(r[0]) for r in found.fetchall())
 
     @staticmethod
-    def _insert(
-        conn: sqlite3.Connection, table: str, known: set[str], row: Mapping[str, Any]
-    ) -> None:
+    def _insert(conn: Any, table: str, known: set[str], row: Mapping[str, Any]) -> None:
         unknown = sorted(k for k, v in row.items() if k not in known and v is not None)
         if unknown:
             raise UnknownColumnsError(

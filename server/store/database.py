@@ -1,5 +1,11 @@
 """The SQLite connection: WAL mode, migrations, serialised transactions.
 
+This is the embedded default store; :func:`open_database` picks it, or the
+PostgreSQL one (:mod:`server.store.postgres`) when a ``postgresql://`` URL is
+configured.  Both offer the same interface (``transaction``, ``query``,
+``query_one``, ``columns``, ``close``, ``dialect``) and raise
+:class:`IntegrityError` for a violated constraint.
+
 The database holds token hashes and the audit trail, so it is private to the
 service's user: the data directory is 0700 and the database with its WAL and
 shared-memory files 0600, enforced on every open (a directory or file left
@@ -15,10 +21,10 @@ import stat
 import threading
 import weakref
 from collections.abc import Iterator
-from contextlib import contextmanager
+from contextlib import AbstractContextManager, contextmanager
 from datetime import UTC, datetime
 from pathlib import Path
-from typing import Any
+from typing import Any, Literal, Protocol
 
 from server.store.migrations import migrate
 
@@ -26,6 +32,63 @@ log = logging.getLogger(__name__)
 
 DIR_MODE = 0o700
 FILE_MODE = 0o600
+
+
+class IntegrityError(sqlite3.IntegrityError):
+    """A unique, foreign-key or not-null constraint was violated, on either backend.
+
+    A subclass of :class:`sqlite3.IntegrityError` so code written against the
+    SQLite store keeps catching it; the PostgreSQL store raises it too.
+    """
+
+
+class RowLike(Protocol):
+    """A result row of either backend (:class:`sqlite3.Row` or
+    :class:`server.store.postgres.Row`): by column name or index, or ``dict(row)``."""
+
+    def keys(self) -> list[str]: ...
+
+    def __getitem__(self, key: str | int, /) -> Any: ...
+
+
+class StoreDatabase(Protocol):
+    """What the stores need of a database; SQLite's :class:`Database` and
+    :class:`~server.store.postgres.PostgresDatabase` both provide it.
+
+    SQL is written with ``?`` placeholders in the dialect both accept; where
+    they differ, code branches on ``dialect``.  Rows are read by column name
+    or index, or turned into a dict.
+    """
+
+    @property
+    def dialect(self) -> Literal["sqlite", "postgresql"]: ...
+
+    def transaction(self) -> AbstractContextManager[Any]: ...
+
+    def query(self, sql: str, args: tuple[Any, ...] | list[Any] = ()) -> list[Any]: ...
+
+    def query_one(self, sql: str, args: tuple[Any, ...] | list[Any] = ()) -> Any: ...
+
+    def columns(self, table: str) -> list[str]: ...
+
+    def close(self) -> None: ...
+
+
+def open_database(
+    data_dir: Path, database_url: str | None = None, *, migrate_to: int | None = None
+) -> StoreDatabase:
+    """The store's database: PostgreSQL for a ``postgresql://`` URL, else SQLite
+    under ``data_dir`` (psycopg is only imported when PostgreSQL is asked for)."""
+    if database_url:
+        if not database_url.startswith(("postgresql://", "postgres://")):
+            raise ValueError(
+                f"database_url {database_url.split('@')[-1]!r} is not a postgresql:// URL "
+                "(unset it to keep SQLite under the data directory)"
+            )
+        from server.store.postgres import PostgresDatabase
+
+        return PostgresDatabase(database_url, migrate_to=migrate_to)
+    return Database(Path(data_dir) / "steelpath.sqlite3", migrate_to=migrate_to)
 
 
 def utcnow() -> str:
@@ -74,6 +137,8 @@ class Database:
     take seconds on a busy server.  A thread inside a transaction reads
     through the writer, so it sees its own uncommitted rows.
     """
+
+    dialect: Literal["sqlite", "postgresql"] = "sqlite"
 
     def __init__(self, path: Path, *, migrate_to: int | None = None) -> None:
         self.path = Path(path)
@@ -146,6 +211,11 @@ class Database:
             self._writer_thread = threading.get_ident()
             try:
                 yield self._conn
+            except sqlite3.IntegrityError as exc:
+                self._conn.execute("ROLLBACK")
+                if isinstance(exc, IntegrityError):
+                    raise
+                raise IntegrityError(*exc.args) from exc
             except BaseException:
                 self._conn.execute("ROLLBACK")
                 raise
@@ -159,7 +229,12 @@ class Database:
         if reader is not None:
             return list(reader.execute(sql, args).fetchall())
         with self._lock:
-            return list(self._conn.execute(sql, args).fetchall())
+            try:
+                return list(self._conn.execute(sql, args).fetchall())
+            except sqlite3.IntegrityError as exc:
+                if isinstance(exc, IntegrityError):
+                    raise
+                raise IntegrityError(*exc.args) from exc
 
     def query_one(self, sql: str, args: tuple[Any, ...] | list[Any] = ()) -> sqlite3.Row | None:
         reader = self._reader() if _is_read(sql) else None
@@ -168,6 +243,10 @@ class Database:
             return row
         with self._lock:
             return self._conn.execute(sql, args).fetchone()
+
+    def columns(self, table: str) -> list[str]:
+        """``table``'s column names in schema order."""
+        return [str(r["name"]) for r in self.query(f"PRAGMA table_info({table})")]
 
     def close(self) -> None:
         with self._readers_lock:

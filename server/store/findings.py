@@ -1,4 +1,4 @@
-"""Findings on the structure and their photos (issue #16 §1), in the service's SQLite.
+"""Findings on the structure and their photos (issue #16 §1), in the service's database (SQLite or PostgreSQL).
 
 A finding says where (an inspection plan and, in its structure model, a
 member and face — ``ara.inspect`` — or a cluster — ``ara.navigate`` — plus
@@ -13,12 +13,11 @@ from __future__ import annotations
 
 import json
 import secrets
-import sqlite3
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from server.store.database import Database, ensure_private_dir, utcnow
+from server.store.database import RowLike, StoreDatabase, ensure_private_dir, utcnow
 from server.store.store import NotFoundError
 
 FINDING_TYPES: tuple[str, ...] = (
@@ -78,7 +77,7 @@ class Finding:
     photos: tuple[Photo, ...] = ()
 
     @classmethod
-    def from_row(cls, r: sqlite3.Row, photos: tuple[Photo, ...] = ()) -> Finding:
+    def from_row(cls, r: RowLike, photos: tuple[Photo, ...] = ()) -> Finding:
         d = dict(r)
         for k in ("point_m", "region_m"):
             d[k] = json.loads(d[k]) if d[k] is not None else None
@@ -99,11 +98,11 @@ EDITABLE = ("type", "condition_state", "notes", "point_m", "region_m", "face_id"
 class FindingStore:
     """Findings over the service's :class:`Database`; photos under ``photo_dir``."""
 
-    def __init__(self, db: Database, photo_dir: Path) -> None:
+    def __init__(self, db: StoreDatabase, photo_dir: Path) -> None:
         self.db = db
         self.photo_dir = photo_dir
 
-    def _audit(self, conn: sqlite3.Connection, actor: str, fid: str, action: str, why: str) -> None:
+    def _audit(self, conn: Any, actor: str, fid: str, action: str, why: str) -> None:
         conn.execute(
             "INSERT INTO audit_events (ts, actor, entity, entity_id, action, reason) "
             "VALUES (?,?,?,?,?,?)",
@@ -234,7 +233,8 @@ class FindingStore:
         tmp.replace(path)
         with self.db.transaction() as conn:
             conn.execute(
-                "INSERT INTO finding_photos VALUES (?,?,?,?,?,?,?)",
+                "INSERT INTO finding_photos (id, finding_id, filename, content_type, size, "
+                "created_by, created_at) VALUES (?,?,?,?,?,?,?)",
                 (pid, finding_id, filename, content_type, len(data), actor, utcnow()),
             )
             self._audit(conn, actor, finding_id, "photo", f"{filename} ({len(data)} bytes)")

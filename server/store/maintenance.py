@@ -12,11 +12,10 @@ edit answers (``reviewed_at``).
 
 from __future__ import annotations
 
-import sqlite3
 from dataclasses import dataclass
 from typing import Any
 
-from server.store.database import Database, utcnow
+from server.store.database import RowLike, StoreDatabase, utcnow
 
 
 @dataclass(frozen=True)
@@ -35,7 +34,7 @@ class MaintenanceLink:
     reviewed_at: str | None
 
     @classmethod
-    def from_row(cls, r: sqlite3.Row) -> MaintenanceLink:
+    def from_row(cls, r: RowLike) -> MaintenanceLink:
         return cls(**dict(r))
 
     @property
@@ -46,7 +45,7 @@ class MaintenanceLink:
 class MaintenanceStore:
     """The ``finding_plans`` table over the service's :class:`Database`."""
 
-    def __init__(self, db: Database) -> None:
+    def __init__(self, db: StoreDatabase) -> None:
         self.db = db
 
     def link(self, finding_id: str, plan_id: str, kind: str, actor: str) -> None:

@@ -3,13 +3,14 @@
 from __future__ import annotations
 
 import json
-import sqlite3
 import time
 from dataclasses import dataclass, field
 from datetime import datetime
 from typing import Any
 
 import numpy as np
+
+from server.store.database import RowLike
 
 
 def _loads(text: str | None, default: Any) -> Any:
@@ -30,7 +31,7 @@ class CloudRecord:
     survey: dict[str, Any] = field(default_factory=dict)
 
     @classmethod
-    def from_row(cls, row: sqlite3.Row) -> CloudRecord:
+    def from_row(cls, row: RowLike) -> CloudRecord:
         d = dict(row)
         d["bounds"] = json.loads(d["bounds"])
         d["survey"] = _loads(d.get("survey"), {})
@@ -82,7 +83,7 @@ class PlanRecord:
     _loader: Any = field(default=None, repr=False, compare=False)
 
     @classmethod
-    def from_row(cls, row: sqlite3.Row, loader: Any = None) -> PlanRecord:
+    def from_row(cls, row: RowLike, loader: Any = None) -> PlanRecord:
         return cls.from_mapping(dict(row), loader)
 
     @classmethod
@@ -96,7 +97,7 @@ class PlanRecord:
         return cls(**d, _loader=loader)
 
     @staticmethod
-    def summary_json(row: sqlite3.Row | dict[str, Any]) -> str:
+    def summary_json(row: RowLike | dict[str, Any]) -> str:
         """``public(include_result=False)`` of a summary row as JSON text, with
         ``params``, ``metrics`` and ``checks`` spliced in as stored (strict
         JSON written by the store): a listing decodes none of them."""
@@ -184,7 +185,7 @@ class ExecutionRecord:
     fault: str | None = None
 
     @classmethod
-    def from_row(cls, row: sqlite3.Row) -> ExecutionRecord:
+    def from_row(cls, row: RowLike) -> ExecutionRecord:
         return cls(**dict(row))
 
     def public(self) -> dict[str, Any]:
@@ -209,7 +210,7 @@ class AuditEvent:
     reason: str
 
     @classmethod
-    def from_row(cls, row: sqlite3.Row) -> AuditEvent:
+    def from_row(cls, row: RowLike) -> AuditEvent:
         return cls(**dict(row))
 
     def public(self) -> dict[str, Any]:
@@ -229,7 +230,7 @@ class TokenRecord:
     expires_at: str | None = None
 
     @classmethod
-    def from_row(cls, row: sqlite3.Row) -> TokenRecord:
+    def from_row(cls, row: RowLike) -> TokenRecord:
         return cls(**dict(row))
 
     @property

@@ -1,7 +1,10 @@
 """The service's persistent state: plans, clouds, executions, audit, tokens, robots.
 
-Rows live in SQLite (:class:`server.store.database.Database`), large arrays in
-``.npy`` files (:class:`server.store.arrays.ArrayStore`).  Arrays are written
+Rows live in SQLite (:class:`server.store.database.Database`) or, with a
+``postgresql://`` database URL, in PostgreSQL
+(:class:`server.store.postgres.PostgresDatabase`); large arrays in ``.npy``
+files under the data directory (:class:`server.store.arrays.ArrayStore`),
+which several servers sharing one PostgreSQL must therefore share too.  Arrays are written
 *before* the row that references them is committed, so a crash at any point
 leaves the previously committed state readable (an orphan file at worst).
 Every state change and its audit event commit in one transaction.
@@ -28,7 +31,7 @@ from server.lifecycle import (
     next_state,
 )
 from server.store.arrays import ArrayStore
-from server.store.database import Database, ensure_private_dir, utcnow
+from server.store.database import StoreDatabase, ensure_private_dir, open_database, utcnow
 from server.store.records import (
     AuditEvent,
     CloudRecord,
@@ -62,7 +65,51 @@ _PLAN_SUMMARY_COLUMNS = (
     "CASE WHEN program IS NULL THEN NULL ELSE json_array_length(program) END "
     "AS program_length_hint"
 )
+#: The same on PostgreSQL, whose ``json_array_length`` takes ``json``, not text.
+_PLAN_SUMMARY_COLUMNS_PG = _PLAN_SUMMARY_COLUMNS.replace(
+    "json_array_length(program)", "json_array_length(program::json)"
+)
 
+#: One command of a plan's program as JSON text, picked in SQL, per dialect.
+_PLAN_COMMAND = {
+    "sqlite": "SELECT json_extract(program, '$[' || ? || ']') AS cmd FROM plans WHERE id = ?",
+    "postgresql": "SELECT (program::json -> ?::int)::text AS cmd FROM plans WHERE id = ?",
+}
+
+
+def _checks_verdict(checks: list[dict[str, Any]]) -> tuple[str, str]:
+    """A finished plan's action (``finish``, or ``reject`` if a check failed) and its reason."""
+    failed = [c for c in checks if not c.get("passed")]
+    if failed:
+        return "reject", "checks failed: " + "; ".join(
+            f"{c['name']}: {c.get('message', '')}" for c in failed
+        )
+    return "finish", f"{len(checks)} checks passed"
+
+
+def worker_name(run: str | None) -> str:
+    """The worker part of a plan's ``worker`` column (``name@address#run``): ``name``."""
+    if not run:
+        return "?"
+    return run.rsplit("#", 1)[0].split("@", 1)[0]
+
+
+def worker_address(run: str | None) -> str | None:
+    """The Dask address in a plan's ``worker`` column (``name@address#run``)."""
+    if not run or "@" not in run:
+        return None
+    return run.rsplit("#", 1)[0].split("@", 1)[1]
+
+
+#: Portable SQL (SQLite ≥ 3.24 and PostgreSQL): a repeated ack changes nothing,
+#: and ``acked`` only grows (SQLite's two-argument ``MAX`` is ``GREATEST`` there).
+_INSERT_ACK = (
+    "INSERT INTO execution_acks (execution_id, idx, ts) VALUES (?,?,?) ON CONFLICT DO NOTHING"
+)
+_RAISE_ACKED = (
+    "UPDATE executions SET acked = CASE WHEN acked < ? THEN ? ELSE acked END, updated_at = ? "
+    "WHERE id = ?"
+)
 
 _INSERT_CLOUD = (
     "INSERT INTO clouds (id, name, source, n_points, bounds, dropped, array_file, created_at,"
@@ -71,12 +118,23 @@ _INSERT_CLOUD = (
 
 
 class Store:
-    """All persistent state under one data directory."""
+    """All persistent state: rows in SQLite under ``data_dir`` or, given a
+    ``postgresql://`` ``database_url``, in PostgreSQL; arrays under ``data_dir``
+    either way (a directory every server sharing the database must share)."""
 
-    def __init__(self, data_dir: Path, *, migrate_to: int | None = None) -> None:
+    def __init__(
+        self,
+        data_dir: Path,
+        *,
+        database_url: str | None = None,
+        migrate_to: int | None = None,
+    ) -> None:
         self.data_dir = Path(data_dir)
         ensure_private_dir(self.data_dir)
-        self.db = Database(self.data_dir / "steelpath.sqlite3", migrate_to=migrate_to)
+        self.db: StoreDatabase = open_database(self.data_dir, database_url, migrate_to=migrate_to)
+        self._summary_columns = (
+            _PLAN_SUMMARY_COLUMNS_PG if self.db.dialect == "postgresql" else _PLAN_SUMMARY_COLUMNS
+        )
         # Bumped by every revocation in this process: long-lived connections
         # (event streams, scene sockets) poll it and re-check their token.
         self._token_epoch = 0
@@ -229,7 +287,7 @@ class Store:
         GIL for its whole length, which the robot-link service cannot afford."""
         cols = "*"
         if not (result and program):
-            cols = _PLAN_SUMMARY_COLUMNS
+            cols = self._summary_columns
             if result:
                 cols = cols.replace("NULL AS result", "result")
             if program:
@@ -248,7 +306,7 @@ class Store:
         /plans/{id}``.
         """
         row = self.db.query_one(
-            f"SELECT {_PLAN_SUMMARY_COLUMNS}, result AS result_json, program AS program_json "
+            f"SELECT {self._summary_columns}, result AS result_json, program AS program_json "
             "FROM plans WHERE id = ?",
             (plan_id,),
         )
@@ -265,10 +323,7 @@ class Store:
         if index < 0:
             self.get_plan_json(plan_id)  # NotFoundError for an unknown plan
             return None
-        row = self.db.query_one(
-            "SELECT json_extract(program, '$[' || ? || ']') AS cmd FROM plans WHERE id = ?",
-            (int(index), plan_id),
-        )
+        row = self.db.query_one(_PLAN_COMMAND[self.db.dialect], (int(index), plan_id))
         if row is None:
             raise NotFoundError(f"no plan with id {plan_id!r}")
         return None if row["cmd"] is None else json.loads(row["cmd"])
@@ -283,7 +338,7 @@ class Store:
         offset: int = 0,
     ) -> str:
         """``list_plans(summary=True)`` as the JSON text of its public form."""
-        sql, args = self._plans_query(_PLAN_SUMMARY_COLUMNS, kind, state, parent_id, limit, offset)
+        sql, args = self._plans_query(self._summary_columns, kind, state, parent_id, limit, offset)
         return "[" + ",".join(PlanRecord.summary_json(r) for r in self.db.query(sql, args)) + "]"
 
     def _plans_query(
@@ -318,7 +373,7 @@ class Store:
         """Plans, newest first.  ``summary`` leaves out ``result`` and ``program``
         (``program_length`` is kept): a listing then costs no JSON decoding of
         results, which can be megabytes per plan."""
-        cols = _PLAN_SUMMARY_COLUMNS if summary else "*"
+        cols = self._summary_columns if summary else "*"
         sql, args = self._plans_query(cols, kind, state, parent_id, limit, offset)
         return [PlanRecord.from_row(r, loader=self.arrays.load) for r in self.db.query(sql, args)]
 
@@ -377,13 +432,7 @@ class Store:
             name: self.arrays.save(f"plans/{plan_id}/{name}.npy", arr)
             for name, arr in arrays.items()
         }
-        failed = [c for c in checks if not c.get("passed")]
-        action = "reject" if failed else "finish"
-        reason = (
-            "checks failed: " + "; ".join(f"{c['name']}: {c.get('message', '')}" for c in failed)
-            if failed
-            else f"{len(checks)} checks passed"
-        )
+        action, reason = _checks_verdict(checks)
         extra = {"program": _json(program)} if program is not None else {}
         return self.transition_plan(
             plan_id,
@@ -424,6 +473,227 @@ class Store:
             f"SELECT * FROM plans WHERE state IN ({marks}) ORDER BY created_at", list(states)
         )
         return [PlanRecord.from_row(r, loader=self.arrays.load) for r in rows]
+
+    # ----------------------------------------- plan runs on a Dask cluster (#17 §2)
+    # A planning worker on another machine writes its plan's start, progress and
+    # end here itself; the server only reads them.  Each start of a plan on a
+    # worker is a *run*, named in ``worker`` as ``name@address#token`` (the token
+    # is new per start).  Every write of a run is a conditional UPDATE on
+    # ``state`` and ``worker``: a run that has been replaced (its worker died and
+    # the task was re-run elsewhere) or a plan already out of ``planning``
+    # changes nothing, so no plan is finished twice and no cancel is overwritten.
+    # Plain SQL with ``?`` placeholders only (the PostgreSQL store runs it too).
+
+    def start_plan_run(
+        self, plan_id: str, run: str, *, max_starts: int = 2
+    ) -> tuple[str, PlanRecord | None]:
+        """Record that ``run`` starts planning ``plan_id``; returns what to do.
+
+        ``("run", plan)``: plan it.  A plan still ``planning`` when a run starts
+        lost its previous run (Dask re-runs the task of a worker that died):
+        that start is a re-run, audited as ``rerun``; the start after
+        ``max_starts`` fails the plan instead.  ``("cancelled", …)``: a cancel
+        was asked before it started; ``("gone", …)``: it is no longer queued or
+        planning; ``("failed", …)``: too many starts; ``("raced", …)``: another
+        start changed it first.
+        """
+        now = utcnow()
+        with self.db.transaction() as conn:
+            plan = self.get_plan(plan_id)
+            if plan.state not in (PlanState.QUEUED, PlanState.PLANNING):
+                return "gone", plan
+            if plan.cancel_requested:
+                why = "cancelled before it started"
+                done = self._run_update(
+                    conn, plan_id, plan.state, plan.worker, "cancel", "operator", why, {}
+                )
+                return ("cancelled" if done else "raced"), None
+            starts = plan.attempts + 1
+            if plan.state == PlanState.QUEUED:
+                done = self._run_update(
+                    conn,
+                    plan_id,
+                    PlanState.QUEUED,
+                    plan.worker,
+                    "start",
+                    "planner",
+                    f"worker {worker_name(run)} picked it up",
+                    {"attempts": starts, "worker": run, "progress": 0.0, "stage": "start"},
+                )
+                return ("run" if done else "raced"), plan
+            lost = worker_name(plan.worker)
+            if starts > max_starts:
+                msg = (
+                    f"planning was started {starts} times: the worker running it died or was "
+                    f"restarted each time (last: {lost}); it is not re-run again"
+                )
+                done = self._run_update(
+                    conn,
+                    plan_id,
+                    PlanState.PLANNING,
+                    plan.worker,
+                    "fail",
+                    "planner",
+                    msg,
+                    {"attempts": starts, "worker": run, "error": msg},
+                )
+                return ("failed" if done else "raced"), None
+            why = f"re-run after worker {lost} died"
+            cur = conn.execute(
+                "UPDATE plans SET attempts = ?, worker = ?, progress = ?, stage = ?, "
+                "updated_at = ? WHERE id = ? AND state = ? AND attempts = ?",
+                (starts, run, 0.0, why, now, plan_id, PlanState.PLANNING, plan.attempts),
+            )
+            if cur.rowcount != 1:
+                return "raced", None
+            self._audit(
+                conn,
+                "planner",
+                "plan",
+                plan_id,
+                "rerun",
+                PlanState.PLANNING,
+                PlanState.PLANNING,
+                f"{why}; run {starts} of {max_starts} on {worker_name(run)}",
+            )
+        return "run", plan
+
+    def plan_run_status(self, plan_id: str, run: str) -> tuple[bool, bool]:
+        """``(cancel asked, still this run's)`` for a worker's progress call."""
+        row = self.db.query_one(
+            "SELECT state, cancel_requested, worker FROM plans WHERE id = ?", (plan_id,)
+        )
+        if row is None:
+            return True, False
+        mine = row["state"] == PlanState.PLANNING and row["worker"] == run
+        return bool(row["cancel_requested"]), mine
+
+    def set_run_progress(self, plan_id: str, run: str, progress: float, stage: str) -> bool:
+        """Store a run's progress; ``False`` when the plan is no longer this run's."""
+        with self.db.transaction() as conn:
+            cur = conn.execute(
+                "UPDATE plans SET progress = ?, stage = ?, updated_at = ? "
+                "WHERE id = ? AND state = ? AND worker = ?",
+                (float(progress), stage, utcnow(), plan_id, PlanState.PLANNING, run),
+            )
+            return bool(cur.rowcount == 1)
+
+    def end_plan_run(
+        self, plan_id: str, run: str, action: str, actor: str, reason: str, **fields: Any
+    ) -> bool:
+        """``action`` (``fail``, ``cancel``…) out of ``planning``, only if ``run`` still owns it."""
+        with self.db.transaction() as conn:
+            return self._run_update(
+                conn, plan_id, PlanState.PLANNING, run, action, actor, reason, fields
+            )
+
+    def finish_plan_run(
+        self,
+        plan_id: str,
+        run: str,
+        *,
+        result: dict[str, Any],
+        arrays: Mapping[str, np.ndarray],
+        checks: list[dict[str, Any]],
+        metrics: dict[str, float],
+        program: list[dict[str, Any]] | None = None,
+    ) -> bool:
+        """:meth:`store_plan_result` for a run: once, and only by the run that owns the plan.
+
+        Arrays go to files named after the run, so a run that lost the plan
+        (between its check here and its UPDATE) never overwrites the arrays of
+        the one that finished it; its files are removed again.
+        """
+        if not self.plan_run_status(plan_id, run)[1]:
+            return False  # not this run's any more: write no arrays at all
+        token = run.rsplit("#", 1)[-1]
+        refs = {
+            name: self.arrays.save(f"plans/{plan_id}/{name}.{token}.npy", arr)
+            for name, arr in arrays.items()
+        }
+        action, reason = _checks_verdict(checks)
+        fields: dict[str, Any] = {
+            "result": result,
+            "arrays": refs,
+            "checks": checks,
+            "metrics": metrics,
+            "progress": 1.0,
+            "stage": "done",
+        }
+        if program is not None:
+            fields["program"] = _json(program)
+        done = False
+        try:
+            done = self.end_plan_run(plan_id, run, action, "planner", reason, **fields)
+        finally:
+            if not done:
+                for ref in refs.values():
+                    self.arrays.delete(ref)
+        return done
+
+    def request_plan_cancel(self, plan_id: str) -> None:
+        """Ask the plan's run (wherever it is) to stop at its next progress call."""
+        with self.db.transaction() as conn:
+            conn.execute(
+                "UPDATE plans SET cancel_requested = 1 WHERE id = ? AND state IN (?, ?)",
+                (plan_id, PlanState.QUEUED, PlanState.PLANNING),
+            )
+
+    def cancel_queued_plan(self, plan_id: str, actor: str, reason: str) -> bool:
+        """Cancel a plan no run has started; ``False`` if one started first."""
+        with self.db.transaction() as conn:
+            row = conn.execute("SELECT worker FROM plans WHERE id = ?", (plan_id,)).fetchone()
+            if row is None:
+                return False
+            return self._run_update(
+                conn, plan_id, PlanState.QUEUED, row["worker"], "cancel", actor, reason, {}
+            )
+
+    def plan_run_rows(self, plan_ids: Iterable[str]) -> list[dict[str, Any]]:
+        """What the server's poller follows of plans in flight (one query)."""
+        ids = list(plan_ids)
+        if not ids:
+            return []
+        marks = ",".join("?" * len(ids))
+        rows = self.db.query(
+            "SELECT id, kind, state, progress, stage, error, updated_at, attempts, worker "
+            f"FROM plans WHERE id IN ({marks})",
+            ids,
+        )
+        return [dict(r) for r in rows]
+
+    def _run_update(
+        self,
+        conn: Any,
+        plan_id: str,
+        state: str,
+        run: str | None,
+        action: str,
+        actor: str,
+        reason: str,
+        fields: Mapping[str, Any],
+    ) -> bool:
+        """Apply ``action`` to a plan in ``state`` whose ``worker`` is ``run``, with its
+        audit event; ``False`` (nothing written) if the plan is not that any more."""
+        new = next_state(plan_id, state, action)
+        sets: dict[str, Any] = {"state": str(new), "updated_at": utcnow()}
+        for k, v in fields.items():
+            sets[k] = _json(v) if isinstance(v, dict | list) else v
+        cols = ", ".join(f"{k} = ?" for k in sets)
+        args: tuple[str, ...] = ()
+        where = "worker IS NULL"
+        if run is not None:
+            where, args = "worker = ?", (run,)
+        cur = conn.execute(
+            f"UPDATE plans SET {cols} WHERE id = ? AND state = ? AND {where}",
+            (*sets.values(), plan_id, state, *args),
+        )
+        if cur.rowcount != 1:
+            return False
+        self._audit(conn, actor, "plan", plan_id, action, state, str(new), reason)
+        return True
+
+    # ------------------------------------------------- end of Dask plan runs (#17 §2)
 
     # ------------------------------------------------------------- executions
     def create_execution(
@@ -519,14 +789,8 @@ class Store:
         returns, so the streamer may advance only after this call.
         """
         with self.db.transaction() as conn:
-            conn.execute(
-                "INSERT OR IGNORE INTO execution_acks VALUES (?,?,?)",
-                (execution_id, int(index), utcnow()),
-            )
-            conn.execute(
-                "UPDATE executions SET acked = MAX(acked, ?), updated_at = ? WHERE id = ?",
-                (int(index) + 1, utcnow(), execution_id),
-            )
+            conn.execute(_INSERT_ACK, (execution_id, int(index), utcnow()))
+            conn.execute(_RAISE_ACKED, (int(index) + 1, int(index) + 1, utcnow(), execution_id))
 
     def record_acks(self, execution_id: str, first: int, last: int) -> None:
         """Commands ``first`` … ``last`` finished: :meth:`record_ack` for each, in one
@@ -536,13 +800,9 @@ class Store:
         now = utcnow()
         with self.db.transaction() as conn:
             conn.executemany(
-                "INSERT OR IGNORE INTO execution_acks VALUES (?,?,?)",
-                [(execution_id, i, now) for i in range(int(first), int(last) + 1)],
+                _INSERT_ACK, [(execution_id, i, now) for i in range(int(first), int(last) + 1)]
             )
-            conn.execute(
-                "UPDATE executions SET acked = MAX(acked, ?), updated_at = ? WHERE id = ?",
-                (int(last) + 1, now, execution_id),
-            )
+            conn.execute(_RAISE_ACKED, (int(last) + 1, int(last) + 1, now, execution_id))
 
     def list_acks(self, execution_id: str) -> list[int]:
         rows = self.db.query(
@@ -554,7 +814,8 @@ class Store:
         """A state report of the robot running ``execution_id`` at Unix time ``t``."""
         with self.db.transaction() as conn:
             conn.execute(
-                "INSERT INTO execution_states VALUES (?,?,?)", (execution_id, t, _json(state))
+                "INSERT INTO execution_states (execution_id, t, state) VALUES (?,?,?)",
+                (execution_id, t, _json(state)),
             )
 
     def execution_states(self, execution_id: str) -> list[tuple[float, dict[str, Any]]]:
@@ -575,7 +836,8 @@ class Store:
     def save_robot_state(self, name: str, state: dict[str, Any]) -> None:
         with self.db.transaction() as conn:
             conn.execute(
-                "INSERT INTO robot_states VALUES (?,?,?) ON CONFLICT(name) DO UPDATE SET "
+                "INSERT INTO robot_states (name, state, updated_at) VALUES (?,?,?) "
+                "ON CONFLICT(name) DO UPDATE SET "
                 "state = excluded.state, updated_at = excluded.updated_at",
                 (name, _json(state), utcnow()),
             )
@@ -675,7 +937,8 @@ class Store:
     def set_robot_url(self, name: str, url: str, actor: str) -> None:
         with self.db.transaction() as conn:
             conn.execute(
-                "INSERT INTO robots VALUES (?,?,?,?) ON CONFLICT(name) DO UPDATE SET "
+                "INSERT INTO robots (name, url, updated_at, updated_by) VALUES (?,?,?,?) "
+                "ON CONFLICT(name) DO UPDATE SET "
                 "url = excluded.url, updated_at = excluded.updated_at, "
                 "updated_by = excluded.updated_by",
                 (name, url, utcnow(), actor),

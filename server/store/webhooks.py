@@ -1,4 +1,4 @@
-"""Webhook receivers and their deliveries (issue #16 §5), in the service's SQLite.
+"""Webhook receivers and their deliveries (issue #16 §5), in the service's database (SQLite or PostgreSQL).
 
 A webhook is an admin-registered URL with the events it wants and a secret
 (generated here, shown once) that signs every delivery.  A delivery is one
@@ -12,12 +12,11 @@ from __future__ import annotations
 
 import json
 import secrets
-import sqlite3
 from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
 
-from server.store.database import Database, utcnow
+from server.store.database import RowLike, StoreDatabase, utcnow
 from server.store.store import NotFoundError
 
 #: Events a webhook can ask for.
@@ -44,7 +43,7 @@ class Webhook:
     removed_by: str | None
 
     @classmethod
-    def from_row(cls, r: sqlite3.Row) -> Webhook:
+    def from_row(cls, r: RowLike) -> Webhook:
         return cls(
             r["id"],
             r["url"],
@@ -84,7 +83,7 @@ class Delivery:
     delivered_at: str | None
 
     @classmethod
-    def from_row(cls, r: sqlite3.Row) -> Delivery:
+    def from_row(cls, r: RowLike) -> Delivery:
         return cls(
             r["id"],
             r["webhook_id"],
@@ -117,7 +116,7 @@ class Delivery:
 class WebhookStore:
     """Webhooks and deliveries over the service's :class:`Database`."""
 
-    def __init__(self, db: Database) -> None:
+    def __init__(self, db: StoreDatabase) -> None:
         self.db = db
 
     # ---------------------------------------------------------------- webhooks

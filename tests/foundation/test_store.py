@@ -1,9 +1,16 @@
-"""SQLite + npy storage: WAL, migrations, atomic writes, restart persistence."""
+"""The store on SQLite and PostgreSQL: migrations, atomic writes, restart persistence.
+
+The tests taking ``open_store`` run once per backend (``[sqlite]`` and
+``[postgresql]``); the PostgreSQL server is a real one started for the session
+(:mod:`tests.support.postgres`), each test on a database of its own.
+"""
 
 from __future__ import annotations
 
 import sqlite3
+from collections.abc import Callable, Iterator
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -11,6 +18,30 @@ import pytest
 from server.lifecycle import IllegalTransitionError
 from server.store import NotFoundError, Store
 from server.store.migrations import SCHEMA_VERSION, SchemaTooNewError
+from tests.support.postgres import pg_url, postgres_server  # noqa: F401
+
+#: ``open_store(data_dir=tmp_path, **kw)`` → a :class:`Store` on this test's backend
+#: (the same database on every call, as a restarted server finds it).
+OpenStore = Callable[..., Store]
+
+
+#: A PostgreSQL server is a server: its tests are ``integration`` (tests/conftest.py).
+POSTGRES = pytest.param("postgresql", marks=pytest.mark.integration)
+
+
+@pytest.fixture(params=["sqlite", POSTGRES])
+def open_store(request: pytest.FixtureRequest, tmp_path: Path) -> Iterator[OpenStore]:
+    url = request.getfixturevalue("pg_url") if request.param == "postgresql" else None
+    opened: list[Store] = []
+
+    def factory(data_dir: Path | None = None, **kw: Any) -> Store:
+        store = Store(data_dir or tmp_path, database_url=url, **kw)
+        opened.append(store)
+        return store
+
+    yield factory
+    for store in opened:
+        store.close()
 
 
 def _planned(store: Store) -> str:
@@ -60,8 +91,8 @@ def test_newer_schema_is_refused(tmp_path: Path) -> None:
         Store(tmp_path)
 
 
-def test_restart_finds_everything(tmp_path: Path) -> None:
-    store = Store(tmp_path)
+def test_restart_finds_everything(open_store: OpenStore, tmp_path: Path) -> None:
+    store = open_store()
     cloud = store.add_cloud(
         "scan", "upload:scan.ply", np.random.default_rng(0).random((50, 3)), 2, "bob"
     )
@@ -72,7 +103,7 @@ def test_restart_finds_everything(tmp_path: Path) -> None:
     audit_before = [(e.id, e.action) for e in store.list_audit()]
     store.close()
 
-    again = Store(tmp_path)
+    again = open_store()
     assert again.get_cloud(cloud.id).n_points == 50
     assert np.array_equal(again.cloud_points(cloud.id), store.arrays.load(cloud.array_file))
     plan = again.get_plan(pid)
@@ -84,9 +115,9 @@ def test_restart_finds_everything(tmp_path: Path) -> None:
 
 
 def test_crash_mid_array_write_keeps_previous_state(
-    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+    open_store: OpenStore, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    store = Store(tmp_path)
+    store = open_store()
     pts = np.ones((10, 3))
     cloud = store.add_cloud("a", "upload", pts, 0, "x")
 
@@ -109,8 +140,8 @@ def test_crash_mid_array_write_keeps_previous_state(
     store.close()
 
 
-def test_failed_transaction_rolls_back(tmp_path: Path) -> None:
-    store = Store(tmp_path)
+def test_failed_transaction_rolls_back(open_store: OpenStore, tmp_path: Path) -> None:
+    store = open_store()
     p = store.create_plan("demo.route", {}, "x")
     n_audit = len(store.list_audit())
     with pytest.raises(IllegalTransitionError):
@@ -125,8 +156,8 @@ def test_failed_transaction_rolls_back(tmp_path: Path) -> None:
     store.close()
 
 
-def test_rejected_when_a_check_fails(tmp_path: Path) -> None:
-    store = Store(tmp_path)
+def test_rejected_when_a_check_fails(open_store: OpenStore, tmp_path: Path) -> None:
+    store = open_store()
     p = store.create_plan("demo.route", {}, "x")
     store.transition_plan(p.id, "start", "x")
     rec = store.store_plan_result(
@@ -140,8 +171,8 @@ def test_rejected_when_a_check_fails(tmp_path: Path) -> None:
     assert "clearance" in store.list_audit("plan", p.id)[0].reason
 
 
-def test_not_found_and_delete_rules(tmp_path: Path) -> None:
-    store = Store(tmp_path)
+def test_not_found_and_delete_rules(open_store: OpenStore, tmp_path: Path) -> None:
+    store = open_store()
     with pytest.raises(NotFoundError, match="no plan"):
         store.get_plan("pl_nope")
     pid = _planned(store)
@@ -157,10 +188,12 @@ def test_not_found_and_delete_rules(tmp_path: Path) -> None:
     assert store.list_audit("plan", pid)[0].action == "delete"
 
 
-def test_newest_execution_of_agrees_with_a_scan_of_every_record(tmp_path: Path) -> None:
+def test_newest_execution_of_agrees_with_a_scan_of_every_record(
+    open_store: OpenStore, tmp_path: Path
+) -> None:
     import random
 
-    store = Store(tmp_path / "var")
+    store = open_store(tmp_path / "var")
     plan = store.create_plan("demo.route", {}, "t")
     rng = random.Random(7)
     states = ["pending", "running", "paused", "interrupted", "completed", "aborted", "faulted"]
@@ -191,12 +224,12 @@ def test_newest_execution_of_agrees_with_a_scan_of_every_record(tmp_path: Path) 
     store.close()
 
 
-def test_json_reads_agree_with_decoding_every_row(tmp_path: Path) -> None:
+def test_json_reads_agree_with_decoding_every_row(open_store: OpenStore, tmp_path: Path) -> None:
     """The undecoded JSON paths (listing, plan detail, one program command)
     give exactly what decoding the rows and building ``public()`` gives."""
     import json
 
-    store = Store(tmp_path)
+    store = open_store()
     store.create_plan("demo.route", {"start": "a0"}, "bob")  # queued: no result yet
     done = _planned(store)
     p = store.create_plan("blast", {"surface": {"w": 1.5}}, "alice")
@@ -231,8 +264,10 @@ def test_json_reads_agree_with_decoding_every_row(tmp_path: Path) -> None:
         store.get_plan_json("pl_missing")
 
 
-def test_get_plan_can_leave_result_and_program_unread(tmp_path: Path) -> None:
-    store = Store(tmp_path)
+def test_get_plan_can_leave_result_and_program_unread(
+    open_store: OpenStore, tmp_path: Path
+) -> None:
+    store = open_store()
     pid = _planned(store)
     program = [{"op": "stop"}]
     with store.db.transaction() as conn:
@@ -247,15 +282,17 @@ def test_get_plan_can_leave_result_and_program_unread(tmp_path: Path) -> None:
     assert store.get_plan(pid, program=False).result == full.result
 
 
-def test_record_acks_is_record_ack_for_a_range_and_survives_a_restart(tmp_path: Path) -> None:
-    store = Store(tmp_path)
+def test_record_acks_is_record_ack_for_a_range_and_survives_a_restart(
+    open_store: OpenStore, tmp_path: Path
+) -> None:
+    store = open_store()
     pid = _planned(store)
     store.transition_plan(pid, "approve", "carol", approved_by="carol")
     one = store.create_execution(pid, "ara", 10, "carol")
     for i in range(0, 6):
         store.record_ack(one.id, i)
     store.close()
-    store = Store(tmp_path)
+    store = open_store()
     pid2 = _planned(store)
     store.transition_plan(pid2, "approve", "carol", approved_by="carol")
     ranged = store.create_execution(pid2, "ara", 10, "carol")
@@ -267,4 +304,192 @@ def test_record_acks_is_record_ack_for_a_range_and_survives_a_restart(tmp_path: 
     with pytest.raises(ValueError, match="last < first"):
         store.record_acks(ranged.id, 4, 3)
     assert store.list_acks(ranged.id) == list(range(6))
+    store.close()
+
+
+def test_a_violated_constraint_raises_the_store_integrity_error(open_store: OpenStore) -> None:
+    """One exception for both backends (an archive import catches it), and the
+    transaction is rolled back whole."""
+    from server.store.database import IntegrityError
+
+    store = open_store()
+    with pytest.raises(IntegrityError, match=r"(?i)unique"), store.db.transaction() as conn:
+        conn.execute(
+            "INSERT INTO tokens (id, name, role, hash, created_at) VALUES (?,?,?,?,?)",
+            ("tk_1", "a", "admin", "h", "now"),
+        )
+        conn.execute(
+            "INSERT INTO tokens (id, name, role, hash, created_at) VALUES (?,?,?,?,?)",
+            ("tk_2", "b", "admin", "h", "now"),  # the same hash: UNIQUE
+        )
+    assert store.list_tokens() == []
+    with pytest.raises(IntegrityError):  # a foreign key: no such plan
+        store.db.query(
+            "INSERT INTO executions (id, plan_id, robot, state, created_at, updated_at, "
+            "created_by) VALUES ('ex_1', 'pl_none', 'ara', 'pending', 't', 't', 't')"
+        )
+
+
+# ------------------------------------------------------------- PostgreSQL only
+# (integration: each starts on the session's PostgreSQL server)
+
+
+def _pg_version(url: str) -> int:
+    import psycopg
+
+    with psycopg.connect(url) as conn:
+        row = conn.execute("SELECT version FROM schema_version").fetchone()
+        assert row is not None
+        return int(row[0])
+
+
+@pytest.mark.integration
+def test_postgres_schema_version_and_forward_migration(pg_url: str, tmp_path: Path) -> None:  # noqa: F811
+    old = Store(tmp_path, database_url=pg_url, migrate_to=1)
+    assert _pg_version(pg_url) == 1
+    pid = _planned(old)
+    old.close()
+    new = Store(tmp_path, database_url=pg_url)
+    assert _pg_version(pg_url) == SCHEMA_VERSION
+    plan = new.get_plan(pid)
+    assert plan.state == "planned" and plan.metrics == {"route_length_m": 1.0}
+    idx = {r[0] for r in new.db.query("SELECT indexname FROM pg_indexes")}
+    assert {"plans_state", "audit_entity", "findings_by_plan"} <= idx
+    types = {
+        (r[0], r[1]): r[2]
+        for r in new.db.query(
+            "SELECT table_name, column_name, data_type FROM information_schema.columns "
+            "WHERE table_schema = current_schema()"
+        )
+    }
+    # SQLite's REAL is a double and its INTEGER 64-bit: the translation keeps both.
+    assert types[("plans", "progress")] == "double precision"
+    assert types[("execution_states", "t")] == "double precision"
+    assert types[("executions", "acked")] == "bigint"
+    assert types[("audit_events", "id")] == "bigint"
+    new.close()
+
+
+@pytest.mark.integration
+def test_postgres_newer_schema_is_refused(pg_url: str, tmp_path: Path) -> None:  # noqa: F811
+    import psycopg
+
+    Store(tmp_path, database_url=pg_url).close()
+    with psycopg.connect(pg_url, autocommit=True) as conn:
+        conn.execute("UPDATE schema_version SET version = %s", (SCHEMA_VERSION + 5,))
+    with pytest.raises(SchemaTooNewError, match="newer"):
+        Store(tmp_path, database_url=pg_url)
+
+
+@pytest.mark.integration
+def test_postgres_servers_starting_at_once_migrate_once(pg_url: str, tmp_path: Path) -> None:  # noqa: F811
+    """Six stores opened at the same moment on an empty database: each migration
+    runs once (a second run would fail on CREATE TABLE), every store works."""
+    import threading
+
+    barrier = threading.Barrier(6)
+    stores: list[Store] = []
+    errors: list[BaseException] = []
+
+    def open_one(i: int) -> None:
+        barrier.wait()
+        try:
+            stores.append(Store(tmp_path / str(i), database_url=pg_url))
+        except BaseException as exc:
+            errors.append(exc)
+
+    threads = [threading.Thread(target=open_one, args=(i,)) for i in range(6)]
+    for th in threads:
+        th.start()
+    for th in threads:
+        th.join(60)
+    assert errors == [] and len(stores) == 6
+    assert _pg_version(pg_url) == SCHEMA_VERSION
+    pid = stores[0].create_plan("demo.route", {}, "x").id
+    assert all(s.get_plan(pid).state == "queued" for s in stores)
+    for s in stores:
+        s.close()
+
+
+@pytest.mark.integration
+def test_postgres_rows_read_like_sqlite_rows(pg_url: str, tmp_path: Path) -> None:  # noqa: F811
+    store = Store(tmp_path, database_url=pg_url)
+    pid = _planned(store)
+    row = store.db.query_one("SELECT * FROM plans WHERE id = ?", (pid,))
+    assert row is not None and row["id"] == row[0] == pid
+    # The stand-in for SQLite's rowid stays hidden, as rowid is from SELECT * there.
+    assert row.keys() == store.db.columns("plans") and "rowid" not in dict(row)
+    assert dict(row)["state"] == "planned" and len(row) == len(row.keys())
+    # A literal '?' and '%' stay literal; placeholders still bind.
+    lit = store.db.query_one("SELECT '?' AS q, '100%' AS p, ? AS v", ("x",))
+    assert (lit["q"], lit["p"], lit["v"]) == ("?", "100%", "x")
+    # A bool is stored as 0/1 in an INTEGER column, as SQLite stores it.
+    with store.db.transaction() as conn:
+        conn.execute("UPDATE plans SET cancel_requested = ? WHERE id = ?", (True, pid))
+    assert store.get_plan(pid).cancel_requested == 1
+    assert tuple(store.db.query_one("SELECT ? + 0, ?", (True, False))) == (1, 0)
+    store.close()
+
+
+@pytest.mark.integration
+def test_postgres_writers_on_two_stores_take_turns(pg_url: str, tmp_path: Path) -> None:  # noqa: F811
+    """Read-check-write is atomic across servers, as on SQLite: of 8 threads on
+    two stores approving one plan, exactly one succeeds."""
+    import threading
+
+    a = Store(tmp_path / "a", database_url=pg_url)
+    b = Store(tmp_path / "b", database_url=pg_url)
+    pid = _planned(a)
+    barrier = threading.Barrier(8)
+    outcomes: list[str] = []
+
+    def approve(store: Store) -> None:
+        barrier.wait()
+        try:
+            store.transition_plan(pid, "approve", "x", expect="planned")
+            outcomes.append("ok")
+        except IllegalTransitionError:
+            outcomes.append("409")
+
+    threads = [threading.Thread(target=approve, args=((a, b)[i % 2],)) for i in range(8)]
+    for th in threads:
+        th.start()
+    for th in threads:
+        th.join(60)
+    assert sorted(outcomes) == ["409"] * 7 + ["ok"]
+    assert [e.action for e in b.list_audit("plan", pid)].count("approve") == 1
+    a.close()
+    b.close()
+
+
+@pytest.mark.integration
+def test_postgres_reads_see_the_last_commit_and_a_writer_its_own_rows(
+    pg_url: str,  # noqa: F811
+    tmp_path: Path,
+) -> None:
+    """As on SQLite (tests/api/test_database_readers.py): a read does not wait for
+    another thread's open transaction and sees the last commit; inside its own
+    transaction a thread reads what it has written."""
+    import threading
+
+    store = Store(tmp_path, database_url=pg_url)
+    pid = store.create_plan("demo.route", {}, "x").id
+    inside, release = threading.Event(), threading.Event()
+
+    def writer() -> None:
+        with store.db.transaction() as conn:
+            conn.execute("UPDATE plans SET stage = 'pending' WHERE id = ?", (pid,))
+            assert store.get_plan(pid).stage == "pending"  # its own, uncommitted
+            inside.set()
+            release.wait(30)
+
+    th = threading.Thread(target=writer)
+    th.start()
+    try:
+        assert inside.wait(30)
+        assert store.get_plan(pid).stage == ""  # the last commit, without waiting
+    finally:
+        release.set()
+        th.join(30)
+    assert store.get_plan(pid).stage == "pending"
     store.close()
