@@ -165,6 +165,17 @@ class WorkerContext:
         return np.load(path, allow_pickle=False)
 
 
+#: What a job returns: result, arrays, checks, metrics, program, the program's check.
+JobOutput = tuple[
+    dict[str, Any],
+    dict[str, np.ndarray],
+    list[dict[str, Any]],
+    dict[str, float],
+    list[dict[str, Any]] | None,
+    dict[str, Any] | None,
+]
+
+
 def execute_job(
     kind_name: str,
     params: dict[str, Any],
@@ -172,25 +183,27 @@ def execute_job(
     clouds_dir: str,
     progress_q: Any,
     cancel_flags: Any,
-) -> tuple[
-    dict[str, Any],
-    dict[str, np.ndarray],
-    list[dict[str, Any]],
-    dict[str, float],
-    list[dict[str, Any]] | None,
-    dict[str, Any] | None,
-]:
+) -> JobOutput:
     """Run one plan and compile its robot program (in a worker).
 
     Module-level so process pools can pickle it.  Returns the result, arrays,
     checks, metrics, the program (or ``None``) and the program's check.
     """
     from server.kinds import get_kind
+
+    get_kind(kind_name)  # an unknown kind fails before the plan is started
+    ctx = WorkerContext(plan_id, Path(clouds_dir), progress_q, cancel_flags)
+    progress_q.put((plan_id, 0.0, "start"))
+    return run_kind(kind_name, params, plan_id, ctx)
+
+
+def run_kind(kind_name: str, params: dict[str, Any], plan_id: str, ctx: Any) -> JobOutput:
+    """The pure part of a job, the same in a pool process and on a Dask worker:
+    the kind's ``run`` with ``ctx`` (progress, cancel, clouds), then the compile."""
+    from server.kinds import get_kind
     from server.kinds.base import drop_unknown_keys
 
     kind = get_kind(kind_name)
-    ctx = WorkerContext(plan_id, Path(clouds_dir), progress_q, cancel_flags)
-    progress_q.put((plan_id, 0.0, "start"))
     # Rows stored before params forbade unknown keys still run (the keys are ignored).
     params, _legacy = drop_unknown_keys(kind.params_model, params)
     model = kind.params_model.model_validate(params)
@@ -216,6 +229,29 @@ class _PlanRef:
     id: str
     kind: str
     params: dict[str, Any]
+
+
+def make_job_runner(store: Store, events: EventBus, settings: Any) -> JobRunner:
+    """The app's runner: on the Dask cluster of ``settings.dask_scheduler`` when
+    set (imported only then), else the local pool of ``settings.job_mode``."""
+    if settings.dask_scheduler:
+        from server.dask_jobs import DaskJobRunner
+
+        return DaskJobRunner(
+            store,
+            events,
+            scheduler=settings.dask_scheduler,
+            data_dir=Path(settings.data),
+            database_url=settings.database_url,
+            stuck_s=settings.dask_stuck_s,
+        )
+    return JobRunner(
+        store,
+        events,
+        mode=settings.job_mode,
+        workers=settings.job_workers,
+        preload=settings.job_preload,
+    )
 
 
 class JobRunner:

@@ -12,7 +12,7 @@ from server.kinds.base import Check, KindOutput, PlanKind
 
 class Params(BaseModel):
     seconds: float = Field(30.0, description="how long the slow kind keeps reporting progress")
-    mode: str = Field("slow", description="slow | raise | crash | nan")
+    mode: str = Field("slow", description="slow | raise | crash | nan | hang")
 
 
 def run(p: Params, ctx) -> KindOutput:
@@ -22,6 +22,9 @@ def run(p: Params, ctx) -> KindOutput:
         os._exit(3)  # a native crash in the worker process
     if p.mode == "nan":
         return KindOutput(result={"x": float("nan")})
+    if p.mode == "hang":  # a planner stuck without a progress call for ``seconds``
+        time.sleep(p.seconds)
+        return KindOutput(result={"ticks": 0}, checks=[Check(name="ok", passed=True)])
     t0 = time.monotonic()
     i = 0
     while time.monotonic() - t0 < p.seconds:
