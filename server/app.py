@@ -21,7 +21,7 @@ from planners.errors import PlannerError
 from server import __version__
 from server.auth import bootstrap_admin
 from server.events import EventBus
-from server.jobs import JobRunner
+from server.jobs import make_job_runner
 from server.kinds import registry
 from server.lifecycle import IllegalTransitionError
 from server.routers import (
@@ -136,16 +136,18 @@ def create_app(settings: Settings | None = None, *, start_scene: bool | None = N
 
     @asynccontextmanager
     async def lifespan(app: FastAPI) -> AsyncIterator[None]:
-        store = Store(settings.data)
+        store = Store(settings.data, database_url=settings.database_url)
         cleanup_leftovers(store)  # crash leftovers (issue #12 §6), before jobs/uploads run
         bus = EventBus()
-        jobs = JobRunner(
-            store,
-            bus,
-            mode=settings.job_mode,
-            workers=settings.job_workers,
-            preload=settings.job_preload,
-        )
+        # --- PostgreSQL store (issue #17 §1): relay this bus's events to and from
+        # every other server sharing the database (LISTEN/NOTIFY, server/events_pg.py).
+        pg_events = None
+        if settings.database_url:
+            from server.events_pg import PgEventRelay
+
+            pg_events = PgEventRelay(bus, settings.database_url).start()
+        # --- end PostgreSQL event relay
+        jobs = make_job_runner(store, bus, settings)
         services = Services(settings=settings, store=store, events=bus, jobs=jobs)
         from server.store.webhooks import WebhookStore
         from server.webhooks import WebhookDispatcher
@@ -186,7 +188,15 @@ def create_app(settings: Settings | None = None, *, start_scene: bool | None = N
             jobs.on_finished.append(scene.plan_finished)
         from robots import ROBOT_NAMES
         from server.linkservice import EmulatorSupervisor, LinkServiceClient
+        from server.linkservice.client import new_server_id, server_url
+        from server.ownership.keeper import check_lease
+        from server.ownership.peers import Peers
+        from server.store.ownership import OwnershipStore
 
+        # Several servers may share this store (issue #17 §3): this one's id,
+        # under which its link service holds the leases of the robots it drives.
+        check_lease(settings.robot_lease_s)
+        server_id = new_server_id()
         if settings.emulators:
             services.emulators = EmulatorSupervisor(
                 settings.data,
@@ -194,6 +204,8 @@ def create_app(settings: Settings | None = None, *, start_scene: bool | None = N
                 time_scale=settings.emulator_time_scale,
                 nice=settings.emulator_nice,
             ).start()
+            # So that a server started without emulators reaches these robots.
+            OwnershipStore(store.db).record_emulator_urls(services.emulators.urls(), server_id)
 
         def kind_robot(kind: str) -> str | None:
             spec = registry().get(kind)
@@ -206,11 +218,15 @@ def create_app(settings: Settings | None = None, *, start_scene: bool | None = N
             scene=services.scene,
             emulators=services.emulators,
             kind_robot=kind_robot,
+            server_id=server_id,
         ).start()
         services.dispatch = dispatch
+        services.peers = Peers(
+            store.db, server_id, server_url(settings), settings.robot_lease_s
+        ).start()
 
-        def estop_robots(robot: str | None, reason: str) -> None:
-            dispatch.estop(robot, reason)
+        def estop_robots(robot: str | None, reason: str) -> list[str]:
+            return dispatch.estop(robot, reason)
 
         services.estop_handlers.append(estop_robots)
         if settings.foxglove_port:
@@ -224,6 +240,8 @@ def create_app(settings: Settings | None = None, *, start_scene: bool | None = N
             yield
         finally:
             jobs.shutdown()
+            if services.peers is not None:
+                services.peers.stop()
             if services.dispatch is not None:
                 services.dispatch.shutdown()
             if services.emulators is not None:
@@ -234,6 +252,8 @@ def create_app(settings: Settings | None = None, *, start_scene: bool | None = N
                 services.foxglove.stop()
             services.webhooks.stop()
             services.outcomes.stop()
+            if pg_events is not None:  # PostgreSQL event relay (issue #17 §1)
+                pg_events.stop()
             store.close()
 
     app = FastAPI(

@@ -23,11 +23,13 @@ class Services:
     scene: Any = None  # server.scene.service.SceneService when the scene runs
     dispatch: Any = None  # server.linkservice.LinkServiceClient once robots are wired
     emulators: Any = None  # server.linkservice.EmulatorSupervisor when built-in emulators run
-    estop_handlers: list[Callable[[str | None, str], None]] = field(default_factory=list)
+    # A handler may return the robots it reached (the link service's does).
+    estop_handlers: list[Callable[[str | None, str], Any]] = field(default_factory=list)
     token_cache: Any = None  # server.auth.TokenCache, made on first use
     webhooks: Any = None  # server.webhooks.WebhookDispatcher
     outcomes: Any = None  # server.maintenance.OutcomeRecorder
     foxglove: Any = None  # server.foxglove_live.FoxgloveLive (STEELPATH_FOXGLOVE_PORT)
+    peers: Any = None  # server.ownership.peers.Peers: the other servers sharing the store
 
 
 async def get_services(request: Request) -> Services:

@@ -19,7 +19,13 @@ class Settings(BaseSettings):
 
     model_config = SettingsConfigDict(env_prefix="STEELPATH_", extra="ignore")
 
-    data: Path = Field(Path("./var"), description="data directory: SQLite database and .npy arrays")
+    data: Path = Field(
+        Path("./var"),
+        description="data directory: the SQLite database (unless database_url selects "
+        "PostgreSQL) and the .npy arrays (clouds, plan arrays), photos and uploads; with "
+        "several servers on one PostgreSQL this must be one shared directory (e.g. an NFS "
+        "or CephFS mount, or a shared volume) that every server and planning worker mounts",
+    )
     host: str = Field("127.0.0.1", description="HTTP bind address of the API and console")
     port: int = Field(8000, ge=0, le=65535, description="HTTP port of the API and console")
     scene_port: int = Field(
@@ -86,6 +92,14 @@ class Settings(BaseSettings):
         None,
         description="tcp://host:8786 sends planning jobs to that Dask cluster (its workers read "
         "and write through the shared store); unset keeps the local process pool",
+    )
+    dask_stuck_s: float = Field(
+        600.0,
+        gt=0,
+        le=86400,
+        description="a Dask worker whose plan has written no progress for this long is "
+        "restarted and the plan re-run once (generous: a planner may go minutes between "
+        "progress calls on a whole-span cloud)",
     )
     server_url: str | None = Field(
         None,

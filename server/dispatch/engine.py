@@ -114,15 +114,31 @@ class DispatchEngine:
         # the link I/O thread only drops it here (a dict store, never blocks).
         self._mirror_q: queue.SimpleQueue[tuple[str, dict[str, Any]] | None] = queue.SimpleQueue()
         self._mirror_thread: threading.Thread | None = None
+        # Several servers (issue #17 §3): with ``leased`` the engine drives only
+        # the robots whose lease this server holds (adopt/drop); a streamer of
+        # a dropped robot is detached: it never writes to the store again,
+        # since the robot's execution now belongs to whichever server owns it.
+        self.leased = False
+        self.server_id: str | None = None
+        self._streamer_robot: dict[str, str] = {}
+        self._detached: set[str] = set()
+        self._store_emulated: dict[str, str] = {}
 
     # ------------------------------------------------------------- lifecycle
-    def start(self) -> None:
-        self._interrupt_leftovers()
-        stored = self.store.robot_urls()
+    def start(self, *, leased: bool = False) -> None:
+        """Open every robot's link; with ``leased``, none yet: :meth:`adopt` opens
+        each once this server holds its lease (``server.ownership.LeaseKeeper``)."""
+        self.leased = leased
         self._mirror_thread = threading.Thread(
             target=self._mirror_loop, name="robot-state mirror", daemon=True
         )
         self._mirror_thread.start()
+        if leased:
+            # No server can own a robot that is not one of ours: what runs on it is over.
+            self._interrupt_leftovers(lambda robot: robot not in ROBOT_NAMES)
+            return
+        self._interrupt_leftovers()
+        stored = self.store.robot_urls()
         for name in ROBOT_NAMES:
             url = stored.get(name) or self._emulator_urls.get(name)
             if url is None:
@@ -153,32 +169,128 @@ class DispatchEngine:
         if self._mirror_thread is not None:
             self._mirror_thread.join(timeout=2)
 
-    def _interrupt_leftovers(self) -> None:
+    def _interrupt_leftovers(
+        self,
+        which: Callable[[str], bool] = lambda _robot: True,
+        reason: str = "server restarted during execution",
+    ) -> None:
         """Executions a previous server left running are interrupted (resumable)."""
         for ex in self.store.list_executions(limit=10_000):
-            if ex.state in (ExecutionState.PENDING, ExecutionState.RUNNING, ExecutionState.PAUSED):
-                self._transition(ex.id, "interrupt", "system", "server restarted during execution")
+            if ex.state in (
+                ExecutionState.PENDING,
+                ExecutionState.RUNNING,
+                ExecutionState.PAUSED,
+            ) and which(ex.robot):
+                self._transition(ex.id, "interrupt", "system", reason)
+
+    # ------------------------------------------------ ownership (several servers)
+    def owns(self, name: str) -> bool:
+        return name in self._robots
+
+    def set_store_emulated(self, urls: dict[str, str]) -> None:
+        """Robot URLs a server recorded for its embedded emulators (``emulated`` in statuses)."""
+        self._store_emulated = dict(urls)
+
+    def adopt(self, name: str, url: str, emulated: dict[str, str] | None = None) -> bool:
+        """Start driving ``name`` (this server has just taken its lease); ``False``
+        if it already does.
+
+        Whatever the store still shows running on it was driven by a server that
+        no longer holds it (killed, or this service before a restart): that run
+        is interrupted first (resumable from its last acknowledged command, the
+        robot refuses to repeat one), and only then the link opens.
+        """
+        if emulated is not None:
+            self._store_emulated = dict(emulated)
+        with self._lock:
+            if name in self._robots:
+                return False
+            self._interrupt_leftovers(
+                lambda robot: robot == name,
+                f"server {self.server_id or '?'} took the robot over "
+                "(its previous driver stopped or lost the robot's lease)",
+            )
+            self._robots[name] = _Robot(name, url, self._new_link(name, url))
+        log.info("driving robot %s at %s", name, url)
+        self.events.publish("robot", {"name": name, "url": url, "owned": True})
+        return True
+
+    def drop(self, name: str, why: str) -> bool:
+        """Stop driving ``name`` (its lease is lost or could not be renewed).
+
+        The link closes first (a TCP robot stops at once, a serial one within
+        its watchdog); the robot's streamers are detached, so nothing this
+        server does after it touches the execution the new owner takes over.
+        """
+        with self._lock:
+            r = self._robots.pop(name, None)
+            if r is None:
+                return False
+            eids = [e for e, robot in self._streamer_robot.items() if robot == name]
+            streamers = []
+            for eid in eids:
+                self._detached.add(eid)
+                self._streamer_robot.pop(eid, None)
+                s = self._streamers.pop(eid, None)
+                if s is not None:
+                    streamers.append(s)
+        log.warning("no longer driving robot %s: %s", name, why)
+        r.link.close(timeout=2)
+        for s in streamers:
+            s.close(timeout=2)
+        self.events.publish("robot", {"name": name, "owned": False, "reason": why})
+        return True
+
+    def sync_url(self, name: str, url: str) -> None:
+        """Reconnect an owned robot whose URL in the shared store changed (another
+        server's emulators recorded theirs, or an operator's change); never while
+        a run streams to it."""
+        with self._lock:
+            r = self._robots.get(name)
+            if r is None or r.url == url:
+                return
+            if self._active_execution_for(name, running_only=True):
+                return
+            was_latched = r.link.estop_latched
+            r.link.close(timeout=2)
+            r.url = url
+            r.link = self._new_link(name, url)
+            if was_latched:
+                r.link.estop()
+        self.events.publish("robot", {"name": name, "url": url, "state": str(r.link.state)})
 
     # --------------------------------------------------------------- robots
     def robot_names(self) -> list[str]:
-        return list(self._robots)
+        return list(ROBOT_NAMES) if self.leased else list(self._robots)
 
     def _robot(self, name: str) -> _Robot:
-        try:
-            return self._robots[name]
-        except KeyError:
-            raise NotFoundError(
-                f"no robot {name!r}; robots: {', '.join(self._robots) or 'none'}"
-            ) from None
+        r = self._robots.get(name)
+        if r is not None:
+            return r
+        if self.leased and name in ROBOT_NAMES:
+            raise DispatchError(
+                f"robot {name} is not driven by this server (another server holds its "
+                "lease, or none does yet); try again",
+                503,
+            )
+        raise NotFoundError(
+            f"no robot {name!r}; robots: {', '.join(self.robot_names()) or 'none'}"
+        ) from None
+
+    def _emulated(self, name: str, url: str) -> bool:
+        return url in (self._emulator_urls.get(name), self._store_emulated.get(name))
 
     def robot_status(self, name: str) -> dict[str, Any]:
+        if self.leased and name in ROBOT_NAMES and name not in self._robots:
+            return self._remote_status(name)
         r = self._robot(name)
         st = r.link.status()
         busy = self._active_execution_for(name)
         return {
             "name": name,
             "url": r.url,
-            "emulated": r.url == self._emulator_urls.get(name),
+            "emulated": self._emulated(name, r.url),
+            "owned": True,
             "state": str(st.state),
             "reason": st.reason,
             "connected": st.state in (LinkState.READY, LinkState.STREAMING),
@@ -189,6 +301,30 @@ class DispatchEngine:
             "faults": int(st.report.faults) if st.report is not None else 0,
             "execution": busy,
             "stats": dict(st.stats),
+        }
+
+    def _remote_status(self, name: str) -> dict[str, Any]:
+        """A robot another server drives: what the shared store knows (its owner's
+        mirror writes the report twice a second); the web server adds the owner."""
+        url = self.store.robot_urls().get(name)
+        stored = self.store.robot_state(name)
+        report = stored[0] if stored else None
+        faults = int(report.get("faults", 0)) if report else 0
+        return {
+            "name": name,
+            "url": url,
+            "emulated": url is not None and self._emulated(name, url),
+            "owned": False,
+            "state": "remote",
+            "reason": "driven by another server",
+            "connected": None,
+            "estop_latched": bool(faults & int(FaultFlag.ESTOP)) if report else None,
+            "last_heartbeat": None,
+            "robot_info": None,
+            "report": report,
+            "faults": faults,
+            "execution": self._active_execution_for(name),
+            "stats": {},
         }
 
     def set_connection(
@@ -209,8 +345,8 @@ class DispatchEngine:
         was_latched = r.link.estop_latched
         if secret_writer is not None:
             secret_writer(name)
-        self.store.set_robot_url(name, url, actor)
         with self._lock:
+            self.store.set_robot_url(name, url, actor)
             r.link.close(timeout=2)
             r.url = url
             r.link = self._new_link(name, url)
@@ -316,6 +452,7 @@ class DispatchEngine:
         with self._lock:
             old = self._streamers.pop(eid, None)
             self._streamers[eid] = streamer
+            self._streamer_robot[eid] = ex.robot
         if old is not None:
             old.close(timeout=2)
         if ex.state == ExecutionState.PENDING:
@@ -329,6 +466,8 @@ class DispatchEngine:
 
     # ------------------------------------------------------- operator actions
     def pause(self, execution_id: str, actor: str) -> ExecutionRecord:
+        if self.leased:
+            self._robot(self.store.get_execution(execution_id).robot)  # 503 if driven elsewhere
         ex = self._transition(execution_id, "pause", actor, "operator pause", strict=True)
         assert ex is not None  # strict: a refused transition raised
         s = self._streamers.get(execution_id)
@@ -385,6 +524,8 @@ class DispatchEngine:
 
     def abort(self, execution_id: str, actor: str) -> ExecutionRecord:
         ex = self.store.get_execution(execution_id)
+        if self.leased:
+            self._robot(ex.robot)  # 503 if driven elsewhere
         s = self._streamers.get(execution_id)
         if s is not None and s.state not in (
             ExecState.COMPLETED,
@@ -406,7 +547,14 @@ class DispatchEngine:
         ``link.estop()`` writes the frame at once and latches it for
         reconnects, so this never waits on a busy link, a streamer or SQLite.
         """
-        targets = list(self._robots.values()) if robot is None else [self._robot(robot)]
+        if robot is None:
+            targets = list(self._robots.values())
+        elif robot in self._robots:
+            targets = [self._robots[robot]]
+        elif self.leased and robot in ROBOT_NAMES:
+            return []  # driven by another server: the web server forwards to it
+        else:
+            targets = [self._robot(robot)]
         reached = []
         for r in targets:
             try:
@@ -428,6 +576,8 @@ class DispatchEngine:
     # ------------------------------------------------------------- callbacks
     def _on_acks(self, execution_id: str, first: int, last: int) -> None:
         # Runs on the streamer thread; the streamer advances only after this returns.
+        if execution_id in self._detached:
+            return  # its robot is driven by another server now
         self.store.record_acks(execution_id, first, last)
         ex = self.store.get_execution(execution_id)
         self.events.publish(
@@ -442,15 +592,20 @@ class DispatchEngine:
         )
 
     def _on_done(self, execution_id: str, outcome: Outcome) -> None:
+        if execution_id in self._detached:
+            return
         action = {"completed": "complete", "aborted": "abort", "estopped": "abort"}[str(outcome)]
         reason = "E-stop" if outcome == Outcome.ESTOPPED else f"robot reported {outcome}"
         self._transition(execution_id, action, "robot", reason)
         with self._lock:
             s = self._streamers.pop(execution_id, None)
+            self._streamer_robot.pop(execution_id, None)
         if s is not None:
             threading.Thread(target=s.close, daemon=True).start()
 
     def _on_fault(self, execution_id: str, fault: StreamFault) -> None:
+        if execution_id in self._detached:
+            return
         action = "interrupt" if fault.kind.value == "link_lost" else "fault"
         self._transition(execution_id, action, "robot", str(fault), fault=str(fault))
 
@@ -478,6 +633,8 @@ class DispatchEngine:
             if item is None:
                 return
             name, state = item
+            if self.leased and name not in self._robots:
+                continue  # a late report of a robot dropped meanwhile
             try:
                 self.store.save_robot_state(name, state)
                 # Recorded runs (issue #16 §3): the reports of an active execution.

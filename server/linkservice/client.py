@@ -20,6 +20,7 @@ import itertools
 import json
 import logging
 import os
+import secrets
 import socket
 import subprocess
 import sys
@@ -43,6 +44,25 @@ log = logging.getLogger(__name__)
 #: the store and starts a streamer: milliseconds; this is a wedge detector).
 RPC_TIMEOUT_S = 15.0
 ESTOP_TIMEOUT_S = 2.0
+
+
+def new_server_id() -> str:
+    """A fresh id per server process: a restarted server is a new server (its
+    predecessor's leases lapse or were released, never silently inherited)."""
+    return f"srv_{secrets.token_hex(6)}"
+
+
+def server_url(settings: Settings) -> str:
+    """This server's base URL as other servers reach it (``server_url``, or
+    ``http://<host>:<port>``; a wildcard bind address is reached on loopback)."""
+    if settings.server_url:
+        return settings.server_url.rstrip("/")
+    host = settings.host
+    if host in ("0.0.0.0", "::", ""):
+        host = "127.0.0.1"
+    if ":" in host and not host.startswith("["):
+        host = f"[{host}]"
+    return f"http://{host}:{settings.port}"
 
 
 class LinkServiceUnavailable(DispatchError):
@@ -88,7 +108,12 @@ class LinkServiceClient:
         scene: Any = None,
         emulators: Any = None,
         kind_robot: Callable[[str], str | None] | None = None,
+        server_id: str | None = None,
     ) -> None:
+        #: This server's id in the shared store's ``servers`` table: the link
+        #: service holds robot leases under it (and keeps it across a restart
+        #: of the service, so the leases stay this server's).
+        self.server_id = server_id or new_server_id()
         self.store = store
         self.events = events
         self.settings = settings
@@ -156,6 +181,8 @@ class LinkServiceClient:
             "settings": json.loads(self.settings.model_dump_json()),
             "emulator_urls": urls,
             "log_level": self.settings.log_level,
+            "server_id": self.server_id,
+            "server_url": server_url(self.settings),
         }
         cmd = [
             sys.executable,

@@ -138,12 +138,21 @@ class LinkService:
         rpc: Channel,
         estop: Channel,
         emulator_urls: dict[str, str],
+        *,
+        server_id: str = "",
+        server_url: str = "",
+        parent_pid: int | None = None,
     ) -> None:
         self.settings = settings
+        self.server_id = server_id
+        self.server_url = server_url
+        self.parent_pid = parent_pid
+        self.emulator_urls = dict(emulator_urls)
+        self.keeper: Any = None  # server.ownership.LeaseKeeper once running
         self.rpc = rpc
         self.estop_channel = estop
         self.outbox = _Outbox(rpc)
-        self.store = Store(settings.data)
+        self.store = Store(settings.data, database_url=settings.database_url)
         self.engine = DispatchEngine(
             self.store,
             self.outbox,
@@ -151,6 +160,7 @@ class LinkService:
             emulator_urls=emulator_urls,
             secret_for=self._secret_for,
         )
+        self.engine.server_id = server_id or None
         self.pool = concurrent.futures.ThreadPoolExecutor(8, thread_name_prefix="link-rpc")
         self._book = concurrent.futures.ThreadPoolExecutor(1, thread_name_prefix="estop-book")
         self.stopping = threading.Event()
@@ -263,7 +273,24 @@ class LinkService:
 
     # -------------------------------------------------------------- lifecycle
     def run(self) -> None:
-        self.engine.start()
+        if self.server_id:
+            # Several servers may share the store: drive only the robots whose
+            # lease this server holds (issue #17 §3; server.ownership.keeper).
+            from robots import ROBOT_NAMES
+            from server.ownership.keeper import LeaseKeeper
+
+            self.engine.start(leased=True)
+            self.keeper = LeaseKeeper(
+                self.engine,
+                self.store.db,
+                server_id=self.server_id,
+                url=self.server_url,
+                lease_s=self.settings.robot_lease_s,
+                robots=ROBOT_NAMES,
+                emulator_urls=self.emulator_urls,
+            ).start()
+        else:
+            self.engine.start()
         threading.Thread(target=self.estop_loop, name="estop", daemon=True).start()
         threading.Thread(target=self.rpc_loop, name="link-rpc reader", daemon=True).start()
         self.outbox.publish("linkservice", {"state": "ready", "pid": os.getpid()})
@@ -284,7 +311,14 @@ class LinkService:
 
     def shutdown(self) -> None:
         self.stopping.set()
+        if self.keeper is not None:
+            self.keeper.stop()
         self.engine.shutdown()
+        # Released only when the web server asked us to stop (it is still our
+        # parent): a killed server's leases lapse instead, after its robots'
+        # watchdogs have stopped them for certain.
+        if self.keeper is not None and os.getppid() == self.parent_pid:
+            self.keeper.release()
         self.pool.shutdown(wait=False, cancel_futures=True)
         self._book.shutdown(wait=False, cancel_futures=True)
         self.outbox.close()
@@ -350,7 +384,15 @@ def main(argv: list[str] | None = None) -> int:
     settings = Settings(**cfg["settings"])
     rpc = Channel(socket.socket(fileno=ns.rpc_fd))
     estop = Channel(socket.socket(fileno=ns.estop_fd))
-    service = LinkService(settings, rpc, estop, cfg.get("emulator_urls") or {})
+    service = LinkService(
+        settings,
+        rpc,
+        estop,
+        cfg.get("emulator_urls") or {},
+        server_id=str(cfg.get("server_id") or ""),
+        server_url=str(cfg.get("server_url") or ""),
+        parent_pid=ns.parent_pid,
+    )
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # the parent decides when we stop
     service.run()
     # Links are closed and the store is durable: do not wait at interpreter exit

@@ -54,7 +54,7 @@ async def events(
     async def robots_event() -> bytes | None:
         if services.dispatch is None:
             return None
-        statuses = await statuses_now(services.dispatch)
+        statuses = await statuses_now(services.dispatch, services.peers)
         return f"event: robots\ndata: {json.dumps(statuses)}\n\n".encode()
 
     async def stream() -> AsyncIterator[bytes]:

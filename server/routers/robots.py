@@ -4,13 +4,14 @@ from __future__ import annotations
 
 from typing import Annotated, Any, Literal
 
-from fastapi import APIRouter, Depends, HTTPException, Query, Response
+from fastapi import APIRouter, Depends, HTTPException, Query, Request, Response
 from fastapi.concurrency import run_in_threadpool
 from pydantic import BaseModel, Field, field_validator
 
-from server.auth import Admin, Operator, Viewer
+from server.auth import Admin, Operator, Viewer, token_from_request
 from server.dispatch import DispatchError
 from server.linkservice import LinkServiceClient
+from server.ownership.peers import FORWARDED_HEADER
 from server.routers.responses import errors, json_response
 from server.services import Services, get_services
 
@@ -27,6 +28,53 @@ def engine(services: Services) -> LinkServiceClient:
 
 def _refuse(exc: DispatchError) -> HTTPException:
     return HTTPException(exc.status, detail=str(exc))
+
+
+def _forward(
+    services: Services,
+    request: Request,
+    response: Response,
+    robot: str | None,
+    body: Any = None,
+    *,
+    read_only: bool = False,
+) -> dict[str, Any] | None:
+    """Send this request to ``robot``'s owner when another server drives it; its
+    answer (status and body) becomes ours.  ``None``: act here.
+
+    Alone (no other live server) nothing is looked up.  The cached owner is
+    confirmed from the store before forwarding; a forwarded request is never
+    forwarded again: if the robot moved meanwhile, this server's engine
+    refuses it (503, try again).  A read (``read_only``) whose owner does not
+    answer is served here from the store instead.
+    """
+    peers = services.peers
+    if robot is None or peers is None or not peers.others():
+        return None
+    if request.headers.get(FORWARDED_HEADER):
+        return None
+    if robot not in engine(services).robot_names():
+        return None  # the engine answers 404
+    cached = peers.owner(robot)
+    if cached is not None and cached.server_id == peers.server_id:
+        return None
+    lease = peers.owner(robot, fresh=True)
+    if lease is None or lease.server_id == peers.server_id:
+        return None
+    path = request.url.path + (f"?{request.url.query}" if request.url.query else "")
+    got = peers.forward(lease, request.method, path, token_from_request(request), body)
+    if read_only and not got.answered:
+        return None
+    response.status_code = got.status
+    response.headers["X-SteelPath-Served-By"] = got.server_id
+    return dict(got.body) if isinstance(got.body, dict) else {"detail": got.body}
+
+
+def _execution_robot(services: Services, execution_id: str) -> str | None:
+    """The robot of an execution, only when other servers share the store (else no read)."""
+    if services.peers is None or not services.peers.others():
+        return None
+    return services.store.get_execution(execution_id).robot
 
 
 class ConnectionRequest(BaseModel):
@@ -78,24 +126,41 @@ async def list_robots(services: Svc, _: Viewer) -> list[dict[str, Any]]:
     per robot; a recent shared answer comes straight from the event loop
     (at most 2 s old, and dropped at once on a link, E-stop or execution
     state change), refreshed in the background."""
-    return await statuses_now(engine(services))
+    return await statuses_now(engine(services), services.peers)
 
 
-async def statuses_now(eng: LinkServiceClient) -> list[dict[str, Any]]:
+async def statuses_now(eng: LinkServiceClient, peers: Any = None) -> list[dict[str, Any]]:
     """Every robot's status: the recent shared answer when there is one (no
     waiting), else one round trip off the event loop.  ``GET /robots`` and
     the event stream's ``robots`` snapshots both read it here."""
     recent = getattr(eng, "recent_statuses", None)
-    statuses = recent() if recent is not None else None
-    if statuses is not None:
+    statuses: list[dict[str, Any]] | None = recent() if recent is not None else None
+    if statuses is None:
+        statuses = await run_in_threadpool(eng.robot_statuses)
+    return _with_owners(statuses, peers)
+
+
+def _with_owners(statuses: list[dict[str, Any]], peers: Any) -> list[dict[str, Any]]:
+    """Which server owns each robot (``owner``, ``owner_url``, ``owned_here``)."""
+    if peers is None:
         return statuses
-    return await run_in_threadpool(eng.robot_statuses)
+    for s in statuses:
+        s.update(peers.describe(s["name"]))
+    return statuses
 
 
 @router.get("/robots/{name}/state")
-def robot_state(name: str, services: Svc, _: Viewer) -> dict[str, Any]:
-    """Live link status and the last state report (also persisted, 2 Hz)."""
+def robot_state(
+    name: str, services: Svc, _: Viewer, request: Request, response: Response
+) -> dict[str, Any]:
+    """Live link status and the last state report (also persisted, 2 Hz); from
+    the robot's owner when another server drives it."""
+    fwd = _forward(services, request, response, name, read_only=True)
+    if fwd is not None:
+        return fwd
     status = engine(services).robot_status(name)
+    if services.peers is not None:
+        status.update(services.peers.describe(name))
     stored = services.store.robot_state(name)
     status["stored_report"] = stored[0] if stored else None
     status["stored_at"] = stored[1] if stored else None
@@ -103,8 +168,18 @@ def robot_state(name: str, services: Svc, _: Viewer) -> dict[str, Any]:
 
 
 @router.put("/robots/{name}/connection")
-def set_connection(name: str, req: ConnectionRequest, services: Svc, who: Admin) -> dict[str, Any]:
-    """Persist the robot's connection URL and reconnect."""
+def set_connection(
+    name: str,
+    req: ConnectionRequest,
+    services: Svc,
+    who: Admin,
+    request: Request,
+    response: Response,
+) -> dict[str, Any]:
+    """Persist the robot's connection URL and reconnect (on the robot's owner)."""
+    fwd = _forward(services, request, response, name, req.model_dump())
+    if fwd is not None:
+        return fwd
     try:
         return engine(services).set_connection(name, req.url, who.actor, req.secret)
     except DispatchError as exc:
@@ -112,13 +187,18 @@ def set_connection(name: str, req: ConnectionRequest, services: Svc, who: Admin)
 
 
 @router.post("/robots/{name}/takeover")
-def takeover(name: str, services: Svc, who: Operator) -> dict[str, Any]:
+def takeover(
+    name: str, services: Svc, who: Operator, request: Request, response: Response
+) -> dict[str, Any]:
     """Take the robot's line over from another controller that holds it.
 
     The robot refuses every second controller while one is alive; this is the
     explicit operator action that makes it drop the other one (stopping any
     motion) and accept this server.  It still needs this server's secret.
     """
+    fwd = _forward(services, request, response, name)
+    if fwd is not None:
+        return fwd
     try:
         return engine(services).takeover(name, who.actor)
     except DispatchError as exc:
@@ -126,13 +206,29 @@ def takeover(name: str, services: Svc, who: Operator) -> dict[str, Any]:
 
 
 @router.post("/robots/{name}/clear-estop")
-def clear_estop(name: str, services: Svc, who: Operator) -> dict[str, Any]:
+def clear_estop(
+    name: str, services: Svc, who: Operator, request: Request, response: Response
+) -> dict[str, Any]:
+    fwd = _forward(services, request, response, name)
+    if fwd is not None:
+        return fwd
     return engine(services).clear_estop(name, who.actor)
 
 
 @router.post("/plans/{plan_id}/dispatch", status_code=201)
-def dispatch(plan_id: str, req: DispatchRequest, services: Svc, who: Operator) -> dict[str, Any]:
-    """Send an approved plan whose checks passed to a connected robot."""
+def dispatch(
+    plan_id: str,
+    req: DispatchRequest,
+    services: Svc,
+    who: Operator,
+    request: Request,
+    response: Response,
+) -> dict[str, Any]:
+    """Send an approved plan whose checks passed to a connected robot (through
+    the server that drives it)."""
+    fwd = _forward(services, request, response, req.robot, req.model_dump())
+    if fwd is not None:
+        return fwd
     try:
         ex = engine(services).dispatch(plan_id, req.robot, who.actor)
     except DispatchError as exc:
@@ -219,7 +315,12 @@ def execution_recording(
 
 
 @router.post("/executions/{execution_id}/pause")
-def pause(execution_id: str, services: Svc, who: Operator) -> dict[str, Any]:
+def pause(
+    execution_id: str, services: Svc, who: Operator, request: Request, response: Response
+) -> dict[str, Any]:
+    fwd = _forward(services, request, response, _execution_robot(services, execution_id))
+    if fwd is not None:
+        return fwd
     try:
         return engine(services).pause(execution_id, who.actor).public()
     except DispatchError as exc:
@@ -228,8 +329,17 @@ def pause(execution_id: str, services: Svc, who: Operator) -> dict[str, Any]:
 
 @router.post("/executions/{execution_id}/resume")
 def resume(
-    execution_id: str, services: Svc, who: Operator, req: ResumeRequest | None = None
+    execution_id: str,
+    services: Svc,
+    who: Operator,
+    request: Request,
+    response: Response,
+    req: ResumeRequest | None = None,
 ) -> dict[str, Any]:
+    robot = _execution_robot(services, execution_id)
+    fwd = _forward(services, request, response, robot, req.model_dump() if req else None)
+    if fwd is not None:
+        return fwd
     try:
         ex = engine(services).resume(execution_id, who.actor, bool(req and req.clear_faults))
     except DispatchError as exc:
@@ -238,5 +348,13 @@ def resume(
 
 
 @router.post("/executions/{execution_id}/abort")
-def abort(execution_id: str, services: Svc, who: Operator) -> dict[str, Any]:
-    return engine(services).abort(execution_id, who.actor).public()
+def abort(
+    execution_id: str, services: Svc, who: Operator, request: Request, response: Response
+) -> dict[str, Any]:
+    fwd = _forward(services, request, response, _execution_robot(services, execution_id))
+    if fwd is not None:
+        return fwd
+    try:
+        return engine(services).abort(execution_id, who.actor).public()
+    except DispatchError as exc:
+        raise _refuse(exc) from None

@@ -11,6 +11,7 @@ from fastapi import APIRouter, Depends, HTTPException, Query, Request, status
 from pydantic import BaseModel, Field
 
 from server.auth import Principal, Viewer, authenticate, token_from_request
+from server.ownership.peers import FORWARDED_HEADER
 from server.routers.responses import AUTH
 from server.services import Services, get_services
 from server.store import NotFoundError
@@ -26,28 +27,68 @@ class EstopRequest(BaseModel):
     reason: str = Field("operator E-stop", max_length=500)
 
 
-def trigger_estop(services: Services, robot: str | None, actor: str, reason: str) -> dict[str, Any]:
-    """Stop every robot (or one) through every registered handler, then record it.
+def trigger_estop(
+    services: Services,
+    robot: str | None,
+    actor: str,
+    reason: str,
+    *,
+    token: str | None = None,
+    forwarded_by: str | None = None,
+) -> dict[str, Any]:
+    """Stop every robot (or one) through every registered handler, then the
+    robots other servers own through them, then record it.
 
     Handlers run first and each in isolation: a failing handler must not keep
-    the others from stopping their robots; the audit write comes after.
+    the others from stopping their robots.  Then, unless this request was
+    itself forwarded, every other live server sharing the store is asked in
+    parallel with the caller's token (``server.ownership.peers``); alone, this
+    server asks nobody and waits for nothing.  The audit write comes last.
+    ``robots`` says which server reached each robot; ``unreached`` lists the
+    robots nobody reported stopping (no owner, or its server did not answer).
     """
     if robot is not None and services.dispatch is not None:
         known = services.dispatch.robot_names()
         if robot not in known:
             raise NotFoundError(f"no robot {robot!r}; robots: {', '.join(known)}")
     reached, errors = [], []
+    local: list[str] = []
     for handler in list(services.estop_handlers):
         try:
-            handler(robot, reason)
+            got = handler(robot, reason)
             reached.append(getattr(handler, "__name__", repr(handler)))
+            if isinstance(got, list):
+                local.extend(str(name) for name in got)
         except Exception as exc:
             log.exception("E-stop handler failed")
             errors.append(f"{type(exc).__name__}: {exc}")
+    peers = services.peers
+    me = peers.server_id if peers is not None else None
+    robots: dict[str, str | None] = dict.fromkeys(local, me)
+    forwarded: list[dict[str, Any]] = []
+    if peers is not None and forwarded_by is None:
+        forwarded = peers.estop_others(robot, reason, token)
+        for outcome in forwarded:
+            for name in outcome.get("reached", []):
+                robots.setdefault(str(name), outcome["server"])
+            if not outcome.get("ok"):
+                errors.append(f"server {outcome['server']}: {outcome.get('error')}")
+    names = services.dispatch.robot_names() if services.dispatch is not None else []
+    targets = [robot] if robot is not None else names
     target = robot or "all"
-    services.store.audit(actor, "robot", target, "estop", reason)
+    why = f"{reason} (forwarded by server {forwarded_by})" if forwarded_by else reason
+    services.store.audit(actor, "robot", target, "estop", why)
     services.events.publish("estop", {"robot": target, "reason": reason, "by": actor})
-    return {"robot": target, "handlers": reached, "errors": errors}
+    return {
+        "robot": target,
+        "handlers": reached,
+        "errors": errors,
+        "server": me,
+        "local": local,
+        "robots": robots,
+        "unreached": [n for n in targets if n not in robots] if forwarded_by is None else [],
+        "servers": forwarded,
+    }
 
 
 #: E-stop requests never queue behind other requests for a worker thread: they
@@ -80,10 +121,13 @@ async def _estop_first(request: Request, robot: str | None, reason: str) -> dict
     """
     services: Services = request.app.state.services
     token = token_from_request(request)
+    forwarded_by = request.headers.get(FORWARDED_HEADER)
 
     def run() -> dict[str, Any]:
         who = _operator(services, token)
-        return trigger_estop(services, robot, who.actor, reason)
+        return trigger_estop(
+            services, robot, who.actor, reason, token=token, forwarded_by=forwarded_by
+        )
 
     return await asyncio.get_running_loop().run_in_executor(_ESTOP_POOL, run)
 
