@@ -314,4 +314,3 @@ class _LateJoiners:
 
     def on_subscribe(self, client: Any, channel: Any) -> None:
         self._live.subscribed(str(channel.topic))
-

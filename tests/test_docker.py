@@ -102,6 +102,8 @@ def test_scaled_profile_validates() -> None:
     for worker in ("dask-worker-1", "dask-worker-2"):
         w = services[worker]
         assert "tcp://dask-scheduler:8786" in w["command"]
+        assert w["environment"]["DASK_CONFIG"] == "/app/docker/dask"
+        assert (ROOT / "docker" / "dask" / "steelpath.yaml").is_file()
         assert w["environment"]["STEELPATH_DATABASE_URL"] == apis[0]["environment"][
             "STEELPATH_DATABASE_URL"
         ]
