@@ -95,10 +95,15 @@ def create_token(
 
 
 def bootstrap_admin(store: Store, token_file: Path | None) -> str | None:
-    """On first start (no active tokens) create an admin token and return it once."""
+    """On first start (no active tokens) create an admin token and return it once.
+
+    The check and the insert are one transaction (``Store.add_first_token``):
+    of several servers starting on one empty store, exactly one creates it."""
     if store.count_active_tokens() > 0:
         return None
-    _, secret = create_token(store, "first-start admin", "admin", "system")
+    secret = generate_token()
+    if store.add_first_token("first-start admin", "admin", hash_token(secret), "system") is None:
+        return None  # another server sharing the store made it first
     if token_file is not None:
         token_file.parent.mkdir(parents=True, exist_ok=True)
         fd = os.open(token_file, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o600)

@@ -885,6 +885,29 @@ class Store:
             self._audit(conn, actor, "token", tid, "create", reason=reason)
         return self.get_token(tid)
 
+    def add_first_token(
+        self, name: str, role: str, token_hash: str, actor: str
+    ) -> TokenRecord | None:
+        """Store a token only if no active token exists, in one write transaction:
+        servers starting together on one empty store (issue #17) create one
+        first-start token between them, not one each. ``None``: one existed."""
+        tid = new_id("tk")
+        with self.db.transaction() as conn:
+            row = conn.execute(
+                "SELECT COUNT(*) FROM tokens WHERE revoked_at IS NULL "
+                "AND (expires_at IS NULL OR expires_at > ?)",
+                (utcnow(),),
+            ).fetchone()
+            if row is not None and int(row[0]) > 0:
+                return None
+            conn.execute(
+                "INSERT INTO tokens (id, name, role, hash, created_at, revoked_at, expires_at) "
+                "VALUES (?,?,?,?,?,?,?)",
+                (tid, name, role, token_hash, utcnow(), None, None),
+            )
+            self._audit(conn, actor, "token", tid, "create", reason=f"{name} ({role})")
+        return self.get_token(tid)
+
     def get_token(self, token_id: str) -> TokenRecord:
         row = self.db.query_one("SELECT * FROM tokens WHERE id = ?", (token_id,))
         if row is None:

@@ -493,3 +493,32 @@ def test_postgres_reads_see_the_last_commit_and_a_writer_its_own_rows(
         th.join(30)
     assert store.get_plan(pid).stage == "pending"
     store.close()
+
+
+def test_servers_starting_together_make_one_first_start_token(
+    open_store: OpenStore, tmp_path: Path
+) -> None:
+    """Several servers starting on one empty store (issue #17): the check for an
+    active token and the insert are one transaction, so exactly one of them
+    creates (and prints) the first-start admin token."""
+    import threading
+
+    from server.auth import bootstrap_admin
+
+    stores = [open_store(tmp_path / "shared") for _ in range(2)]
+    barrier = threading.Barrier(6)
+    secrets: list[str | None] = []
+
+    def start(store: Store) -> None:
+        barrier.wait()
+        secrets.append(bootstrap_admin(store, None))
+
+    threads = [threading.Thread(target=start, args=(stores[i % 2],)) for i in range(6)]
+    for th in threads:
+        th.start()
+    for th in threads:
+        th.join(60)
+    made = [s for s in secrets if s is not None]
+    assert len(secrets) == 6 and len(made) == 1, secrets
+    assert stores[1].count_active_tokens() == 1
+    assert bootstrap_admin(stores[0], None) is None  # a later start makes none
