@@ -147,7 +147,13 @@ def create_app(settings: Settings | None = None, *, start_scene: bool | None = N
 
             pg_events = PgEventRelay(bus, settings.database_url).start()
         # --- end PostgreSQL event relay
-        jobs = make_job_runner(store, bus, settings)
+        from server.linkservice.client import new_server_id
+
+        # Several servers may share this store (issue #17): this one's id, under
+        # which its link service holds the leases of the robots it drives and
+        # its job runner the plans it plans.
+        server_id = new_server_id()
+        jobs = make_job_runner(store, bus, settings, server_id)
         services = Services(settings=settings, store=store, events=bus, jobs=jobs)
         from server.store.webhooks import WebhookStore
         from server.webhooks import WebhookDispatcher
@@ -188,15 +194,12 @@ def create_app(settings: Settings | None = None, *, start_scene: bool | None = N
             jobs.on_finished.append(scene.plan_finished)
         from robots import ROBOT_NAMES
         from server.linkservice import EmulatorSupervisor, LinkServiceClient
-        from server.linkservice.client import new_server_id, server_url
+        from server.linkservice.client import server_url
         from server.ownership.keeper import check_lease
         from server.ownership.peers import Peers
         from server.store.ownership import OwnershipStore
 
-        # Several servers may share this store (issue #17 §3): this one's id,
-        # under which its link service holds the leases of the robots it drives.
         check_lease(settings.robot_lease_s)
-        server_id = new_server_id()
         if settings.emulators:
             services.emulators = EmulatorSupervisor(
                 settings.data,

@@ -254,8 +254,19 @@ class DaskJobRunner(JobRunner):
         stuck_s: float = 600.0,
         poll_s: float = 0.2,
         connect_timeout_s: float = 30.0,
+        server_id: str | None = None,
+        orphan_after_s: float = 10.0,
+        sweep_s: float = 2.0,
     ) -> None:
-        super().__init__(store, events, mode="dask", workers=0)
+        super().__init__(
+            store,
+            events,
+            mode="dask",
+            workers=0,
+            server_id=server_id,
+            orphan_after_s=orphan_after_s,
+            sweep_s=sweep_s,
+        )
         self.scheduler = scheduler
         self.data_dir = str(Path(data_dir).resolve())
         self.database_url = database_url
@@ -275,6 +286,7 @@ class DaskJobRunner(JobRunner):
         self._recover()
         self._poller = threading.Thread(target=self._poll_loop, name="dask-jobs", daemon=True)
         self._poller.start()
+        self._start_sweeper()
 
     def shutdown(self) -> None:
         """Stop following and disconnect.  Dask drops the tasks no worker has
@@ -282,6 +294,7 @@ class DaskJobRunner(JobRunner):
         store if it ends first.  The next start re-queues what is left queued or
         planning (:meth:`_recover`); a run still going then stops at its next
         progress call (the plan is no longer its)."""
+        self._stop_sweeper()
         self._stop.set()
         if self._poller is not None:
             self._poller.join(timeout=5)
@@ -289,24 +302,24 @@ class DaskJobRunner(JobRunner):
             with contextlib.suppress(Exception):
                 self._client.close(timeout=10)
 
-    def _recover(self) -> None:
-        """Re-submit plans left queued or planning, as a fresh start (attempts 0)."""
-        for plan in self.store.plans_in_states({PlanState.QUEUED, PlanState.PLANNING}):
-            if plan.state == PlanState.PLANNING:
-                self.store.transition_plan(
-                    plan.id,
-                    "requeue",
-                    "system",
-                    "server restarted while planning",
-                    attempts=0,
-                    worker=None,
-                )
-            self.submit(plan.id)
+    def _requeue(self, plan_id: str, why: str) -> None:
+        """Re-queue as a fresh start (attempts 0, no run): a run still going on a
+        worker for the previous server stops at its next progress call."""
+        self.store.transition_plan(
+            plan_id,
+            "requeue",
+            "system",
+            why,
+            expect=PlanState.PLANNING,
+            attempts=0,
+            worker=None,
+        )
 
     # ------------------------------------------------------------------- jobs
     def submit(self, plan_id: str) -> None:
-        plan = self.store.get_plan(plan_id, result=False, program=False)
         assert self._client is not None, "DaskJobRunner.start() was not called"
+        self._owners.assign(plan_id, self.server_id)
+        plan = self.store.get_plan(plan_id, result=False, program=False)
         fut = self._client.submit(
             run_plan_on_worker,
             plan_id,

@@ -44,6 +44,8 @@ from server.events import EventBus
 from server.lifecycle import IllegalTransitionError, PlanState
 from server.lifetime import die_with_parent
 from server.store import NotFoundError, Store
+from server.store.ownership import OwnershipStore
+from server.store.plan_owners import PlanOwnerStore
 
 log = logging.getLogger(__name__)
 
@@ -231,9 +233,15 @@ class _PlanRef:
     params: dict[str, Any]
 
 
-def make_job_runner(store: Store, events: EventBus, settings: Any) -> JobRunner:
+def make_job_runner(
+    store: Store, events: EventBus, settings: Any, server_id: str | None = None
+) -> JobRunner:
     """The app's runner: on the Dask cluster of ``settings.dask_scheduler`` when
-    set (imported only then), else the local pool of ``settings.job_mode``."""
+    set (imported only then), else the local pool of ``settings.job_mode``.
+
+    ``server_id`` names this server in ``plans.planner`` (servers sharing the
+    store adopt only the plans of a server silent for ``orphan_plan_s``)."""
+    owner = {"server_id": server_id, "orphan_after_s": settings.orphan_plan_s}
     if settings.dask_scheduler:
         from server.dask_jobs import DaskJobRunner
 
@@ -244,6 +252,7 @@ def make_job_runner(store: Store, events: EventBus, settings: Any) -> JobRunner:
             data_dir=Path(settings.data),
             database_url=settings.database_url,
             stuck_s=settings.dask_stuck_s,
+            **owner,
         )
     return JobRunner(
         store,
@@ -251,11 +260,22 @@ def make_job_runner(store: Store, events: EventBus, settings: Any) -> JobRunner:
         mode=settings.job_mode,
         workers=settings.job_workers,
         preload=settings.job_preload,
+        **owner,
     )
 
 
 class JobRunner:
-    """Owns the worker pool, the progress listener and the cancel flags."""
+    """Owns the worker pool, the progress listener and the cancel flags.
+
+    **Several servers on one store.**  Each plan's job belongs to the server
+    that submitted it (``plans.planner``, :mod:`server.store.plan_owners`).
+    At start, and then every ``sweep_s`` in a thread of its own, a runner
+    adopts the queued or planning plans whose server is neither itself nor
+    alive (no heartbeat in ``servers`` for ``orphan_after_s``) and plans them
+    again — a plan left ``planning`` is re-queued first.  So a server starting
+    beside others leaves their plans alone, and a server that dies has its
+    plans finished by another within about ``orphan_after_s + sweep_s``.
+    """
 
     def __init__(
         self,
@@ -265,12 +285,22 @@ class JobRunner:
         mode: str = "process",
         workers: int = 2,
         preload: bool = False,
+        server_id: str | None = None,
+        orphan_after_s: float = 10.0,
+        sweep_s: float = 2.0,
     ) -> None:
         self.store = store
         self.events = events
         self.mode = mode
         self.workers = workers
         self.preload = preload
+        self.server_id = server_id or f"srv_local_{os.getpid()}_{id(self):x}"
+        self.orphan_after_s = orphan_after_s
+        self.sweep_s = sweep_s
+        self._owners = PlanOwnerStore(store.db)
+        self._servers = OwnershipStore(store.db)
+        self._sweeping = threading.Event()
+        self._sweeper: threading.Thread | None = None
         self._lock = threading.RLock()
         self._futures: dict[str, Future[Any]] = {}
         self._last_progress: dict[str, float] = {}
@@ -297,6 +327,7 @@ class JobRunner:
         self._listener = threading.Thread(target=self._listen, name="job-progress", daemon=True)
         self._listener.start()
         self._recover()
+        self._start_sweeper()
 
     @staticmethod
     def _start_manager() -> SyncManager:
@@ -329,6 +360,7 @@ class JobRunner:
         return pool
 
     def shutdown(self) -> None:
+        self._stop_sweeper()
         with self._lock:
             for pid in list(self._futures):
                 self._cancel[pid] = True
@@ -345,18 +377,65 @@ class JobRunner:
             self._spawner.stop()
 
     def _recover(self) -> None:
-        """Re-queue plans a previous process left queued or planning."""
-        for plan in self.store.plans_in_states({PlanState.QUEUED, PlanState.PLANNING}):
-            if plan.state == PlanState.PLANNING:
-                self.store.transition_plan(
-                    plan.id, "requeue", "system", "server restarted while planning"
-                )
-            self.submit(plan.id)
+        """At start: adopt the plans a previous process (or a dead server) left
+        queued or planning."""
+        self.adopt_orphans()
+
+    # ------------------------------------------------- plans of dead servers
+    def adopt_orphans(self) -> list[str]:
+        """Adopt and plan again every active plan whose server is not alive.
+
+        Returns the ids adopted.  A plan another server adopted first, or that
+        ended meanwhile, is skipped (the adoption is a conditional UPDATE).
+        """
+        cutoff = time.time() - self.orphan_after_s
+        live = [s.id for s in self._servers.servers() if s.heartbeat_at >= cutoff]
+        adopted = []
+        for plan in self._owners.orphans(self.server_id, live):
+            if plan.id in self.running() or not self._owners.adopt(plan, self.server_id):
+                continue
+            try:
+                if plan.state == PlanState.PLANNING:
+                    why = (
+                        "server restarted while planning"
+                        if plan.planner is None
+                        else f"server {plan.planner} stopped while planning; "
+                        f"adopted by {self.server_id}"
+                    )
+                    self._requeue(plan.id, why)
+                self.submit(plan.id)
+                adopted.append(plan.id)
+            except (IllegalTransitionError, NotFoundError) as exc:
+                log.info("plan %s changed while being adopted: %s", plan.id, exc)
+        if adopted:
+            log.warning("adopted %d plan(s) of stopped servers: %s", len(adopted), adopted)
+        return adopted
+
+    def _requeue(self, plan_id: str, why: str) -> None:
+        self.store.transition_plan(plan_id, "requeue", "system", why, expect=PlanState.PLANNING)
+
+    def _start_sweeper(self) -> None:
+        self._sweeping.clear()
+        self._sweeper = threading.Thread(target=self._sweep, name="plan-orphans", daemon=True)
+        self._sweeper.start()
+
+    def _stop_sweeper(self) -> None:
+        self._sweeping.set()
+        if self._sweeper is not None:
+            self._sweeper.join(timeout=5)
+
+    def _sweep(self) -> None:
+        while not self._sweeping.wait(self.sweep_s):
+            try:
+                self.adopt_orphans()
+            except Exception:  # a store hiccup must not end the sweeping
+                log.exception("adopting the plans of stopped servers failed")
 
     # ------------------------------------------------------------------- jobs
     def submit(self, plan_id: str) -> None:
-        plan = self.store.get_plan(plan_id)
         assert self._executor is not None, "JobRunner.start() was not called"
+        self._owners.assign(plan_id, self.server_id)
+        plan = self.store.get_plan(plan_id)
         with self._lock:
             self._cancel[plan_id] = False
             clouds = str(self.store.arrays.path("clouds"))

@@ -113,6 +113,13 @@ class Settings(BaseSettings):
         description="how long a server's ownership of a robot link lasts without renewal; "
         "another server takes the robot over only after it has lapsed",
     )
+    orphan_plan_s: float = Field(
+        10.0,
+        gt=0,
+        le=3600,
+        description="a queued or planning plan whose server has sent no heartbeat for this "
+        "long is adopted and planned again by another server sharing the store",
+    )
     log_level: str = Field("info", description="uvicorn log level")
     access_log: bool = Field(
         False,

@@ -234,6 +234,11 @@ MIGRATIONS: list[str] = [
         taken_at TEXT NOT NULL
     );
     """,
+    # 11: which server runs each plan's planning job, so that servers sharing the
+    # store adopt only the plans of a server that died (server/store/plan_owners.py)
+    """
+    ALTER TABLE plans ADD COLUMN planner TEXT;
+    """,
 ]
 
 SCHEMA_VERSION = len(MIGRATIONS)

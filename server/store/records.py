@@ -80,6 +80,8 @@ class PlanRecord:
     attempts: int = 0
     cancel_requested: int = 0
     worker: str | None = None
+    #: The server whose job runner plans it (``server/store/plan_owners.py``).
+    planner: str | None = None
     _loader: Any = field(default=None, repr=False, compare=False)
 
     @classmethod
