@@ -167,7 +167,27 @@ class LeaseKeeper:
             self._last_ok = started
             self._fenced = False
             self._apply(leases, stored, emulated)
+            self._latch_held_estops()
         return leases
+
+    def _latch_held_estops(self) -> None:
+        """Latch every E-stop that reached no server for a robot this server now
+        drives (pressed while its dead owner's lease was lapsing): the robot
+        stopped on its watchdog then, and stays stopped until an operator clears it."""
+        owned = [name for name in self.robots if self.engine.owns(name)]
+        try:
+            held = self.store.take_estops(owned)
+        except Exception:
+            log.exception("could not read the E-stops held for this server's robots")
+            return
+        for name, e in held.items():
+            why = f"{e['reason']} (held since {e['at']}: no server reached the robot then)"
+            log.warning("latching the E-stop of %s by %s: %s", name, e["actor"], why)
+            try:
+                self.engine.estop(name, why)
+                self.engine.store.audit(e["actor"], "robot", name, "estop", why)
+            except Exception:
+                log.exception("could not latch the held E-stop of %s", name)
 
     def _apply(
         self, leases: Mapping[str, LeaseRow], stored: Mapping[str, str], emulated: dict[str, str]

@@ -209,6 +209,9 @@ def takeover(
 def clear_estop(
     name: str, services: Svc, who: Operator, request: Request, response: Response
 ) -> dict[str, Any]:
+    if services.peers is not None and services.peers.store.take_estops([name]):
+        # An E-stop held for the robot's next driver is cleared with it.
+        services.store.audit(who.actor, "robot", name, "clear-held-estop")
     fwd = _forward(services, request, response, name)
     if fwd is not None:
         return fwd

@@ -45,7 +45,9 @@ def trigger_estop(
     parallel with the caller's token (``server.ownership.peers``); alone, this
     server asks nobody and waits for nothing.  The audit write comes last.
     ``robots`` says which server reached each robot; ``unreached`` lists the
-    robots nobody reported stopping (no owner, or its server did not answer).
+    robots nobody reported stopping (no owner, or its server did not answer);
+    ``held`` those whose E-stop is kept in the store for the next server that
+    drives them, which latches it before anything else.
     """
     if robot is not None and services.dispatch is not None:
         known = services.dispatch.robot_names()
@@ -76,6 +78,17 @@ def trigger_estop(
     names = services.dispatch.robot_names() if services.dispatch is not None else []
     targets = [robot] if robot is not None else names
     target = robot or "all"
+    unreached = [n for n in targets if n not in robots] if forwarded_by is None else []
+    held: list[str] = []
+    if unreached and peers is not None:
+        # No live server drives these (an owner died and its lease has not lapsed,
+        # or none took them): the next server to drive each latches it first.
+        try:
+            peers.store.hold_estops(unreached, actor, reason)
+            held = unreached
+        except Exception as exc:
+            log.exception("could not hold the E-stop for the unreached robots")
+            errors.append(f"holding the E-stop for {', '.join(unreached)}: {exc}")
     why = f"{reason} (forwarded by server {forwarded_by})" if forwarded_by else reason
     services.store.audit(actor, "robot", target, "estop", why)
     services.events.publish("estop", {"robot": target, "reason": reason, "by": actor})
@@ -86,7 +99,8 @@ def trigger_estop(
         "server": me,
         "local": local,
         "robots": robots,
-        "unreached": [n for n in targets if n not in robots] if forwarded_by is None else [],
+        "unreached": unreached,
+        "held": held,
         "servers": forwarded,
     }
 

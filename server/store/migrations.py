@@ -235,9 +235,16 @@ MIGRATIONS: list[str] = [
     );
     """,
     # 11: which server runs each plan's planning job, so that servers sharing the
-    # store adopt only the plans of a server that died (server/store/plan_owners.py)
+    # store adopt only the plans of a server that died (server/store/plan_owners.py);
+    # E-stops that reached no server, latched by the robot's next owner
     """
     ALTER TABLE plans ADD COLUMN planner TEXT;
+    CREATE TABLE estop_pending (
+        robot TEXT PRIMARY KEY,
+        at TEXT NOT NULL,
+        actor TEXT NOT NULL,
+        reason TEXT NOT NULL
+    );
     """,
 ]
 

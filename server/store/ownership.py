@@ -143,6 +143,42 @@ class OwnershipStore:
         )
         return {r["name"]: _lease(r) for r in rows}
 
+    # ------------------------------------------------- E-stops that reached nobody
+    # An E-stop for a robot that no live server answered for (its owner died and
+    # its lease has not lapsed yet, or no server drives it) is kept here; the
+    # server that next drives the robot latches it first (LeaseKeeper).
+
+    def hold_estops(self, names: Iterable[str], actor: str, reason: str) -> None:
+        """Keep an E-stop for each robot in ``names`` until a server drives it."""
+        at = utcnow()
+        with self.db.transaction() as conn:
+            for name in names:
+                conn.execute(
+                    "INSERT INTO estop_pending (robot, at, actor, reason) VALUES (?,?,?,?) "
+                    "ON CONFLICT (robot) DO UPDATE SET at = excluded.at, "
+                    "actor = excluded.actor, reason = excluded.reason",
+                    (name, at, actor, reason),
+                )
+
+    def take_estops(self, names: Iterable[str]) -> dict[str, dict[str, str]]:
+        """Remove and return the held E-stops of ``names`` (for their new driver)."""
+        wanted = list(names)
+        if not wanted:
+            return {}
+        marks = ",".join("?" * len(wanted))
+        with self.db.transaction() as conn:
+            rows = conn.execute(
+                f"SELECT robot, at, actor, reason FROM estop_pending WHERE robot IN ({marks})",
+                wanted,
+            ).fetchall()
+            for r in rows:
+                conn.execute("DELETE FROM estop_pending WHERE robot = ?", (r["robot"],))
+        return {r["robot"]: {k: r[k] for k in ("at", "actor", "reason")} for r in rows}
+
+    def held_estops(self) -> dict[str, dict[str, str]]:
+        rows = self.db.query("SELECT robot, at, actor, reason FROM estop_pending")
+        return {r["robot"]: {k: r[k] for k in ("at", "actor", "reason")} for r in rows}
+
     # ------------------------------------------------------- robot URLs (shared)
     def record_emulator_urls(self, urls: Mapping[str, str], server_id: str) -> None:
         """Publish this server's embedded emulators' URLs in the shared ``robots`` table.

@@ -78,6 +78,12 @@ def pair(
         p.close()
 
 
+def estop_reasons(server: ServeProcess, robot: str) -> list[str]:
+    """The reasons of the robot's ``estop`` audit events."""
+    audit = server.get(f"/audit?entity=robot&entity_id={robot}")
+    return [str(e["reason"]) for e in audit if e.get("action") == "estop"]
+
+
 def owners(server: ServeProcess) -> dict[str, Any]:
     return {n: r["owner"] for n, r in server.robots().items()}
 
@@ -209,6 +215,10 @@ def test_killed_owner_robot_taken_over_after_the_lease_and_run_interrupted(pair:
         10,
         "the robot to stop when its server died",
     )
+    # An E-stop pressed now reaches no server for ara (A is dead, B does not
+    # own it yet): it is reported unreached and held for ara's next driver.
+    held = b.post("/estop", {"robot": "ara", "reason": "pressed in the gap"})
+    assert held["unreached"] == ["ara"] and held["held"] == ["ara"], held
     # B takes ara over once A's lease has lapsed: not before, and soon after.
     took = wait_for(
         lambda: (r := b.get("/robots/ara/state"))["owned_here"] and r,
@@ -228,7 +238,17 @@ def test_killed_owner_robot_taken_over_after_the_lease_and_run_interrupted(pair:
     wait_for(lambda: b.get("/robots/ara/state")["state"] in ("ready", "fault"), 20, "B connected")
     time.sleep(1.0)
     assert b.get(f"/executions/{ex['id']}")["acked"] == got["acked"]
-    assert b.get("/robots/ara/state")["report"]["executing"] == -1
+    state = b.get("/robots/ara/state")
+    assert state["report"]["executing"] == -1
+    # The held E-stop was latched by B when it took ara over: nothing resumes
+    # until an operator clears it.
+    assert state["estop_latched"], state
+    r = b.http.post(f"/executions/{ex['id']}/resume", json={})
+    assert r.status_code == 409 and "E-stopped" in r.json()["detail"], r.text
+    assert any(
+        "pressed in the gap" in why and "held since" in why for why in estop_reasons(b, "ara")
+    ), estop_reasons(b, "ara")
+    b.post("/robots/ara/clear-estop")
     # Not lost: resumed on the new owner, it completes, every command exactly once.
     b.post(f"/executions/{ex['id']}/resume")
     done = wait_for(

@@ -27,6 +27,7 @@ class FakeEngine:
         self.store = store
         self.owned: dict[str, str] = {}
         self.log: list[tuple[str, str, float]] = []
+        self.estops: list[tuple[str, str]] = []
         self._lock = threading.Lock()
 
     def owns(self, name: str) -> bool:
@@ -46,6 +47,12 @@ class FakeEngine:
 
     def sync_url(self, name: str, url: str) -> None:
         self.owned[name] = url
+
+    def estop(self, robot: str | None, reason: str) -> list[str]:
+        with self._lock:
+            self.log.append(("estop", str(robot), time.monotonic()))
+            self.estops.append((str(robot), reason))
+        return [str(robot)]
 
     def set_store_emulated(self, urls: dict[str, str]) -> None:
         pass
@@ -133,6 +140,32 @@ def test_one_owner_then_takeover_only_after_the_lease_lapses(store) -> None:
         assert first - stopped >= LEASE - LEASE / 3 - 0.05, first - stopped
     finally:
         a.stop()
+        b.stop()
+
+
+def test_an_estop_that_reached_nobody_is_latched_by_the_robots_next_driver(store) -> None:
+    """An E-stop pressed while ara's owner is dead and its lease not lapsed is held
+    in the store; the server that takes ara over latches it right after adopting
+    it (same tick), and only ara's: a held E-stop of a robot nobody drives stays."""
+    own = OwnershipStore(store.db)
+    own.claim("dead", "http://dead", ["ara"], LEASE, time.time())  # a killed owner
+    own.hold_estops(["ara", "ghost"], "op", "operator E-stop")
+    assert set(own.held_estops()) == {"ara", "ghost"}
+    b, eng = keeper(store, "b")
+    b.start()
+    try:
+        deadline = time.monotonic() + LEASE + 3
+        while "ara" not in eng.owned and time.monotonic() < deadline:
+            time.sleep(0.02)
+        assert "ara" in eng.owned
+        assert eng.estops == [("ara", eng.estops[0][1])] and "operator E-stop" in eng.estops[0][1]
+        ops = [(op, name) for op, name, _ in eng.log if name == "ara"]
+        assert ops == [("adopt", "ara"), ("estop", "ara")], ops
+        assert set(own.held_estops()) == {"ghost"}
+        time.sleep(LEASE / 3 + 0.2)  # later ticks latch nothing again
+        assert len(eng.estops) == 1
+        assert [e.action for e in store.list_audit("robot", "ara")] == ["estop"]
+    finally:
         b.stop()
 
 
