@@ -22,6 +22,14 @@ conditional UPDATEs next to it), so a late "zombie" run can neither finish a
 plan twice nor overwrite a cancel.  A worker whose plan has written no
 progress for ``stuck_s`` is restarted through its nanny, which is a death as
 above.
+
+A lost scheduler cancels every future of the client ("scheduler connection
+lost") and its workers exit; a supervisor (compose's restart policy, systemd)
+starts them again.  Each plan this server follows that is still queued or
+planning is then *lost*, not failed: the poller waits for the client to be
+connected again (it reconnects by itself within ``connect_timeout_s``, after
+which a new client is made, tried every ``reconnect_s``) and submits it again,
+a plan left ``planning`` re-queued as a fresh start, as after a server restart.
 """
 
 from __future__ import annotations
@@ -238,6 +246,8 @@ class _Flight:
     updated_at: str
     seen_change: float = field(default_factory=time.monotonic)
     restarting: bool = False
+    #: Its future was cancelled by a lost scheduler: submit it again once connected.
+    lost: bool = False
 
 
 class DaskJobRunner(JobRunner):
@@ -254,6 +264,7 @@ class DaskJobRunner(JobRunner):
         stuck_s: float = 600.0,
         poll_s: float = 0.2,
         connect_timeout_s: float = 30.0,
+        reconnect_s: float = 2.0,
         server_id: str | None = None,
         orphan_after_s: float = 10.0,
         sweep_s: float = 2.0,
@@ -273,6 +284,8 @@ class DaskJobRunner(JobRunner):
         self.stuck_s = stuck_s
         self.poll_s = poll_s
         self.connect_timeout_s = connect_timeout_s
+        self.reconnect_s = reconnect_s
+        self._next_connect = 0.0
         self._client: Any = None
         self._flights: dict[str, _Flight] = {}
         self._stop = threading.Event()
@@ -320,6 +333,14 @@ class DaskJobRunner(JobRunner):
         assert self._client is not None, "DaskJobRunner.start() was not called"
         self._owners.assign(plan_id, self.server_id)
         plan = self.store.get_plan(plan_id, result=False, program=False)
+        if self._client.status != "running":
+            # Not connected (the scheduler is being restarted): a message sent
+            # now would be dropped; the poller submits it once connected.
+            with self._lock:
+                self._flights[plan_id] = _Flight(
+                    None, plan.state, plan.progress, plan.stage, plan.updated_at, lost=True
+                )
+            return
         fut = self._client.submit(
             run_plan_on_worker,
             plan_id,
@@ -345,7 +366,7 @@ class DaskJobRunner(JobRunner):
         ):
             with self._lock:
                 flight = self._flights.get(plan_id)
-            if flight is not None:
+            if flight is not None and flight.future is not None:
                 with contextlib.suppress(Exception):
                     self._client.cancel([flight.future], asynchronous=False)
             self._poll_once()  # publish now, as the local runner does
@@ -372,6 +393,19 @@ class DaskJobRunner(JobRunner):
                 return  # not (any more) this server's task for the plan
         status = fut.status
         if status == "cancelled":
+            # Not by this server (its cancel ends the plan in the store first):
+            # the scheduler was lost.  Submitted again once connected.
+            try:
+                plan = self.store.get_plan(plan_id, result=False, program=False)
+            except NotFoundError:
+                return
+            if plan.state in (PlanState.QUEUED, PlanState.PLANNING) and not plan.cancel_requested:
+                log.warning(
+                    "plan %s: the Dask scheduler was lost; it will be submitted again", plan_id
+                )
+                with self._lock:
+                    if self._flights.get(plan_id) is flight:
+                        flight.lost = True
             return
         if status == "error":
             exc = fut.exception()
@@ -400,11 +434,13 @@ class DaskJobRunner(JobRunner):
                 log.exception("following the Dask plans failed")
 
     def _poll_once(self) -> None:
-        """Read the plans in flight; publish what changed; end those that ended."""
+        """Read the plans in flight; publish what changed; end those that ended;
+        submit again those a lost scheduler dropped."""
         with self._lock:
             ids = list(self._flights)
         if not ids:
             return
+        self._resubmit_lost()
         rows = {r["id"]: r for r in self.store.plan_run_rows(ids)}
         ended: list[str] = []
         now = time.monotonic()
@@ -455,6 +491,60 @@ class DaskJobRunner(JobRunner):
                     cb(pid)
                 except Exception:
                     log.exception("on_finished callback failed for %s", pid)
+
+    def _connected(self) -> bool:
+        """Whether the client is connected; a client that gave up reconnecting
+        (closed) is replaced, at most every ``reconnect_s``."""
+        status = self._client.status
+        if status == "running":
+            return True
+        if status not in ("closed", "closing", "failed") or time.monotonic() < self._next_connect:
+            return False  # still reconnecting by itself, or tried a moment ago
+        self._next_connect = time.monotonic() + self.reconnect_s
+        from distributed import Client
+
+        try:
+            client = Client(self.scheduler, timeout=self.reconnect_s, set_as_default=False)
+        except (OSError, TimeoutError) as exc:
+            log.warning("the Dask scheduler %s is unreachable: %s", self.scheduler, exc)
+            return False
+        old, self._client = self._client, client
+        with contextlib.suppress(Exception):
+            old.close(timeout=1)
+        log.warning("connected to the Dask scheduler %s again", self.scheduler)
+        return True
+
+    def _resubmit_lost(self) -> None:
+        """Submit again each plan whose future a lost scheduler cancelled."""
+        with self._lock:
+            lost = [pid for pid, f in self._flights.items() if f.lost]
+        if not lost or not self._connected():
+            return
+        for pid in lost:
+            try:
+                plan = self.store.get_plan(pid, result=False, program=False)
+            except NotFoundError:
+                plan = None
+            with self._lock:
+                flight = self._flights.get(pid)
+                if flight is None:
+                    continue
+                flight.lost = False
+                if plan is None or plan.state not in (PlanState.QUEUED, PlanState.PLANNING):
+                    continue  # ended meanwhile: the poll publishes it as any end
+                self._flights.pop(pid, None)
+            try:
+                if plan.state == PlanState.PLANNING:
+                    self._requeue(
+                        pid, "the Dask scheduler was lost while planning; submitted again"
+                    )
+                else:
+                    self.store.audit(
+                        "system", "plan", pid, "resubmit", "the Dask scheduler was lost"
+                    )
+                self.submit(pid)
+            except (IllegalTransitionError, NotFoundError) as exc:
+                log.info("plan %s changed while being submitted again: %s", pid, exc)
 
     def _restart_stuck(self, plan_id: str, run: str | None, flight: _Flight) -> None:
         """Restart the worker of a plan that wrote no progress for ``stuck_s``.

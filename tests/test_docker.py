@@ -104,9 +104,10 @@ def test_scaled_profile_validates() -> None:
         assert "tcp://dask-scheduler:8786" in w["command"]
         assert w["environment"]["DASK_CONFIG"] == "/app/docker/dask"
         assert (ROOT / "docker" / "dask" / "steelpath.yaml").is_file()
-        assert w["environment"]["STEELPATH_DATABASE_URL"] == apis[0]["environment"][
-            "STEELPATH_DATABASE_URL"
-        ]
+        assert (
+            w["environment"]["STEELPATH_DATABASE_URL"]
+            == apis[0]["environment"]["STEELPATH_DATABASE_URL"]
+        )
     caddyfile = (ROOT / "docker" / "Caddyfile").read_text()
     assert "api-1:8000" in caddyfile and "api-2:8000" in caddyfile
     assert services["proxy"]["ports"]

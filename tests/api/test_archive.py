@@ -43,9 +43,7 @@ def export(api, plan_id: str) -> bytes:
 
 
 def upload(api, data: bytes, role: str = "admin") -> Any:
-    return api.post(
-        "/api/v1/imports", role, files={"file": ("plan.zip", data, "application/zip")}
-    )
+    return api.post("/api/v1/imports", role, files={"file": ("plan.zip", data, "application/zip")})
 
 
 def snapshot(api) -> tuple[dict[str, int], list[str]]:

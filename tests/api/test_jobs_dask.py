@@ -26,7 +26,12 @@ from server.kinds import registry
 from server.store import Store
 from server.store.store import worker_name
 from tests.conftest import make_settings
-from tests.support.dask_cluster import DaskCluster, dask_cluster
+from tests.support.dask_cluster import (
+    DaskCluster,
+    dask_cluster,
+    kill_scheduler,
+    start_scheduler_again,
+)
 from tests.support.postgres import pg_url, postgres_server  # noqa: F401
 
 #: The store-level tests run on both backends (a PostgreSQL server is started
@@ -237,6 +242,50 @@ def test_server_restart_requeues_and_the_old_run_writes_nothing(
             acts = [e.action for e in reversed(store.list_audit("plan", pid))]
             assert acts.count("requeue") == 1 and acts.count("finish") == 1, acts
             assert "rerun" not in acts and "fail" not in acts, acts
+    finally:
+        registry.cache_clear()
+
+
+@pytest.mark.parametrize("client_gives_up", [False, True], ids=["reconnects", "new-client"])
+def test_a_lost_scheduler_loses_no_plan_and_finishes_each_once(
+    make_api, monkeypatch: pytest.MonkeyPatch, tmp_path: Path, client_gives_up: bool
+) -> None:
+    """The scheduler is killed while one plan is planning; a second plan is
+    submitted while it is down.  Once a supervisor has started the scheduler
+    and workers again, both are planned: the first re-queued once (its run
+    died with its worker), each finished once, none failed.  The client either
+    reconnects by itself, or (``new-client``) has given up and closed, and the
+    runner makes a new one."""
+    monkeypatch.setenv("STEELPATH_EXTRA_KINDS", "tests.support.kinds")
+    registry.cache_clear()
+    try:
+        with dask_cluster(tmp_path / "dask-lost", workers=1) as c:
+            api = make_api(tmp_path / "var", dask_scheduler=c.address)
+            jobs = api.services.jobs
+            old_client = jobs._client
+            if client_gives_up:
+                # Dask's reconnect deadline (the connect timeout, 30 s in the app).
+                old_client._timeout = 0.5
+            first = api.submit("test.job", {"seconds": 3})["id"]
+            _poll(api, first, lambda p: (p["stage"] or "").startswith("tick"))
+            kill_scheduler(c)
+            gone = ("closed",) if client_gives_up else ("connecting", "closed")
+            deadline = time.monotonic() + 10
+            while old_client.status not in gone:
+                assert time.monotonic() < deadline, old_client.status
+                time.sleep(0.05)
+            second = api.submit("test.job", {"seconds": 1})["id"]
+            assert api.get(f"/api/v1/plans/{second}").json()["state"] == "queued"
+            start_scheduler_again(c)
+            for pid in (first, second):
+                plan = api.wait(pid, timeout=120)
+                assert plan["state"] == "planned", plan
+                acts = _actions(plan)
+                assert acts.count("finish") == 1 and "fail" not in acts, acts
+            requeues = [a for a in api.wait(first)["audit"] if a["action"] == "requeue"]
+            assert len(requeues) == 1 and "scheduler was lost" in requeues[0]["reason"]
+            assert "requeue" not in _actions(api.wait(second))
+            assert (jobs._client is not old_client) == client_gives_up
     finally:
         registry.cache_clear()
 

@@ -198,9 +198,7 @@ def test_operator_accepts_a_proposal_through_rest(sapi) -> None:
     assert prop["patch"] == {"start": "b1", "end": "c0"}
     assert prop["source"] == "scene client 7" and prop["kind"] == "demo.route"
     assert {"id", "plan_id", "patch", "created_at", "source"} <= set(prop)
-    published = [
-        e for e in sapi.services.events.recent(500) if e not in events_before
-    ]
+    published = [e for e in sapi.services.events.recent(500) if e not in events_before]
     assert any(e.type == "proposal" and e.data["id"] == prop["id"] for e in published)
     assert sapi.get("/api/v1/scene", "viewer").json()["proposals"][0]["id"] == prop["id"]
 

@@ -333,9 +333,7 @@ class PlanWatch:
                 self.done[pid] = plan
                 self.secs[pid] = round(now - self.started.get(pid, now), 1)
 
-    def wait(
-        self, ids: list[str], timeout: float, until: Callable[[], bool] | None = None
-    ) -> None:
+    def wait(self, ids: list[str], timeout: float, until: Callable[[], bool] | None = None) -> None:
         """Until every plan in ``ids`` is terminal (or ``until()`` holds)."""
         deadline = time.monotonic() + timeout
         while True:

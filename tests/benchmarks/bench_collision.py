@@ -278,7 +278,9 @@ def section_cmbot_experiment(quick: bool) -> None:
     print("\n== 5. CMBOT §4 arm experiment, before (per-pair GJK) / after (closed form) ==")
     model = load_robot("cmbot")
     current = cmbot_experiment.pair_distances
-    print(f"{'':7s} {'err mm':>7s} {'clr m':>7s} {'err0 mm':>7s} {'clr0 m':>7s} {'gate':>5s} {'s':>6s}")
+    print(
+        f"{'':7s} {'err mm':>7s} {'clr m':>7s} {'err0 mm':>7s} {'clr0 m':>7s} {'gate':>5s} {'s':>6s}"
+    )
     times = {}
     for tag, fn in (("before", _gjk_pair_distances), ("after", current)):
         cmbot_experiment.pair_distances = fn  # track() looks it up at call time

@@ -49,9 +49,7 @@ def pyserial_read(port: Any, sock: Any, timeout_s: float) -> bytes:
 
 def stream_once(url: str, secret: bytes, n: int) -> tuple[float, float, str]:
     """(CPU s, wall s, final state) for streaming ``n`` way-points over a fresh link."""
-    prog = Program(
-        tuple(JointMove(q_rad=(0.01 * (i % 50),) * 6, duration_s=0.1) for i in range(n))
-    )
+    prog = Program(tuple(JointMove(q_rad=(0.01 * (i % 50),) * 6, duration_s=0.1) for i in range(n)))
     with RobotLink(url, LinkConfig(secret=secret)) as link:
         deadline = time.monotonic() + 20
         while not link.connected:

@@ -99,14 +99,19 @@ def test_loop_url_never_completes_a_handshake() -> None:
 def test_wrong_robot_is_refused() -> None:
     with (
         Emulator("generic") as emu,
-        RobotLink(emu.url, link_config(emu, expected_robot="cmbot", backoff_initial_s=0.05)) as link,
+        RobotLink(
+            emu.url, link_config(emu, expected_robot="cmbot", backoff_initial_s=0.05)
+        ) as link,
     ):
         assert link.wait_for(lambda lk: "expected 'cmbot'" in lk.status().reason, 5)
         assert not link.connected
 
 
 def test_pty_serial_device() -> None:
-    with Emulator("generic", listen=None, pty=True) as emu, RobotLink(emu.pty_path, link_config(emu)) as link:
+    with (
+        Emulator("generic", listen=None, pty=True) as emu,
+        RobotLink(emu.pty_path, link_config(emu)) as link,
+    ):
         assert emu.pty_path.startswith("/dev/pts/")
         assert link.wait_connected(5)
         link.send_command(JointMove((0.2,) * 6, 0.0), run_id=1, index=0)

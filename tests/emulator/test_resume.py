@@ -431,9 +431,11 @@ def test_emulator_process_restarted_from_its_state_file(tmp_path: Path) -> None:
             streamer = Streamer(scenario.program, link, run_id=run_id, on_ack=run.on_ack)
             with streamer:
                 ok = link.wait_for(
-                    lambda lk: lk.last_report is not None
-                    and lk.last_report.executing == cut
-                    and lk.last_report.odometry_um[0] * 1e-6 >= start_m + fraction * 2.0,
+                    lambda lk: (
+                        lk.last_report is not None
+                        and lk.last_report.executing == cut
+                        and lk.last_report.odometry_um[0] * 1e-6 >= start_m + fraction * 2.0
+                    ),
                     20,
                 )
                 assert ok, "wheels command never got under way"

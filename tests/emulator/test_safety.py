@@ -173,7 +173,10 @@ def test_robot_answers_an_unknown_major_version() -> None:
 
 def test_emulator_refusal_of_out_of_limit_targets_from_robot_description() -> None:
     # denso_vm6083: J2 is limited to −90…135° (DESIGN §7) whichever source the limits come from.
-    with Emulator("denso_vm6083", faults=FaultConfig()) as emu, RobotLink(emu.url, link_config(emu)) as link:
+    with (
+        Emulator("denso_vm6083", faults=FaultConfig()) as emu,
+        RobotLink(emu.url, link_config(emu)) as link,
+    ):
         assert link.wait_connected(5)
         prog = Program((JointMove((0.0, -2.0, 0.0, 0.0, 0.0, 0.0), 0.0),))
         with Streamer(prog, link, run_id=1) as s:

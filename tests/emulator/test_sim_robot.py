@@ -480,7 +480,10 @@ def test_state_commands_resume_idempotently() -> None:
     robot.receive(cmd, 3)
     robot.advance()
     assert robot.magnets == 0b10 and robot.last_done == 0
-    assert [(r.outcome, r.continued_from) for r in robot.log] == [("interrupted", None), ("done", 0.0)]
+    assert [(r.outcome, r.continued_from) for r in robot.log] == [
+        ("interrupted", None),
+        ("done", 0.0),
+    ]
     assert check_exactly_once(robot.log, 9, 1) == []
 
 

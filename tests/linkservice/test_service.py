@@ -17,7 +17,6 @@ from tests.support.waiting import wait_for as _wait
 ESTOP_MODE = 4  # STATE.mode ESTOP (docs/protocol.md §6)
 
 
-
 @pytest.fixture
 def lapi(make_api):
     api = make_api(emulators=True, emulator_time_scale=4.0)

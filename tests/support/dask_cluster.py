@@ -120,6 +120,75 @@ def _spawn(args: list[str], log: Path, env: dict[str, str]) -> subprocess.Popen[
         )
 
 
+def _scheduler_args(port: int) -> list[str]:
+    return ["scheduler", "--host", "127.0.0.1", "--port", str(port), "--no-dashboard"]
+
+
+def _worker_args(address: str, name: str, logs: Path) -> list[str]:
+    return [
+        "worker",
+        address,
+        "--nworkers",
+        "1",
+        "--nthreads",
+        "1",
+        "--no-dashboard",
+        "--name",
+        name,
+        "--host",
+        "127.0.0.1",
+        "--local-directory",
+        str(logs / name),
+        "--preload",
+        "server.dask_jobs",  # imports the plan kinds (dask_setup)
+    ]
+
+
+def _wait_scheduler(cluster: DaskCluster, port: int, timeout: float) -> None:
+    deadline = time.monotonic() + timeout
+    while True:
+        with contextlib.suppress(OSError, TimeoutError):
+            socket.create_connection(("127.0.0.1", port), timeout=1).close()
+            return
+        dead = {n: p.returncode for n, p in cluster.procs.items() if p.poll() is not None}
+        assert not dead, f"Dask processes exited: {dead} (logs in {cluster.logs})"
+        assert time.monotonic() < deadline, f"no Dask scheduler after {timeout}s"
+        time.sleep(0.1)
+
+
+def kill_scheduler(cluster: DaskCluster) -> None:
+    """Kill the scheduler (SIGKILL); its workers exit by themselves soon after."""
+    with contextlib.suppress(ProcessLookupError):
+        os.killpg(cluster.procs["scheduler"].pid, signal.SIGKILL)
+    cluster.procs["scheduler"].wait(timeout=10)
+    if cluster._client is not None:
+        with contextlib.suppress(Exception):
+            cluster._client.close(timeout=2)
+        cluster._client = None
+
+
+def start_scheduler_again(cluster: DaskCluster, timeout: float = 90.0) -> None:
+    """What a supervisor (compose's ``restart: unless-stopped``, systemd) does
+    after :func:`kill_scheduler`: start the scheduler again on its address, and
+    the workers, which exit when their scheduler is gone."""
+    port = int(cluster.address.rsplit(":", 1)[1])
+    names = [n for n in cluster.procs if n != "scheduler"]
+    for name in names:
+        _stop(cluster.procs.pop(name))
+    env = worker_env()
+    cluster.procs["scheduler"] = _spawn(
+        _scheduler_args(port), cluster.logs / "scheduler-2.log", env
+    )
+    _wait_scheduler(cluster, port, timeout)
+    for name in names:
+        cluster.procs[name] = _spawn(
+            _worker_args(cluster.address, name, cluster.logs),
+            cluster.logs / f"{name}-2.log",
+            env,
+        )
+    cluster.wait_workers(len(names), timeout)
+
+
 @contextlib.contextmanager
 def dask_cluster(logs: Path, workers: int = 2, timeout: float = 90.0) -> Iterator[DaskCluster]:
     """A scheduler and ``workers`` single-threaded workers (``w1``, ``w2``…) on loopback."""
@@ -129,43 +198,13 @@ def dask_cluster(logs: Path, workers: int = 2, timeout: float = 90.0) -> Iterato
     env = worker_env()
     cluster = DaskCluster(address, logs)
     try:
-        cluster.procs["scheduler"] = _spawn(
-            ["scheduler", "--host", "127.0.0.1", "--port", str(port), "--no-dashboard"],
-            logs / "scheduler.log",
-            env,
-        )
+        cluster.procs["scheduler"] = _spawn(_scheduler_args(port), logs / "scheduler.log", env)
         for i in range(1, workers + 1):
             name = f"w{i}"
             cluster.procs[name] = _spawn(
-                [
-                    "worker",
-                    address,
-                    "--nworkers",
-                    "1",
-                    "--nthreads",
-                    "1",
-                    "--no-dashboard",
-                    "--name",
-                    name,
-                    "--host",
-                    "127.0.0.1",
-                    "--local-directory",
-                    str(logs / name),
-                    "--preload",
-                    "server.dask_jobs",  # imports the plan kinds (dask_setup)
-                ],
-                logs / f"{name}.log",
-                env,
+                _worker_args(address, name, logs), logs / f"{name}.log", env
             )
-        deadline = time.monotonic() + timeout
-        while True:
-            with contextlib.suppress(OSError, TimeoutError):
-                socket.create_connection(("127.0.0.1", port), timeout=1).close()
-                break
-            dead = {n: p.returncode for n, p in cluster.procs.items() if p.poll() is not None}
-            assert not dead, f"Dask processes exited: {dead} (logs in {logs})"
-            assert time.monotonic() < deadline, f"no Dask scheduler after {timeout}s"
-            time.sleep(0.1)
+        _wait_scheduler(cluster, port, timeout)
         cluster.wait_workers(workers, timeout)
         yield cluster
     finally:

@@ -45,7 +45,9 @@ def test_defaults_plan_the_perpendicular_slab_experiment(api) -> None:
     prog = plan["program"]
     joints = [c for c in prog if c["op"] == "joints"]
     assert joints and all(len(c["q_rad"]) == 6 for c in joints)
-    q = np.array(api.get(f"/api/v1/plans/{plan['id']}/arrays/joint_trajectory?format=json").json()["data"])
+    q = np.array(
+        api.get(f"/api/v1/plans/{plan['id']}/arrays/joint_trajectory?format=json").json()["data"]
+    )
     np.testing.assert_allclose(joints[0]["q_rad"], q[0])
     np.testing.assert_allclose(joints[-1]["q_rad"], q[-1])
     mags = [(c["magnet"], c["touched"]) for c in prog if c["op"] == "magnet"]
