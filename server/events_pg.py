@@ -19,10 +19,11 @@ fields (ids, states, names, numbers, strings up to 256 characters), plus
 ``"truncated": [the keys left out]``, so a receiver knows to fetch the full
 record (``GET /plans/{id}``…) if it needs more.
 
-Delivery is best effort, like the local bus's bounded queues: while the
-database is unreachable the relay reconnects every second and events
+Delivery is best effort, like the local bus's bounded queues: a send on a
+connection the database closed is retried once on a new one; while the
+database stays unreachable the relay reconnects every second, and events
 published meanwhile on one server are not seen on the others (the stored
-state is, on the next read).
+state is, on the next read); ``dropped`` counts them.
 """
 
 from __future__ import annotations
@@ -103,6 +104,11 @@ class PgEventRelay:
         self.listening = threading.Event()  # LISTEN is active (set again after a reconnect)
         self.sent = 0
         self.received = 0
+        #: Events given up after a failed send and a failed retry; LISTEN
+        #: connections lost, and made again.
+        self.dropped = 0
+        self.listen_losses = 0
+        self.reconnects = 0
 
     def start(self) -> PgEventRelay:
         """Listen first (so nothing sent after ``start`` returns is missed), then relay."""
@@ -147,21 +153,39 @@ class PgEventRelay:
                     break
                 batch.append(more)
             payloads = [encode(self.server_id, next(self._seq), t, d) for t, d in batch]
-            try:
-                if conn is None:
-                    conn = psycopg.connect(self.url, autocommit=True)
-                with conn.transaction():  # one commit; delivered in this order
-                    for p in payloads:
-                        conn.execute("SELECT pg_notify(%s, %s)", (self.channel, p))
-                self.sent += len(payloads)
-            except psycopg.Error as exc:
-                log.warning(
-                    "event relay: cannot notify (%s); %d events not relayed", exc, len(payloads)
-                )
-                _close(conn)
-                conn = None
-                self._stop.wait(1.0)  # do not spin while the database is away
+            # Twice: a connection the database closed while it sat idle (a
+            # restart, a fail-over) is found dead only by this send, and the
+            # batch goes on a new one rather than being lost.
+            for attempt in (1, 2):
+                try:
+                    if conn is None:
+                        conn = self._connect("send")
+                    with conn.transaction():  # one commit; delivered in this order
+                        for p in payloads:
+                            conn.execute("SELECT pg_notify(%s, %s)", (self.channel, p))
+                    self.sent += len(payloads)
+                    break
+                except psycopg.Error as exc:
+                    _close(conn)
+                    conn = None
+                    if attempt == 1:
+                        log.info("event relay: notify failed (%s); reconnecting", exc)
+                        continue
+                    self.dropped += len(payloads)
+                    log.warning(
+                        "event relay: cannot notify (%s); %d events not relayed",
+                        exc,
+                        len(payloads),
+                    )
+                    self._stop.wait(1.0)  # do not spin while the database is away
         _close(conn)
+
+    def _connect(self, role: str) -> psycopg.Connection[Any]:
+        """A connection of this relay, named so that an administrator sees it in
+        ``pg_stat_activity`` (``steelpath-events-send``/``-listen``)."""
+        return psycopg.connect(
+            self.url, autocommit=True, application_name=f"steelpath-events-{role}"
+        )
 
     # --------------------------------------------------------------- receiving
     def _listen_loop(self) -> None:
@@ -169,8 +193,10 @@ class PgEventRelay:
         while not self._stop.is_set():
             try:
                 if conn is None:
-                    conn = psycopg.connect(self.url, autocommit=True)
+                    conn = self._connect("listen")
                     conn.execute(sql.SQL("LISTEN {}").format(sql.Identifier(self.channel)))
+                    if self.listening.is_set() or self.listen_losses:
+                        self.reconnects += 1
                     self.listening.set()
                 for note in conn.notifies(timeout=0.5):
                     self._receive(note.payload)
@@ -178,6 +204,7 @@ class PgEventRelay:
                         break
             except psycopg.Error as exc:
                 self.listening.clear()
+                self.listen_losses += 1
                 log.warning("event relay: lost the LISTEN connection (%s); reconnecting", exc)
                 _close(conn)
                 conn = None

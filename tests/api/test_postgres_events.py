@@ -147,3 +147,42 @@ def test_a_console_on_server_b_sees_the_plan_server_a_planned(
     assert f'"id": "{pid}"' in r.text and '"state": "planned"' in r.text
     # B reads the plan A planned from the shared store.
     assert b.get(f"/api/v1/plans/{pid}", "viewer").json()["state"] == "planned"
+
+
+def test_the_relay_survives_its_connections_being_cut(
+    pg_url: str,  # noqa: F811
+) -> None:
+    """PostgreSQL ends every relay connection (as a restart or fail-over does):
+    B listens again by itself, and A's next event — sent on a connection found
+    dead only by that send — is retried on a new one and reaches B; none dropped."""
+    import psycopg
+
+    bus_a, bus_b = EventBus(), EventBus()
+    relay_a = PgEventRelay(bus_a, pg_url).start()
+    relay_b = PgEventRelay(bus_b, pg_url).start()
+    seen: list[str] = []
+    try:
+
+        def heard(n: int) -> bool:
+            got = [e.data.get("i") for e in bus_b.recent(100) if e.type == "probe"]
+            seen[:] = [str(i) for i in got]
+            return len(got) >= n
+
+        bus_a.publish("probe", {"i": 0})
+        wait_for(lambda: heard(1), 5, "the first event on B")
+        with psycopg.connect(pg_url, autocommit=True) as admin:
+            cut = admin.execute(
+                "SELECT count(pg_terminate_backend(pid)) FROM pg_stat_activity "
+                "WHERE application_name LIKE 'steelpath-events-%'"
+            ).fetchone()
+        # A's send connection and both listens (B has sent nothing: it has none).
+        assert cut is not None and cut[0] == 3, cut
+        wait_for(lambda: relay_b.reconnects >= 1 and relay_b.listening.is_set(), 10, "B again")
+        bus_a.publish("probe", {"i": 1})
+        wait_for(lambda: heard(2), 5, "the event after the cut on B")
+        assert seen == ["0", "1"]
+        assert relay_a.dropped == 0 and relay_a.sent == 2
+        assert relay_a.listen_losses == 1 and relay_b.listen_losses == 1
+    finally:
+        relay_a.stop()
+        relay_b.stop()
