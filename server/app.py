@@ -129,6 +129,17 @@ def _freeze_startup_objects() -> None:
     gc.freeze()
 
 
+def _check_robot_names(settings: Settings) -> None:
+    from robots import ROBOT_NAMES
+
+    unknown = sorted(set(settings.emulator_urls) - set(ROBOT_NAMES))
+    if unknown:
+        raise ValueError(
+            f"STEELPATH_EMULATOR_URLS names no robot: {', '.join(unknown)}; "
+            f"robots: {', '.join(ROBOT_NAMES)}"
+        )
+
+
 def create_app(settings: Settings | None = None, *, start_scene: bool | None = None) -> FastAPI:
     """Build the app; services start in its lifespan (``TestClient`` as a context manager)."""
     settings = settings or get_settings()
@@ -136,6 +147,7 @@ def create_app(settings: Settings | None = None, *, start_scene: bool | None = N
 
     @asynccontextmanager
     async def lifespan(app: FastAPI) -> AsyncIterator[None]:
+        _check_robot_names(settings)  # before anything starts
         store = Store(settings.data, database_url=settings.database_url)
         cleanup_leftovers(store)  # crash leftovers (issue #12 §6), before jobs/uploads run
         bus = EventBus()
@@ -209,6 +221,10 @@ def create_app(settings: Settings | None = None, *, start_scene: bool | None = N
             ).start()
             # So that a server started without emulators reaches these robots.
             OwnershipStore(store.db).record_emulator_urls(services.emulators.urls(), server_id)
+
+        if settings.emulator_urls:
+            # Emulators run elsewhere (the scaled Docker set-up): every server reaches them.
+            OwnershipStore(store.db).record_emulator_urls(settings.emulator_urls, server_id)
 
         def kind_robot(kind: str) -> str | None:
             spec = registry().get(kind)

@@ -6,7 +6,7 @@ from functools import lru_cache
 from pathlib import Path
 from typing import Literal
 
-from pydantic import Field
+from pydantic import Field, field_validator
 from pydantic_settings import BaseSettings, SettingsConfigDict
 
 
@@ -113,6 +113,13 @@ class Settings(BaseSettings):
         description="how long a server's ownership of a robot link lasts without renewal; "
         "another server takes the robot over only after it has lapsed",
     )
+    emulator_urls: dict[str, str] = Field(
+        default_factory=dict,
+        description="robot emulators run elsewhere, as JSON {robot: socket://host:port} "
+        "(e.g. one container per robot in the scaled Docker set-up, reachable by every "
+        "server); recorded in the store like embedded emulators' URLs, never over an "
+        "operator's PUT /robots/{name}/connection",
+    )
     orphan_plan_s: float = Field(
         10.0,
         gt=0,
@@ -126,6 +133,15 @@ class Settings(BaseSettings):
         description="log every HTTP request (off by default: a console polling robots writes "
         "thousands of lines, and each is a write on the server's event loop)",
     )
+
+    @field_validator("emulator_urls")
+    @classmethod
+    def _socket_urls(cls, urls: dict[str, str]) -> dict[str, str]:
+        for name, url in urls.items():
+            host, _, port = url.removeprefix("socket://").rpartition(":")
+            if not url.startswith("socket://") or not host or not port.isdigit():
+                raise ValueError(f"emulator_urls[{name!r}] = {url!r}: expected socket://host:port")
+        return urls
 
     @property
     def max_upload_bytes(self) -> int:

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import re
 import shutil
 import subprocess
@@ -88,6 +89,10 @@ def test_scaled_profile_validates() -> None:
         "api-1",
         "api-2",
         "proxy",
+        "robot-ara",
+        "robot-cmbot",
+        "robot-denso",
+        "robot-sbg",
     }
     assert "profiles" not in services["steelpath"], "the lab default must start without a profile"
     apis = [services["api-1"], services["api-2"]]
@@ -96,9 +101,27 @@ def test_scaled_profile_validates() -> None:
         assert env["STEELPATH_DATABASE_URL"].startswith("postgresql://")
         assert env["STEELPATH_DASK_SCHEDULER"] == "tcp://dask-scheduler:8786"
         assert api["volumes"][0].startswith("steelpath-shared:/data")
-    # exactly one server runs the embedded emulators; each advertises its own URL
-    assert sorted(a["environment"]["STEELPATH_EMULATORS"] for a in apis) == ["false", "true"]
+    # No server runs embedded emulators (they would be on its loopback only): both
+    # reach one emulator container per robot, on the port it listens on, with the
+    # link secret from the shared volume; each server advertises its own URL.
     assert len({a["environment"]["STEELPATH_SERVER_URL"] for a in apis}) == 2
+    from robots import ROBOT_NAMES
+    from server.settings import Settings
+
+    for api in apis:
+        env = api["environment"]
+        assert env["STEELPATH_EMULATORS"] == "false"
+        urls = Settings(emulator_urls=json.loads(env["STEELPATH_EMULATOR_URLS"])).emulator_urls
+        assert set(urls) == set(ROBOT_NAMES)
+        for robot, url in urls.items():
+            host, port = url.removeprefix("socket://").split(":")
+            emu = services[host]
+            cmd = emu["command"]
+            assert cmd[cmd.index("--robot") + 1] == robot
+            assert cmd[cmd.index("--listen") + 1] == f"tcp://0.0.0.0:{port}"
+            assert cmd[cmd.index("--secret-file") + 1] == f"/data/robots/{robot}.key"
+            assert emu["volumes"][0].startswith("steelpath-shared:/data")
+            assert host in api["depends_on"]
     for worker in ("dask-worker-1", "dask-worker-2"):
         w = services[worker]
         assert "tcp://dask-scheduler:8786" in w["command"]
