@@ -67,6 +67,19 @@ RADIUS_PAD_SPACINGS = 1.0
 ENVELOPE_CAP_M = 0.05
 #: percent of a member cut off at each end before fitting its direction
 MIDDLE_TRIM = 5.0
+#: percent of a member cut off at each end before measuring its section box
+#: and the direction through its halves, when at least ``SECTION_TRIM_POINTS``
+#: points remain: the ends sit in joints, where gussets and the neighbours'
+#: steel widen the box; the envelope grown from a widened box takes in more of
+#: them each refit round and walks off the member (a 2 m UPE 200 post at 2 cm:
+#: radius 0.11 → 0.28 m in five rounds, axis 12 cm aside; at 5 mm: tilted
+#: 0.5° → 3.6°).  10 seeds, recall / precision before → after: Pratt 2 cm
+#: 0.965 / 0.944 → 0.995 / 0.950, Warren 0.969 / 0.956 → 0.969 / 0.972,
+#: grillage 0.684 / 0.848 → 0.682 / 0.872; Pratt 10 cm 0.517 / 0.766 → 0.554 /
+#: 0.839.  Sparse members keep the whole section (trimmed, frame and grillage
+#: precision at 10 cm fell by 0.05).
+SECTION_TRIM = 15.0
+SECTION_TRIM_POINTS = 150
 #: a member needs this many points, and a section this many spacings deep,
 #: before its faces say whether it is steel (a 10 cm scan of an 8 cm angle
 #: is a row of single points)
@@ -125,6 +138,16 @@ def _direction_from_halves(cs: CrossSection, c: np.ndarray, d: np.ndarray) -> np
     return new if float(new @ d) >= 0 else -new
 
 
+def _inner(t: np.ndarray) -> np.ndarray | None:
+    """The points of a member away from its ends (``SECTION_TRIM``), or ``None``
+    when too few would remain (``SECTION_TRIM_POINTS``)."""
+    if SECTION_TRIM <= 0:
+        return None
+    lo, hi = np.percentile(t, [SECTION_TRIM, 100 - SECTION_TRIM])
+    inner = (t >= lo) & (t <= hi)
+    return inner if int(inner.sum()) >= SECTION_TRIM_POINTS else None
+
+
 def _refit(
     core: np.ndarray, points: np.ndarray, spacing: float
 ) -> tuple[np.ndarray, np.ndarray, float, float, float] | None:
@@ -144,9 +167,13 @@ def _refit(
     if len(cs.uv) < 3:
         return None
     if DIRECTION_FROM_HALVES:
-        d = _direction_from_halves(cs, c, d)
+        inner = _inner(cs.t)
+        halves_of = cs if inner is None else cross_section(core[inner], c, d)
+        d = _direction_from_halves(halves_of, c, d)
         cs = cross_section(core, c, d)
-    vt, mu, box = section_box(cs.uv)
+    inner = _inner(cs.t)
+    uv = cs.uv if inner is None else cs.uv[inner]
+    vt, mu, box = section_box(uv)
     mid2 = mu + (0.5 * (box[0] + box[1])) @ vt
     centre = c + mid2[0] * cs.u + mid2[1] * cs.v
     t0, t1 = np.percentile((points - centre) @ d, [0.5, 99.5])
