@@ -187,29 +187,54 @@ def _should_join(
     cos_side: float,
     max_gap: float,
     max_section: float,
-) -> bool:
+) -> float | None:
+    """How far apart ``a`` and ``b`` lie (m) when they are one member's pieces,
+    else ``None``."""
     cos = abs(float(a.direction @ b.direction))
     if cos < cos_side:
-        return False
+        return None
     # b's end points in a's line frame
     rel = b.ends - a.centre
     t = rel @ a.direction
     perp = np.linalg.norm(rel - np.outer(t, a.direction), axis=1)
+    apart = float(perp.max())
     lo, hi = float(t.min()), float(t.max())
     overlap = min(hi, a.t1) - max(lo, a.t0)
     shorter = min(a.length, b.length)
     if overlap > 0.5 * shorter:
         # side by side: two faces of one member when within one section (the
         # direction of a short face is less certain: the linking tolerance)
-        return bool(perp.max() <= max_section)
+        return apart if apart <= max_section else None
     if cos < cos_min:
-        return False
+        return None
     gap = max(lo - a.t1, a.t0 - hi)
     if gap > max_gap:
-        return False
+        return None
     # collinear fragments: the lines must be as close as the sections are wide
     tol = max(a.radius, b.radius, 0.05)
-    return bool(perp.max() <= tol)
+    return apart if apart <= tol else None
+
+
+#: directions over which a group's section extent is measured: the largest
+#: extent over them is at least cos(90° / SECTION_DIRECTIONS) of the true one
+SECTION_DIRECTIONS = 16
+
+
+def section_extent(cands: list[LineCandidate], group: list[int]) -> float:
+    """Largest distance (m) across the line ends of ``group`` seen along the
+    direction of its longest candidate: how deep a section the group makes."""
+    longest = max(group, key=lambda i: cands[i].length)
+    d = cands[longest].direction
+    ends = np.vstack([cands[i].ends for i in group])
+    rel = ends - cands[longest].centre
+    rel = rel - np.outer(rel @ d, d)
+    u = np.cross(d, [1.0, 0.0, 0.0] if abs(d[0]) < 0.9 else [0.0, 1.0, 0.0])
+    u /= np.linalg.norm(u)
+    v = np.cross(d, u)
+    ang = np.linspace(0.0, np.pi, SECTION_DIRECTIONS, endpoint=False)
+    dirs = np.outer(np.cos(ang), u) + np.outer(np.sin(ang), v)  # (K, 3)
+    q = rel @ dirs.T  # (2 × group, K): bounded by the directions, not by a pair count
+    return float((q.max(axis=0) - q.min(axis=0)).max())
 
 
 def join_groups(
@@ -242,9 +267,26 @@ def join_groups(
     uf = _UnionFind(len(cands))
     cos_min = float(np.cos(np.radians(angle_deg)))
     cos_side = float(np.cos(np.radians(max(angle_deg, side_angle_deg or angle_deg))))
+    joinable = []
     for i, j in cand_pairs:
-        if i != j and _should_join(cands[i], cands[j], cos_min, cos_side, max_gap, max_section):
-            uf.union(int(i), int(j))
+        if i == j:
+            continue
+        apart = _should_join(cands[i], cands[j], cos_min, cos_side, max_gap, max_section)
+        if apart is not None:
+            joinable.append((apart, int(i), int(j)))
+    # nearest pieces first, and no group deeper than one section: chained
+    # side-by-side joins (top chord – a diagonal's edge – bottom chord, each
+    # pair within 1.2 m) once made a whole 1.7 m deep truss one member
+    members: dict[int, list[int]] = {i: [i] for i in range(len(cands))}
+    for _, i, j in sorted(joinable):
+        ri, rj = uf.find(i), uf.find(j)
+        if ri == rj:
+            continue
+        both = members[ri] + members[rj]
+        if len(both) > 2 and section_extent(cands, both) > max_section:
+            continue
+        uf.union(ri, rj)
+        members[uf.find(ri)] = both
     groups: dict[int, list[int]] = {}
     for i in range(len(cands)):
         groups.setdefault(uf.find(i), []).append(i)

@@ -315,3 +315,67 @@ def test_a_short_post_between_joints_keeps_its_axis() -> None:
     post = next(i for i, m in enumerate(scan.members) if m.section.name == "UPE 200")
     assert post in {t for t, _ in mm.pairs}
     assert mm.recall == 1.0 and mm.precision >= 0.9, (mm.recall, mm.precision)
+
+
+def _line(centre, direction, half: float, radius: float = 0.05):
+    from planners.structure.lines import LineCandidate
+
+    d = np.asarray(direction, float)
+    return LineCandidate(
+        np.zeros(0, np.int64), np.asarray(centre, float), d / np.linalg.norm(d), -half, half, radius
+    )
+
+
+def test_side_by_side_joins_do_not_chain_past_one_section() -> None:
+    """Three parallel lines 0.8 m apart: each neighbouring pair fits in a
+    1.2 m section, the three together (1.6 m) do not: the nearer pair joins,
+    the third stays apart (a chain of such joins once made a whole truss one member)."""
+    from planners.structure.lines import join_groups
+
+    cands = [_line([0, 0, z], [1, 0, 0], 5.0) for z in (0.0, 0.75, 1.6)]
+    groups = sorted(sorted(g) for g in join_groups(cands, 5.0, 2.0, 1.2, 12.0))
+    assert groups == [[0, 1], [2]]
+    # within one section all three join
+    cands = [_line([0, 0, z], [1, 0, 0], 5.0) for z in (0.0, 0.5, 1.0)]
+    assert [sorted(g) for g in join_groups(cands, 5.0, 2.0, 1.2, 12.0)] == [[0, 1, 2]]
+
+
+@settings(max_examples=60, deadline=None)
+@given(
+    st.lists(
+        st.tuples(st.floats(-1.5, 1.5), st.floats(-1.5, 1.5), st.floats(-3, 3)),
+        min_size=2,
+        max_size=9,
+    ),
+    st.floats(0.3, 1.5),
+)
+def test_every_joined_group_fits_in_one_section(offsets, max_section: float) -> None:
+    """Parallel lines anywhere across and along: whatever joins, no group is
+    deeper than ``max_section`` (brute force over all pairs of the group's line ends)."""
+    from planners.structure.lines import SECTION_DIRECTIONS, join_groups
+
+    cands = [_line([x, y, 0.0], [0, 0, 1], 1.0) for x, y, _ in offsets]
+    cands = [
+        _line(c.centre + [0, 0, s], c.direction, 1.0)
+        for c, (_, _, s) in zip(cands, offsets, strict=True)
+    ]
+    for g in join_groups(cands, 5.0, 2.0, max_section, 12.0):
+        across = np.array([cands[i].centre[:2] for i in g])
+        widest = max(np.linalg.norm(a - b) for a in across for b in across)
+        # the extent is measured over SECTION_DIRECTIONS directions: within cos(90° / K)
+        bound = max_section / np.cos(np.pi / (2 * SECTION_DIRECTIONS))
+        assert widest <= bound + 1e-9, (g, widest)
+
+
+def test_a_short_truss_is_not_joined_into_one_member() -> None:
+    """Pratt seed 18 at 2 cm: a truss 1.7 m deep whose chords, chord edges and
+    a diagonal's edge lay side by side within 1.2 m pair by pair; joined in a
+    chain they made one 2 m deep "box" and nothing was found."""
+    from planners.structure.synthetic import make_scan, match_members
+
+    scan = make_scan("pratt", 18, spacing_m=0.02)
+    model = model_structure(scan.points / scan.scale)
+    found = np.array([m.axis for m in model.members])
+    mm = match_members(scan.true_axes(), scan.true_depths(), found)
+    assert mm.recall == 1.0 and mm.precision >= 0.9, (mm.recall, mm.precision)
+    assert max(m.depth_m for m in model.members) < 0.5
