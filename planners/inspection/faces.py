@@ -119,7 +119,7 @@ class Continuity:
 
 
 def face_continuity(
-    a: FaceGeom, b: FaceGeom, p: np.ndarray, params: InspectionParams
+    a: FaceGeom, b: FaceGeom, p: np.ndarray, params: InspectionParams, outline_slack_m: float = 0.0
 ) -> Continuity:
     """Do the driving faces ``a`` and ``b`` form one surface at vertex ``p``?
 
@@ -129,8 +129,12 @@ def face_continuity(
     plane ``b`` lies within ``contact_tolerance_m`` along ``a``'s normal (seed
     Eq. 3.4: the next plane at the base height); (3) the outlines, ``b``'s
     projected into ``a``'s plane and both clipped to the disc of radius
-    ``jump_reach_m`` about ``q``, come within ``contact_tolerance_m``
-    (touch or overlap near the vertex, not somewhere far along the members).
+    ``jump_reach_m`` about ``q``, come within ``contact_tolerance_m`` plus
+    ``outline_slack_m`` (touch or overlap near the vertex, not somewhere far
+    along the members).  An outline is drawn through a face's outermost scan
+    points, so it stops up to a point spacing short of the steel's edge on
+    either face: two flush faces scanned at spacing ``s`` show outlines up to
+    ``2 s`` apart, the slack :func:`planners.inspection.plan_inspection` allows.
     """
     cos = float(np.clip(a.normal @ b.normal, -1.0, 1.0))
     angle = math.degrees(math.acos(cos))
@@ -149,7 +153,7 @@ def face_continuity(
             if not near_b.is_empty:
                 gap = float(shapely.distance(near_a, near_b))
     ok = angle <= params.coplanar_angle_deg and step <= params.contact_tolerance_m
-    return Continuity(ok and gap <= params.contact_tolerance_m, angle, step, gap)
+    return Continuity(ok and gap <= params.contact_tolerance_m + outline_slack_m, angle, step, gap)
 
 
 def foot_centres(

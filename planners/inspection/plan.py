@@ -139,7 +139,10 @@ def plan_inspection(
     timings["gaps"] = time.perf_counter() - t
 
     t = time.perf_counter()
-    ctx = TransitionContext(members, graph, params)
+    # outlines are drawn through the outermost points: each may stop a spacing short
+    spacing = float(model.spacing_m)
+    slack = 2.0 * spacing if math.isfinite(spacing) and spacing > 0 else 0.0
+    ctx = TransitionContext(members, graph, params, outline_slack_m=slack)
     half = params.jump_cost_m / 2
     for u, v, d in graph.edges(data=True):
         if d["kind"] == "jump":

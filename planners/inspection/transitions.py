@@ -119,6 +119,8 @@ class TransitionContext:
     members: Mapping[int, Member]
     graph: nx.MultiGraph
     params: InspectionParams
+    #: how far apart the outlines of two flush faces may be drawn (m): two point spacings
+    outline_slack_m: float = 0.0
     _geom: dict[int, FaceGeom | None] = field(default_factory=dict)
     _cont: dict[tuple[Hashable, int, int], Continuity] = field(default_factory=dict)
     _feet: dict[tuple[Hashable, int], np.ndarray] = field(default_factory=dict)
@@ -141,7 +143,9 @@ class TransitionContext:
             return None
         key = (v, a, b)
         if key not in self._cont:
-            self._cont[key] = face_continuity(fa, fb, self.pos(v), self.params)
+            self._cont[key] = face_continuity(
+                fa, fb, self.pos(v), self.params, self.outline_slack_m
+            )
         return self._cont[key]
 
     def feet(self, v: Hashable, member: int) -> np.ndarray:
@@ -286,7 +290,7 @@ class TransitionContext:
                 fails.append(f"normals {cont.angle_deg:.1f}° apart > {p.coplanar_angle_deg:g}°")
             if p.contact_tolerance_m < cont.step_m < math.inf:
                 fails.append(f"step {cont.step_m * 1000:.0f} mm at the vertex")
-            if cont.outline_gap_m > p.contact_tolerance_m and not fails:
+            if cont.outline_gap_m > p.contact_tolerance_m + self.outline_slack_m and not fails:
                 fails.append(f"outlines {cont.outline_gap_m * 1000:.0f} mm apart near the vertex")
             why = f"face {fb.face.id} does not continue face {fa.face.id} ({', '.join(fails)})"
         if not feet.size:

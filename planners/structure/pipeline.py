@@ -34,6 +34,7 @@ from planners.pointcloud._validate import as_points
 from planners.pointcloud.spacing import measure_spacing
 from planners.structure.assign import assign_points, relabel_by_faces
 from planners.structure.clutter import plane_continuation
+from planners.structure.direction import compact_direction
 from planners.structure.faces import (
     CrossSection,
     classify_profile,
@@ -95,6 +96,12 @@ FACE_FRACTION_MIN = 0.8
 JOINT_REACH_M = 0.4
 #: direction through the two halves' section centres (else least squares)
 DIRECTION_FROM_HALVES = True
+#: then the direction along which the member's points collapse most
+#: (:mod:`.direction`), with section cells this many spacings wide
+COMPACT_DIRECTION = True
+COMPACT_CELL_SPACINGS = 2.0
+#: and only for a section at least this many cells across
+COMPACT_MIN_CELLS = 2.0
 #: assign → refit rounds before the final assignment: at least, at most
 MIN_REFITS = 2
 MAX_REFITS = 5
@@ -170,6 +177,17 @@ def _refit(
     if DIRECTION_FROM_HALVES:
         d = _direction_from_halves(cs, c, d)
         cs = cross_section(core, c, d)
+    cell = COMPACT_CELL_SPACINGS * max(spacing, NOISE_M)
+    if COMPACT_DIRECTION and len(core) >= RESOLVED_POINTS:
+        inner = _inner(cs.t)
+        part = cs.uv if inner is None else cs.uv[inner]
+        _, _, box = section_box(part)
+        # a section a few cells across cannot tell a tilt from its own shape
+        if float(np.max(box[1] - box[0])) >= COMPACT_MIN_CELLS * cell:
+            d2 = compact_direction(core if inner is None else core[inner], d, cell)
+            if d2 is not d:
+                d = d2
+                cs = cross_section(core, c, d)
     inner = _inner(cs.t)
     uv = cs.uv if inner is None else cs.uv[inner]
     vt, mu, box = section_box(uv)

@@ -452,3 +452,27 @@ def test_foot_centres_by_erosion_match_rectangle_containment(radii, heading):
             assert lo, c
         elif ti:
             pytest.fail(f"centre {c} fits with margin but was rejected")
+
+
+@settings(max_examples=40, deadline=None)
+@given(gap=st.floats(0.0, 0.2), slack=st.floats(0.0, 0.1))
+def test_flush_faces_continue_when_their_outlines_are_within_tolerance_plus_slack(gap, slack):
+    """Two coplanar rectangles ``gap`` apart along x: the outline gap is
+    measured exactly, and they continue iff it is within
+    ``contact_tolerance_m`` + ``outline_slack_m`` (two point spacings in a plan)."""
+    from planners.inspection.faces import FaceGeom, face_continuity
+    from planners.structure.model import Face
+
+    def rect(x0: float, x1: float, fid: int) -> FaceGeom:
+        outline = np.array([[x0, -0.1], [x1, -0.1], [x1, 0.1], [x0, 0.1]])
+        z, x = np.array([0, 0, 1.0]), np.array([1.0, 0, 0])
+        return FaceGeom.of(Face(fid, fid, "flange", np.zeros(3), z, x, outline, 1.0, 0))
+
+    a, b = rect(-1.0, 0.0, 0), rect(gap, 1.0 + gap, 1)
+    params = InspectionParams()
+    c = face_continuity(a, b, np.zeros(3), params, slack)
+    assert c.outline_gap_m == pytest.approx(gap, abs=1e-9)
+    assert c.angle_deg == pytest.approx(0.0, abs=1e-6) and c.step_m == pytest.approx(0.0)
+    limit = params.contact_tolerance_m + slack
+    if abs(gap - limit) > 1e-9:
+        assert c.continues == (gap <= limit)
