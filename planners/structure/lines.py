@@ -6,7 +6,9 @@ is one member candidate and gets a least-squares 3D line (PCA of its voxel
 centroids, unweighted so that range-dependent density does not bias it).
 Candidates that are collinear and separated by an occlusion gap, or
 parallel and overlapping within one section depth (the two flanges of a
-girder), are then joined by union-find.
+girder), are then joined by union-find, nearest pairs first and never into
+a group deeper than one section (pairwise joins would otherwise chain a
+truss's chords and the edges between them into one member).
 """
 
 from __future__ import annotations

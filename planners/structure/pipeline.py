@@ -10,7 +10,9 @@ Stages (each timed in ``StructureModel.timings_s``):
 4. assign — a member label per point by its nearest axis within the
    member's envelope (:mod:`.assign`); each member's axis is then refitted
    through the centre of its cross-section box (the mean of the visible
-   surface is biased towards the scanner, the box centre much less);
+   surface is biased towards the scanner, the box centre much less), along
+   the direction in which its points collapse onto the fewest section cells
+   (:mod:`.direction`: a least-squares line follows where the points are);
 5. faces — planar faces by RANSAC in each cross-section, the profile from
    which box sides carry faces (:mod:`.faces`); points inside two envelopes
    (joint zones) go to the member one of whose faces they lie on;
