@@ -29,15 +29,9 @@ FINE_AZIMUTHS = 8
 MIN_GAIN = 0.9
 
 
-def _frame(d: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    ref = np.array([0.0, 0.0, 1.0]) if abs(d[2]) < 0.9 else np.array([1.0, 0.0, 0.0])
-    u = np.cross(d, ref)
-    u /= np.linalg.norm(u)
-    return u, np.cross(d, u)
-
-
-def _frames(dirs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """(K, 3) unit u and v across each of ``dirs`` (K, 3), as :func:`_frame`."""
+def section_frames(dirs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(K, 3) unit u and v across each unit direction of ``dirs`` (K, 3), the
+    frame :func:`planners.structure.faces.cross_section` uses."""
     near_z = np.abs(dirs[:, 2]) >= 0.9
     ref = np.where(near_z[:, None], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0])
     u = np.cross(dirs, ref)
@@ -53,7 +47,7 @@ def occupied_cells(
     the grid shifted by ``offset`` cells."""
     out = np.empty(len(dirs), dtype=np.int64)
     for k0 in range(0, len(dirs), 32):  # (MAX_POINTS, 32) keys at a time
-        u, v = _frames(dirs[k0 : k0 + 32])
+        u, v = section_frames(dirs[k0 : k0 + 32])
         i = np.floor(rel @ u.T / cell + offset).astype(np.int64)
         j = np.floor(rel @ v.T / cell + offset).astype(np.int64)
         i -= i.min(axis=0)
@@ -70,7 +64,7 @@ def _score(rel: np.ndarray, dirs: np.ndarray, cell: float) -> np.ndarray:
 
 
 def _cone(d: np.ndarray, rings: tuple[float, ...], azimuths: int) -> np.ndarray:
-    u, v = _frame(d)
+    (u,), (v,) = section_frames(d[None])
     out = []
     for r in rings:
         a = np.radians(r)

@@ -197,7 +197,7 @@ def _refit(
         # a section a few cells across cannot tell a tilt from its own shape
         if float(np.max(box[1] - box[0])) >= COMPACT_MIN_CELLS * cell:
             d2 = compact_direction(core if inner is None else core[inner], d, cell)
-            if d2 is not d:
+            if not np.array_equal(d2, d):
                 d = d2
                 cs = cross_section(core, c, d)
     inner = _inner(cs.t)

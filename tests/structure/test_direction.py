@@ -6,8 +6,19 @@ import numpy as np
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from planners.structure.direction import RINGS_DEG, _cone, _frame, compact_direction, occupied_cells
+from planners.structure.direction import (
+    RINGS_DEG,
+    _cone,
+    compact_direction,
+    occupied_cells,
+    section_frames,
+)
 from planners.structure.lines import fit_line
+
+
+def _frame(d: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    (u,), (v,) = section_frames(np.asarray(d, float)[None])
+    return u, v
 
 
 def _angle_deg(a: np.ndarray, b: np.ndarray) -> float:
