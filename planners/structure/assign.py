@@ -124,3 +124,67 @@ def relabel_by_faces(
         ok = d[np.arange(len(sel)), k] <= tol
         out[sel[ok]] = owner[k[ok]]
     return out
+
+
+#: a grown stretch may hold at most this many free points in the ring
+#: between one and two radii round the axis per point within one radius: a
+#: member continues as a line, a piece of ground or slab as a plane
+RING_MAX = 0.5
+
+
+def grow_end(
+    points: np.ndarray,
+    tree: cKDTree,
+    free: np.ndarray,
+    centre: np.ndarray,
+    direction: np.ndarray,
+    t_end: float,
+    sign: float,
+    radius: float,
+    step: float,
+    max_growth: float,
+) -> float:
+    """How far (m, ≥ 0) a member's end at ``centre + t_end·direction`` moves
+    outward (``sign`` ±1) over the ``free`` points continuing its axis.
+
+    The extension is cut in stretches ``step`` long; the walk enters the next
+    stretch while it holds free points within ``radius`` of the axis and not
+    more than ``RING_MAX`` times as many between one and two radii (a line
+    goes on, a plane spreads), and stops after ``max_growth``.  The end moves
+    to the farthest point walked.
+
+    A region split by a joint or by a few points lost to a neighbour leaves
+    the member's own points unlabelled beyond its end, where no envelope
+    reaches; walking over them gives the pieces back their extent, so that
+    collinear pieces meet within the occlusion gap allowed.  Only the points
+    the KD-tree finds near the extension are looked at (bounded by the
+    extension's length, not the cloud's size)."""
+    if max_growth <= 0 or radius <= 0 or step <= 0:
+        return 0.0
+    h = max(radius, 1e-3)
+    ns = max(2, int(np.ceil(max_growth / h)) + 1)
+    ts = t_end + sign * np.linspace(0.0, max_growth, ns)
+    samples = centre + np.outer(ts, direction)
+    hits = tree.query_ball_point(samples, 2.0 * radius + 0.5 * h)
+    idx = np.unique(np.concatenate([np.asarray(x, dtype=np.int64) for x in hits]))
+    idx = idx[free[idx]] if len(idx) else idx
+    if len(idx) == 0:
+        return 0.0
+    rel = points[idx] - centre
+    t = rel @ direction
+    perp = np.linalg.norm(rel - np.outer(t, direction), axis=1)
+    ahead = sign * (t - t_end)
+    keep = (ahead > 0) & (ahead <= max_growth) & (perp <= 2.0 * radius)
+    ahead, inner = ahead[keep], perp[keep] <= radius
+    n_bins = int(np.ceil(max_growth / step))
+    b = np.minimum((ahead / step).astype(np.int64), n_bins - 1)
+    n_in = np.bincount(b[inner], minlength=n_bins)
+    n_ring = np.bincount(b[~inner], minlength=n_bins)
+    far = np.full(n_bins, 0.0)
+    np.maximum.at(far, b[inner], ahead[inner])
+    reached = 0.0
+    for k in range(n_bins):
+        if n_in[k] == 0 or n_ring[k] > RING_MAX * n_in[k]:
+            break
+        reached = float(far[k])
+    return reached

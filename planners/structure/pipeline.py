@@ -34,7 +34,7 @@ from scipy.spatial import cKDTree
 from planners.errors import EmptyInputError, InvalidInputError
 from planners.pointcloud._validate import as_points
 from planners.pointcloud.spacing import measure_spacing
-from planners.structure.assign import assign_points, relabel_by_faces
+from planners.structure.assign import assign_points, grow_end, relabel_by_faces
 from planners.structure.clutter import plane_continuation
 from planners.structure.direction import compact_direction
 from planners.structure.faces import (
@@ -117,6 +117,11 @@ COMPACT_MIN_CELLS = 2.0
 #: assign → refit rounds before the final assignment: at least, at most
 MIN_REFITS = 2
 MAX_REFITS = 5
+#: after each refit a member's ends walk over the unlabelled points that
+#: continue its axis, with steps of at most this many spacings, up to
+#: ``max_gap_m`` (:func:`.assign.grow_end`)
+GROW_ENDS = True
+GROW_STEP_SPACINGS = 3.0
 
 Progress = Callable[[float, str], None]
 
@@ -186,7 +191,9 @@ def _refit(
     cs = cross_section(core, c, d)
     if len(cs.uv) < 3:
         return None
-    if DIRECTION_FROM_HALVES:
+    # a few dozen points (a 10 cm scan of a small section) give a surer
+    # direction by least squares than through two halves' boxes
+    if DIRECTION_FROM_HALVES and len(core) >= RESOLVED_POINTS:
         d = _direction_from_halves(cs, c, d)
         cs = cross_section(core, c, d)
     cell = COMPACT_CELL_SPACINGS * max(spacing, NOISE_M)
@@ -279,7 +286,13 @@ def model_structure(
     # a face runs the member's whole length, but its points stop where the
     # joint's points were given to the neighbour: lengthen it by the section
     reach = np.array([radii[f.member] for f in faces]) if faces else None
-    relabelled = relabel_by_faces(pts, labels, shared, faces, 2 * tol, reach)
+    # a member with no face (a 10 cm scan of an angle: a row of single
+    # points) keeps the joint points it was assigned: given to the chord
+    # whose face they are near (within 2 × 1.5 spacings), a 1.7 m diagonal
+    # lost 10 of its 17 points and was dropped
+    faceless = np.array([not m.faces for m in members] + [False])
+    movable = shared & ~faceless[labels]  # −1 indexes the last slot
+    relabelled = relabel_by_faces(pts, labels, movable, faces, 2 * tol, reach)
     if np.any(relabelled != labels):
         labels = relabelled
         _fit_faces(pts, labels, members, spacing, tol, rng)
@@ -390,6 +403,11 @@ def _assign_and_refit(
             if fit is None or fit[3] - fit[2] < min_len:
                 continue
             c, d, t0, t1, rad = fit
+            if GROW_ENDS:
+                free = mine | (labels < 0)
+                step = GROW_STEP_SPACINGS * spacing
+                t1 += grow_end(pts, tree, free, c, d, t1, 1.0, rad, step, prm.max_gap_m)
+                t0 -= grow_end(pts, tree, free, c, d, t0, -1.0, rad, step, prm.max_gap_m)
             frags = sum(lines[i].fragments for i in group)
             refitted.append(
                 LineCandidate(
