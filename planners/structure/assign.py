@@ -188,3 +188,45 @@ def grow_end(
             break
         reached = float(far[k])
     return reached
+
+
+def gap_filled(
+    points: np.ndarray,
+    tree: cKDTree,
+    unlabelled: np.ndarray,
+    centre: np.ndarray,
+    direction: np.ndarray,
+    t_from: float,
+    t_to: float,
+    radius: float,
+    max_empty: float,
+) -> bool:
+    """Whether the stretch ``[t_from, t_to]`` of the line ``centre +
+    t·direction`` is steel: points within ``radius`` of it all along, no
+    empty stretch longer than ``max_empty``, and not more than ``RING_MAX``
+    ``unlabelled`` points between one and two radii per point within one (a
+    piece of ground or slab spreads beside the line; a crossing member's
+    points are labelled and do not count).  Only the points a KD-tree finds
+    near the stretch are looked at."""
+    lo, hi = min(t_from, t_to), max(t_from, t_to)
+    if hi - lo <= max_empty:
+        return True
+    if radius <= 0:
+        return False
+    h = max(radius, 1e-3)
+    ns = max(2, int(np.ceil((hi - lo) / h)) + 1)
+    samples = centre + np.outer(np.linspace(lo, hi, ns), direction)
+    hits = tree.query_ball_point(samples, 2.0 * radius + 0.5 * h)
+    idx = np.unique(np.concatenate([np.asarray(x, dtype=np.int64) for x in hits]))
+    if len(idx) == 0:
+        return False
+    rel = points[idx] - centre
+    t = rel @ direction
+    perp = np.linalg.norm(rel - np.outer(t, direction), axis=1)
+    along = (t >= lo) & (t <= hi)
+    inner = along & (perp <= radius)
+    ring = along & (perp > radius) & (perp <= 2.0 * radius) & unlabelled[idx]
+    if not inner.any() or ring.sum() > RING_MAX * inner.sum():
+        return False
+    ts = np.concatenate([[lo], np.sort(t[inner]), [hi]])
+    return float(np.diff(ts).max()) <= max_empty

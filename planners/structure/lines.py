@@ -13,6 +13,7 @@ truss's chords and the edges between them into one member).
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -182,6 +183,11 @@ class _UnionFind:
             self.p[max(ra, rb)] = min(ra, rb)
 
 
+#: ``bridge(a, b, t_from, t_to)``: whether the stretch ``[t_from, t_to]`` of
+#: ``a``'s line between two collinear pieces is steel (points all along it)
+Bridge = Callable[[LineCandidate, LineCandidate, float, float], bool]
+
+
 def _should_join(
     a: LineCandidate,
     b: LineCandidate,
@@ -189,9 +195,14 @@ def _should_join(
     cos_side: float,
     max_gap: float,
     max_section: float,
+    bridge: Bridge | None = None,
+    bridge_gap: float = 0.0,
 ) -> float | None:
     """How far apart ``a`` and ``b`` lie (m) when they are one member's pieces,
-    else ``None``."""
+    else ``None``.  Collinear pieces further apart than ``max_gap`` (up to
+    ``bridge_gap``) are one member when ``bridge`` finds the stretch between
+    them filled: a girder's middle far from every scanner is sparse, its
+    pieces' directions uncertain, and the pieces found stop metres apart."""
     if (b.length, *b.centre) > (a.length, *a.centre):  # ties: either order, one answer
         # the shorter piece is measured against the longer one's line: the
         # longer direction is the surer (a 1.3 m piece 1.9° off puts the far
@@ -215,11 +226,18 @@ def _should_join(
     if cos < cos_min:
         return None
     gap = max(lo - a.t1, a.t0 - hi)
-    if gap > max_gap:
-        return None
     # collinear fragments: the lines must be as close as the sections are wide
     tol = max(a.radius, b.radius, 0.05)
-    return apart if apart <= tol else None
+    if apart > tol:
+        return None
+    if gap <= max_gap:
+        return apart
+    # a bridge spans more, so it asks for half the offset: collinear rows of
+    # cross girders, each framing into a main girder, stand a few cm apart
+    if bridge is None or gap > bridge_gap or apart > 0.5 * tol:
+        return None
+    span = (a.t1, lo) if lo - a.t1 >= a.t0 - hi else (hi, a.t0)
+    return apart if bridge(a, b, *span) else None
 
 
 #: directions over which a group's section extent is measured: the largest
@@ -244,16 +262,42 @@ def section_extent(cands: list[LineCandidate], group: list[int]) -> float:
     return float((q.max(axis=0) - q.min(axis=0)).max())
 
 
+def _pairs_ahead(
+    cands: list[LineCandidate], tree: cKDTree, own: np.ndarray, step: float, reach: float
+) -> list[np.ndarray]:
+    """(i, j) pairs where candidate j's sampled axis lies on candidate i's line
+    within ``reach`` past either end: the pieces a bridge may join.  One ball
+    query a sample of the extensions: bounded by their length."""
+    out = []
+    for i, c in enumerate(cands):
+        ts = np.arange(step, reach + step, step)
+        ext = np.vstack(
+            [
+                c.centre + np.outer(c.t1 + ts, c.direction),
+                c.centre + np.outer(c.t0 - ts, c.direction),
+            ]
+        )
+        hits = tree.query_ball_point(ext, step + max(c.radius, 0.05))
+        js = np.unique(own[np.concatenate([np.asarray(h, dtype=np.int64) for h in hits])])
+        js = js[js != i]
+        if len(js):
+            out.append(np.column_stack([np.full(len(js), i), js]))
+    return out
+
+
 def join_groups(
     cands: list[LineCandidate],
     angle_deg: float,
     max_gap: float,
     max_section: float,
     side_angle_deg: float | None = None,
+    bridge: Bridge | None = None,
+    bridge_gap: float = 0.0,
 ) -> list[list[int]]:
     """Groups of candidate indices to join: union-find over the pairs near each
     other (KD-tree on their sampled axes: no all-pairs array) that are
-    collinear across a gap up to ``max_gap`` or side by side within ``max_section``."""
+    collinear across a gap up to ``max_gap`` (or up to ``bridge_gap`` where
+    ``bridge`` finds the gap filled) or side by side within ``max_section``."""
     if len(cands) < 2:
         return [[i] for i in range(len(cands))]
     step = max(0.25, max_gap / 4)
@@ -265,11 +309,13 @@ def join_groups(
         owner.append(np.full(n, i))
     pts = np.vstack(samples)
     own = np.concatenate(owner)
-    pairs = cKDTree(pts).query_pairs(max(max_gap, max_section) + step, output_type="ndarray")
+    tree = cKDTree(pts)
+    pairs = tree.query_pairs(max(max_gap, max_section) + step, output_type="ndarray")
+    found = [np.column_stack([own[pairs[:, 0]], own[pairs[:, 1]]])] if len(pairs) else []
+    if bridge is not None and bridge_gap > max_gap:
+        found += _pairs_ahead(cands, tree, own, step, bridge_gap)
     cand_pairs = (
-        np.unique(np.sort(np.column_stack([own[pairs[:, 0]], own[pairs[:, 1]]]), axis=1), axis=0)
-        if len(pairs)
-        else np.zeros((0, 2), int)
+        np.unique(np.sort(np.vstack(found), axis=1), axis=0) if found else np.zeros((0, 2), int)
     )
     uf = _UnionFind(len(cands))
     cos_min = float(np.cos(np.radians(angle_deg)))
@@ -278,7 +324,9 @@ def join_groups(
     for i, j in cand_pairs:
         if i == j:
             continue
-        apart = _should_join(cands[i], cands[j], cos_min, cos_side, max_gap, max_section)
+        apart = _should_join(
+            cands[i], cands[j], cos_min, cos_side, max_gap, max_section, bridge, bridge_gap
+        )
         if apart is not None:
             joinable.append((apart, int(i), int(j)))
     # nearest pieces first, and no group deeper than one section: chained

@@ -34,7 +34,7 @@ from scipy.spatial import cKDTree
 from planners.errors import EmptyInputError, InvalidInputError
 from planners.pointcloud._validate import as_points
 from planners.pointcloud.spacing import measure_spacing
-from planners.structure.assign import assign_points, grow_end, relabel_by_faces
+from planners.structure.assign import assign_points, gap_filled, grow_end, relabel_by_faces
 from planners.structure.clutter import plane_continuation
 from planners.structure.direction import compact_direction
 from planners.structure.faces import (
@@ -122,6 +122,9 @@ MAX_REFITS = 5
 #: ``max_gap_m`` (:func:`.assign.grow_end`)
 GROW_ENDS = True
 GROW_STEP_SPACINGS = 3.0
+#: collinear pieces up to this many ``max_gap_m`` apart are one member when
+#: the stretch between them is filled (:func:`.assign.gap_filled`); 0: never
+BRIDGE_GAPS = 4
 
 Progress = Callable[[float, str], None]
 
@@ -388,8 +391,28 @@ def _assign_and_refit(
     for round_ in range(MAX_REFITS):
         before = _arrays(lines)[4]
         labels, shared = assign_points(pts, *_arrays(lines), margin, tree)
+        unlabelled = labels < 0
+
+        def bridge(
+            a: LineCandidate,
+            b: LineCandidate,
+            t_from: float,
+            t_to: float,
+            unlabelled: np.ndarray = unlabelled,
+        ) -> bool:
+            radius = max(a.radius, b.radius)
+            return gap_filled(
+                pts, tree, unlabelled, a.centre, a.direction, t_from, t_to, radius, prm.max_gap_m
+            )
+
         groups = join_groups(
-            lines, prm.merge_angle_deg, prm.max_gap_m, prm.max_section_m, prm.link_angle_deg
+            lines,
+            prm.merge_angle_deg,
+            prm.max_gap_m,
+            prm.max_section_m,
+            prm.link_angle_deg,
+            bridge if BRIDGE_GAPS else None,
+            BRIDGE_GAPS * prm.max_gap_m,
         )
         refitted: list[LineCandidate] = []
         for group in groups:

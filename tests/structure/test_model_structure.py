@@ -507,3 +507,59 @@ def test_a_chord_split_by_a_joint_is_one_member_at_10_cm() -> None:
     chords = [i for i, m in enumerate(scan.members) if m.role == "chord"]
     assert set(chords) <= {t for t, _ in mm.pairs}
     assert mm.precision >= 0.9, mm.precision
+
+
+def test_gap_filled_needs_points_all_along_and_no_plane_beside() -> None:
+    from scipy.spatial import cKDTree
+
+    from planners.structure.assign import gap_filled
+
+    d = np.array([0.0, 1.0, 0.0])
+    ts = np.arange(0.0, 6.0, 0.3)
+    line = np.column_stack([np.zeros(len(ts)), ts, np.zeros(len(ts))])
+    free = np.ones(len(line), bool)
+    tree = cKDTree(line)
+    assert gap_filled(line, tree, free, np.zeros(3), d, 0.5, 5.5, 0.1, 2.0)
+    # a 2.4 m hole in the stretch is an occlusion gap longer than allowed
+    holed = line[(ts < 2.0) | (ts > 4.4)]
+    assert not gap_filled(
+        holed, cKDTree(holed), free[: len(holed)], np.zeros(3), d, 0.5, 5.5, 0.1, 2.0
+    )
+    # ... and one of 1.5 m is allowed
+    holed = line[(ts < 2.0) | (ts > 3.5)]
+    assert gap_filled(holed, cKDTree(holed), free[: len(holed)], np.zeros(3), d, 0.5, 5.5, 0.1, 2.0)
+    # the same points as the middle row of a plane (ground): not a member's stretch
+    xs, ys = np.meshgrid(np.arange(-0.3, 0.31, 0.1), ts, indexing="ij")
+    plane = np.column_stack([xs.ravel(), ys.ravel(), np.zeros(xs.size)])
+    pfree = np.ones(len(plane), bool)
+    assert not gap_filled(plane, cKDTree(plane), pfree, np.zeros(3), d, 0.5, 5.5, 0.15, 2.0)
+    # unless the points beside are labelled (members crossing the line)
+    assert gap_filled(plane, cKDTree(plane), ~pfree, np.zeros(3), d, 0.5, 5.5, 0.15, 2.0)
+    # a stretch no longer than the allowed gap needs no points
+    assert gap_filled(
+        line[:0], cKDTree(np.zeros((1, 3))), free[:0], np.zeros(3), d, 0.0, 1.9, 0.1, 2.0
+    )
+
+
+def test_collinear_pieces_further_apart_than_the_gap_are_joined_over_a_filled_stretch() -> None:
+    from planners.structure.lines import join_groups
+
+    a = _line([0.0, 0.0, 0.0], [1.0, 0.0, 0.0], 4.0, radius=0.2)  # x −4 … 4
+    b = _line([11.0, 0.02, 0.0], [1.0, 0.0, 0.0], 3.0, radius=0.2)  # x 8 … 14: 4 m apart
+    calls: list[tuple[float, float]] = []
+
+    def filled(p, q, t_from, t_to):
+        calls.append((t_from, t_to))
+        return True
+
+    assert sorted(sorted(g) for g in join_groups([a, b], 5.0, 2.0, 1.2, 12.0)) == [[0], [1]]
+    got = join_groups([a, b], 5.0, 2.0, 1.2, 12.0, filled, 8.0)
+    assert [sorted(g) for g in got] == [[0, 1]]
+    # the stretch asked about is the one between the pieces, on the longer's line
+    assert calls and all(sorted(c) == pytest.approx([4.0, 8.0], abs=0.05) for c in calls)
+    # an empty stretch, or one further than the bridge reaches, is not joined
+    assert len(join_groups([a, b], 5.0, 2.0, 1.2, 12.0, lambda *_: False, 8.0)) == 2
+    assert len(join_groups([a, b], 5.0, 2.0, 1.2, 12.0, filled, 3.5)) == 2
+    # a row of pieces offset by more than half a section is not bridged
+    c = _line([11.0, 0.15, 0.0], [1.0, 0.0, 0.0], 3.0, radius=0.2)
+    assert len(join_groups([a, c], 5.0, 2.0, 1.2, 12.0, filled, 8.0)) == 2
