@@ -172,6 +172,41 @@ def section_box(
     return vt, mu, np.vstack([lo, hi])
 
 
+def persistent_section(
+    uv: np.ndarray,
+    t: np.ndarray,
+    cell: float,
+    bin_length: float,
+    min_share: float,
+    max_points: float = np.inf,
+) -> np.ndarray:
+    """(n,) mask of the section points in cells (``cell`` wide) that hold
+    points in at least ``min_share`` of the member's occupied stretches
+    (``bin_length`` long, along ``t``).  A member's own section is seen all
+    along it; the stub of each diagonal inside a chord's envelope only at its
+    joint, so at coarse spacing (a chord of 20 points a metre, each joint
+    adding 5–10) the stubs widen the section box and pull the axis towards
+    the diagonals.  All points when fewer than four stretches hold points, or
+    when they hold more than ``max_points`` on average (a fine scan: the
+    stubs are a few percent, which the box's 1–99 % extents leave out, and a
+    face seen from one scanner only over part of the length is the
+    member's)."""
+    n = len(uv)
+    if n == 0 or cell <= 0 or bin_length <= 0:
+        return np.ones(n, bool)
+    b = np.floor((t - t.min()) / bin_length).astype(np.int64)
+    stretches = len(np.unique(b))
+    if stretches < 4 or n > max_points * stretches:
+        return np.ones(n, bool)
+    ij = np.floor(uv / cell).astype(np.int64)
+    _, cell_id = np.unique(ij, axis=0, return_inverse=True)
+    cell_id = cell_id.reshape(-1)
+    pairs = np.unique(cell_id * (int(b.max()) + 1) + b)
+    seen = np.bincount(pairs // (int(b.max()) + 1), minlength=int(cell_id.max()) + 1)
+    keep = seen[cell_id] >= min_share * stretches
+    return keep if int(keep.sum()) >= 3 else np.ones(n, bool)
+
+
 def face_axis(faces: list[Face], cs: CrossSection) -> np.ndarray | None:
     """2D normal, in the cross-section, of the face with the most points."""
     if not faces:

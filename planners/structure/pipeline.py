@@ -42,6 +42,7 @@ from planners.structure.faces import (
     classify_profile,
     cross_section,
     member_faces,
+    persistent_section,
     section_box,
 )
 from planners.structure.features import line_features
@@ -114,6 +115,13 @@ COMPACT_DIRECTION = True
 COMPACT_CELL_SPACINGS = 2.0
 #: and only for a section at least this many cells across
 COMPACT_MIN_CELLS = 2.0
+#: the section box from the cells seen along at least this share of the
+#: member's stretches (each this many spacings long): diagonals' stubs are
+#: seen only at the joints (:func:`.faces.persistent_section`); 0: every cell
+PERSISTENT_SHARE = 0.3
+PERSISTENT_BIN_SPACINGS = 5.0
+#: only for members with at most this many points a stretch on average
+PERSISTENT_MAX_POINTS = 20.0
 #: assign → refit rounds before the final assignment: at least, at most
 MIN_REFITS = 2
 MAX_REFITS = 5
@@ -212,6 +220,17 @@ def _refit(
                 cs = cross_section(core, c, d)
     inner = _inner(cs.t)
     uv = cs.uv if inner is None else cs.uv[inner]
+    if PERSISTENT_SHARE > 0:
+        t_in = cs.t if inner is None else cs.t[inner]
+        keep = persistent_section(
+            uv,
+            t_in,
+            cell,
+            PERSISTENT_BIN_SPACINGS * max(spacing, NOISE_M),
+            PERSISTENT_SHARE,
+            PERSISTENT_MAX_POINTS,
+        )
+        uv = uv[keep]
     vt, mu, box = section_box(uv)
     mid2 = mu + (0.5 * (box[0] + box[1])) @ vt
     centre = c + mid2[0] * cs.u + mid2[1] * cs.v
