@@ -93,6 +93,9 @@ RESOLVED_SPACINGS = 4.0
 #: a candidate whose largest face's plane covers this fraction of the cells
 #: beside it or more is a piece of a larger surface
 CONTINUATION_MAX = 0.55
+#: steel members crossing a candidate at more than this angle are not its
+#: plane going on (the diagonals beside a chord, :func:`_truss_planes`)
+CROSSING_DEG = 20.0
 #: a candidate with fewer of its points on its faces is not steel (vegetation, rubble)
 FACE_FRACTION_MIN = 0.8
 #: how far past a member's last point (beyond the neighbour's section) a joint
@@ -322,7 +325,8 @@ def model_structure(
 
     # pieces of larger planes (ground, slabs, walls) and of things that are
     # not a few planes (vegetation) are not members
-    not_clutter = []
+    not_clutter: list[Member] = []
+    plane_like: list[tuple[Member, Face, float, float]] = []
     for m in members:
         if m.n_points < MIN_MEMBER_POINTS:  # its points all went to neighbours
             continue
@@ -342,6 +346,10 @@ def model_structure(
             < CONTINUATION_MAX
         ):
             not_clutter.append(m)
+        else:
+            plane_like.append((m, big, band, cell))
+    not_clutter += _truss_planes(tree, pts, labels, members, not_clutter, plane_like, 2 * tol)
+    not_clutter.sort(key=lambda m: m.id)
     if len(not_clutter) < len(members):
         labels, members, radii, _ = _renumber(labels, members, radii, not_clutter, spacing)
     stage("clutter", 0.9)
@@ -374,6 +382,37 @@ def model_structure(
         data["pos"] = data["pos"] + origin
     used = prm.as_dict()
     return StructureModel(members, joints, graph, labels, float(spacing), timings, used)
+
+
+def _truss_planes(
+    tree: cKDTree,
+    pts: np.ndarray,
+    labels: np.ndarray,
+    members: list[Member],
+    steel: list[Member],
+    plane_like: list[tuple[Member, Face, float, float]],
+    tol: float,
+) -> list[Member]:
+    """The plane-like candidates whose plane is made of steel members
+    crossing them: a chord's face lies in its truss's plane, and at coarse
+    spacing the diagonals (one a metre) fill the cells beside it (Warren and
+    Pratt at 10 cm lost both chords so).  The continuation is measured again
+    without the points of the members kept as steel that cross it at more
+    than ``CROSSING_DEG``; pieces of ground cross each other too, but none of
+    them was kept, so their plane still goes on."""
+    if not plane_like or not steel:
+        return []
+    dirs = np.array([m.direction for m in members])
+    is_steel = np.zeros(len(members) + 1, bool)  # the last slot answers label −1
+    is_steel[[m.id for m in steel]] = True
+    cos_cross = float(np.cos(np.radians(CROSSING_DEG)))
+    out = []
+    for m, face, band, cell in plane_like:
+        crossing = np.append(np.abs(dirs @ m.direction) < cos_cross, False) & is_steel
+        own = (labels == m.id) | crossing[labels]
+        if plane_continuation(tree, pts, face, band, tol, cell, own) < CONTINUATION_MAX:
+            out.append(m)
+    return out
 
 
 def _assign_and_refit(
