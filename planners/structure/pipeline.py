@@ -207,10 +207,24 @@ def _refit(
         return None
     # a few dozen points (a 10 cm scan of a small section) give a surer
     # direction by least squares than through two halves' boxes
-    if DIRECTION_FROM_HALVES and len(core) >= RESOLVED_POINTS:
-        d = _direction_from_halves(cs, c, d)
-        cs = cross_section(core, c, d)
     cell = COMPACT_CELL_SPACINGS * max(spacing, NOISE_M)
+    if DIRECTION_FROM_HALVES and len(core) >= RESOLVED_POINTS:
+        # the halves' boxes from the persistent section too: a column's base
+        # plate at one end moved its lower box and tilted it by 6°
+        if PERSISTENT_SHARE > 0:
+            keep = persistent_section(
+                cs.uv,
+                cs.t,
+                cell,
+                PERSISTENT_BIN_SPACINGS * max(spacing, NOISE_M),
+                PERSISTENT_SHARE,
+                PERSISTENT_MAX_POINTS,
+            )
+            half_cs = CrossSection(cs.centre, cs.direction, cs.u, cs.v, cs.t[keep], cs.uv[keep])
+        else:
+            half_cs = cs
+        d = _direction_from_halves(half_cs, c, d)
+        cs = cross_section(core, c, d)
     if COMPACT_DIRECTION and len(core) >= RESOLVED_POINTS:
         inner = _inner(cs.t)
         part = cs.uv if inner is None else cs.uv[inner]

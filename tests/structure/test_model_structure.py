@@ -492,21 +492,27 @@ def test_grow_end_stops_at_points_not_free_and_at_a_plane() -> None:
     assert grow_end(plane, ptree, pfree, np.zeros(3), d, 0.0, 1.0, 0.075, 0.1, 2.0) == 0.0
 
 
+def _assert_chords_found_at_10_cm(kind: str, seed: int) -> None:
+    """Both chords of the generator's truss ``kind`` / ``seed`` scanned at
+    10 cm are found (the issue's criterion), at a precision ≥ 0.9."""
+    from planners.structure.synthetic import make_scan, match_members
+
+    scan = make_scan(kind, seed, spacing_m=0.1)
+    model = model_structure(scan.points / scan.scale)
+    found = np.array([m.axis for m in model.members])
+    mm = match_members(scan.true_axes(), scan.true_depths(), found)
+    chords = [i for i, m in enumerate(scan.members) if m.role == "chord"]
+    assert set(chords) <= {t for t, _ in mm.pairs}, (kind, seed, mm.pairs)
+    assert mm.precision >= 0.9, mm.precision
+
+
 def test_a_chord_split_by_a_joint_is_one_member_at_10_cm() -> None:
     """Warren seed 2 at 10 cm: the 20.8 m chord's regions stopped 1.5 m short
     of each other round a joint, its points there left unlabelled, and the
     pieces 2.3 m apart (more than ``max_gap_m``) stayed two members, neither
     covering 80 % of the chord.  Walking the ends over those points joins
     them."""
-    from planners.structure.synthetic import make_scan, match_members
-
-    scan = make_scan("warren", 2, spacing_m=0.1)
-    model = model_structure(scan.points / scan.scale)
-    found = np.array([m.axis for m in model.members])
-    mm = match_members(scan.true_axes(), scan.true_depths(), found)
-    chords = [i for i, m in enumerate(scan.members) if m.role == "chord"]
-    assert set(chords) <= {t for t, _ in mm.pairs}
-    assert mm.precision >= 0.9, mm.precision
+    _assert_chords_found_at_10_cm("warren", 2)
 
 
 def test_gap_filled_needs_points_all_along_and_no_plane_beside() -> None:
@@ -599,15 +605,7 @@ def test_chords_keep_their_sections_among_diagonals_at_10_cm() -> None:
     spacing; the section box grew to the diagonals round after round, the
     axes went 0.2 m aside and neither chord was found (recall 0.33).  The
     box from the cells seen all along the chord finds both."""
-    from planners.structure.synthetic import make_scan, match_members
-
-    scan = make_scan("warren", 6, spacing_m=0.1)
-    model = model_structure(scan.points / scan.scale)
-    found = np.array([m.axis for m in model.members])
-    mm = match_members(scan.true_axes(), scan.true_depths(), found)
-    chords = [i for i, m in enumerate(scan.members) if m.role == "chord"]
-    assert set(chords) <= {t for t, _ in mm.pairs}
-    assert mm.precision >= 0.9, mm.precision
+    _assert_chords_found_at_10_cm("warren", 6)
 
 
 def test_a_chord_in_its_truss_plane_is_not_taken_for_a_surface_at_10_cm() -> None:
@@ -616,15 +614,7 @@ def test_a_chord_in_its_truss_plane_is_not_taken_for_a_surface_at_10_cm() -> Non
     spacings wide) covered 59 % of the cells beside it, so both chords were
     dropped as pieces of a larger surface (recall 0.26).  Without the steel
     members crossing it the plane does not go on."""
-    from planners.structure.synthetic import make_scan, match_members
-
-    scan = make_scan("pratt", 12, spacing_m=0.1)
-    model = model_structure(scan.points / scan.scale)
-    found = np.array([m.axis for m in model.members])
-    mm = match_members(scan.true_axes(), scan.true_depths(), found)
-    chords = [i for i, m in enumerate(scan.members) if m.role == "chord"]
-    assert set(chords) <= {t for t, _ in mm.pairs}
-    assert mm.precision >= 0.9, mm.precision
+    _assert_chords_found_at_10_cm("pratt", 12)
 
 
 def test_pieces_of_ground_crossing_each_other_stay_clutter() -> None:
@@ -639,3 +629,24 @@ def test_pieces_of_ground_crossing_each_other_stay_clutter() -> None:
     for m in model.members:
         clutter = float((scan.labels[model.labels == m.id] < 0).mean())
         assert clutter < 0.5, (m.id, m.length_m, clutter)
+
+
+def test_a_column_s_base_does_not_tilt_its_axis_at_10_cm() -> None:
+    """Frame seed 14 at 10 cm: a 3.6 m HEB 300 column's lower half held a few
+    wide points at its base; the box of that half moved, and the direction
+    through the two halves' box centres leaned 6.3° (found at 5° only).  The
+    halves' boxes from the cells seen along the column keep it upright."""
+    from planners.structure.synthetic import _angles_deg, make_scan
+
+    scan = make_scan("frame", 14, spacing_m=0.1)
+    model = model_structure(scan.points / scan.scale)
+    column = scan.true_axes()[0:1]
+    assert scan.members[0].role == "column"
+    found = np.array([m.axis for m in model.members])
+    near = [
+        k
+        for k, m in enumerate(model.members)
+        if np.linalg.norm(m.axis.mean(axis=0) - column[0].mean(axis=0)) < 0.5
+    ]
+    assert near, "no member at the column"
+    assert float(_angles_deg(column, found[near]).min()) < 1.0
