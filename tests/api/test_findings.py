@@ -24,7 +24,7 @@ def fapi(make_api):
 
 
 def inspect_plan(api) -> dict:
-    plan = api.wait(api.submit("ara.inspect", {"sample_seed": 1})["id"], timeout=120)
+    plan = api.wait(api.submit("ara.inspect", {"sample_seed": 2})["id"], timeout=120)
     assert plan["state"] == "planned", plan.get("error")
     return plan
 

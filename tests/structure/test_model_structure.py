@@ -650,3 +650,4 @@ def test_a_column_s_base_does_not_tilt_its_axis_at_10_cm() -> None:
     ]
     assert near, "no member at the column"
     assert float(_angles_deg(column, found[near]).min()) < 1.0
+
