@@ -126,6 +126,29 @@ def relabel_by_faces(
     return out
 
 
+def _near_line(
+    points: np.ndarray,
+    tree: cKDTree,
+    centre: np.ndarray,
+    direction: np.ndarray,
+    t_lo: float,
+    t_hi: float,
+    radius: float,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``(idx, t, perp)`` of the points within two ``radius`` of the stretch
+    ``[t_lo, t_hi]`` of the line (a ball query a sample, one radius apart:
+    bounded by the stretch's length), with their parameter along the line
+    and their distance from it."""
+    h = max(radius, 1e-3)
+    ns = max(2, int(np.ceil((t_hi - t_lo) / h)) + 1)
+    samples = centre + np.outer(np.linspace(t_lo, t_hi, ns), direction)
+    hits = tree.query_ball_point(samples, 2.0 * radius + 0.5 * h)
+    idx = np.unique(np.concatenate([np.asarray(x, dtype=np.int64) for x in hits]))
+    rel = points[idx] - centre
+    t = rel @ direction
+    return idx, t, np.linalg.norm(rel - np.outer(t, direction), axis=1)
+
+
 #: a grown stretch may hold at most this many free points in the ring
 #: between one and two radii round the axis per point within one radius: a
 #: member continues as a line, a piece of ground or slab as a plane
@@ -161,18 +184,12 @@ def grow_end(
     extension's length, not the cloud's size)."""
     if max_growth <= 0 or radius <= 0 or step <= 0:
         return 0.0
-    h = max(radius, 1e-3)
-    ns = max(2, int(np.ceil(max_growth / h)) + 1)
-    ts = t_end + sign * np.linspace(0.0, max_growth, ns)
-    samples = centre + np.outer(ts, direction)
-    hits = tree.query_ball_point(samples, 2.0 * radius + 0.5 * h)
-    idx = np.unique(np.concatenate([np.asarray(x, dtype=np.int64) for x in hits]))
-    idx = idx[free[idx]] if len(idx) else idx
-    if len(idx) == 0:
-        return 0.0
-    rel = points[idx] - centre
-    t = rel @ direction
-    perp = np.linalg.norm(rel - np.outer(t, direction), axis=1)
+    far_end = t_end + sign * max_growth
+    idx, t, perp = _near_line(
+        points, tree, centre, direction, min(t_end, far_end), max(t_end, far_end), radius
+    )
+    mine = free[idx]
+    t, perp = t[mine], perp[mine]
     ahead = sign * (t - t_end)
     keep = (ahead > 0) & (ahead <= max_growth) & (perp <= 2.0 * radius)
     ahead, inner = ahead[keep], perp[keep] <= radius
@@ -213,16 +230,7 @@ def gap_filled(
         return True
     if radius <= 0:
         return False
-    h = max(radius, 1e-3)
-    ns = max(2, int(np.ceil((hi - lo) / h)) + 1)
-    samples = centre + np.outer(np.linspace(lo, hi, ns), direction)
-    hits = tree.query_ball_point(samples, 2.0 * radius + 0.5 * h)
-    idx = np.unique(np.concatenate([np.asarray(x, dtype=np.int64) for x in hits]))
-    if len(idx) == 0:
-        return False
-    rel = points[idx] - centre
-    t = rel @ direction
-    perp = np.linalg.norm(rel - np.outer(t, direction), axis=1)
+    idx, t, perp = _near_line(points, tree, centre, direction, lo, hi, radius)
     along = (t >= lo) & (t <= hi)
     inner = along & (perp <= radius)
     ring = along & (perp > radius) & (perp <= 2.0 * radius) & unlabelled[idx]

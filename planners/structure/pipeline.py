@@ -187,6 +187,14 @@ def _inner(t: np.ndarray) -> np.ndarray | None:
     return inner if int(inner.sum()) >= SECTION_TRIM_POINTS else None
 
 
+def _persistent(uv: np.ndarray, t: np.ndarray, cell: float, spacing: float) -> np.ndarray:
+    """Mask of the section points in persistent cells (all when ``PERSISTENT_SHARE`` is 0)."""
+    if PERSISTENT_SHARE <= 0:
+        return np.ones(len(uv), bool)
+    stretch = PERSISTENT_BIN_SPACINGS * max(spacing, NOISE_M)
+    return persistent_section(uv, t, cell, stretch, PERSISTENT_SHARE, PERSISTENT_MAX_POINTS)
+
+
 def _refit(
     core: np.ndarray, points: np.ndarray, spacing: float
 ) -> tuple[np.ndarray, np.ndarray, float, float, float] | None:
@@ -205,24 +213,14 @@ def _refit(
     cs = cross_section(core, c, d)
     if len(cs.uv) < 3:
         return None
+    cell = COMPACT_CELL_SPACINGS * max(spacing, NOISE_M)
     # a few dozen points (a 10 cm scan of a small section) give a surer
     # direction by least squares than through two halves' boxes
-    cell = COMPACT_CELL_SPACINGS * max(spacing, NOISE_M)
     if DIRECTION_FROM_HALVES and len(core) >= RESOLVED_POINTS:
         # the halves' boxes from the persistent section too: a column's base
         # plate at one end moved its lower box and tilted it by 6°
-        if PERSISTENT_SHARE > 0:
-            keep = persistent_section(
-                cs.uv,
-                cs.t,
-                cell,
-                PERSISTENT_BIN_SPACINGS * max(spacing, NOISE_M),
-                PERSISTENT_SHARE,
-                PERSISTENT_MAX_POINTS,
-            )
-            half_cs = CrossSection(cs.centre, cs.direction, cs.u, cs.v, cs.t[keep], cs.uv[keep])
-        else:
-            half_cs = cs
+        keep = _persistent(cs.uv, cs.t, cell, spacing)
+        half_cs = CrossSection(cs.centre, cs.direction, cs.u, cs.v, cs.t[keep], cs.uv[keep])
         d = _direction_from_halves(half_cs, c, d)
         cs = cross_section(core, c, d)
     if COMPACT_DIRECTION and len(core) >= RESOLVED_POINTS:
@@ -237,17 +235,7 @@ def _refit(
                 cs = cross_section(core, c, d)
     inner = _inner(cs.t)
     uv = cs.uv if inner is None else cs.uv[inner]
-    if PERSISTENT_SHARE > 0:
-        t_in = cs.t if inner is None else cs.t[inner]
-        keep = persistent_section(
-            uv,
-            t_in,
-            cell,
-            PERSISTENT_BIN_SPACINGS * max(spacing, NOISE_M),
-            PERSISTENT_SHARE,
-            PERSISTENT_MAX_POINTS,
-        )
-        uv = uv[keep]
+    uv = uv[_persistent(uv, cs.t if inner is None else cs.t[inner], cell, spacing)]
     vt, mu, box = section_box(uv)
     mid2 = mu + (0.5 * (box[0] + box[1])) @ vt
     centre = c + mid2[0] * cs.u + mid2[1] * cs.v
