@@ -30,9 +30,9 @@ from server.scene.finding_pick import MODIFIER as FINDING_MODIFIER
 from server.scene.finding_pick import FindingPicker, point_view
 from server.scene.framing import BoundsRecorder, apply_view, framing
 from server.scene.measure import Measurer
-from server.scene.proposals import ProposalBook
+from server.scene.proposals import ACCEPTING, PENDING, ProposalBook
 from server.scene.wsguard import TicketDesk, guarded_viser_start
-from server.store import PlanRecord, Store
+from server.store import NotFoundError, PlanRecord, Store
 
 log = logging.getLogger(__name__)
 
@@ -259,12 +259,22 @@ class SceneService:
             current_scene_client.reset(token)
         if pid is not None and self.running:
             with self._lock:  # a white marker until the proposal is decided
-                self._server.scene.add_icosphere(
+                handle = self._server.scene.add_icosphere(
                     f"/findings/proposed/{pid}",
                     radius=0.03,
                     color=(255, 255, 255),
                     position=tuple(place["point_m"]),
                 )
+                # decided between its recording and this marker (the API
+                # lists it at once): proposal_decided found no marker to remove
+                if self._proposal_state(pid) not in (PENDING, ACCEPTING):
+                    handle.remove()
+
+    def _proposal_state(self, proposal_id: str) -> str:
+        try:
+            return self.proposals.get(proposal_id).state
+        except NotFoundError:
+            return "gone"
 
     def proposal_decided(self, proposal_id: str) -> None:
         """A finding proposal was accepted or dismissed: its marker goes."""

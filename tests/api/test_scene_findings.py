@@ -83,7 +83,8 @@ def test_a_ctrl_click_on_a_face_proposes_a_finding_that_the_operator_confirms(sh
     assert prop["action"] == "finding" and prop["plan_id"] == plan["id"]
     assert prop["patch"]["member_id"] == member and prop["patch"]["face_id"] == face["id"]
     assert np.allclose(prop["patch"]["point_m"], target, atol=2e-3)
-    assert scene.server.scene.get_handle_by_name(f"/findings/proposed/{prop['id']}") is not None
+    marker = f"/findings/proposed/{prop['id']}"
+    assert wait_for(lambda: scene.server.scene.get_handle_by_name(marker), 10) is not None
 
     url = f"/api/v1/scene/proposals/{prop['id']}/accept"
     fields = {"type": "corrosion", "condition_state": 3, "notes": "rust at the web"}
@@ -140,7 +141,8 @@ def test_a_ctrl_click_on_a_face_proposes_a_finding_that_the_operator_confirms(sh
         ws.send(ctrl_click(cam, target - cam))
         (again,) = wait_for(lambda: _pending(sapi), 10)
     marker = f"/findings/proposed/{again['id']}"
-    assert scene.server.scene.get_handle_by_name(marker) is not None
+    # the API lists a proposal as soon as it is recorded; its marker follows
+    assert wait_for(lambda: scene.server.scene.get_handle_by_name(marker), 10) is not None
     assert sapi.post(f"/api/v1/scene/proposals/{again['id']}/dismiss").status_code == 200
     assert scene.server.scene.get_handle_by_name(marker) is None
 
@@ -153,6 +155,28 @@ def test_other_kinds_shown_pick_nothing(shown) -> None:
     assert not scene.finding_picker.active
     _, _, c, n = _web(plan)
     assert scene.finding_picker.pick(c + n, -n) is None
+
+
+def test_a_proposal_decided_before_its_marker_is_drawn_leaves_no_marker(shown) -> None:
+    """The API lists a proposal as soon as it is recorded, so an operator may
+    dismiss it before the click's thread draws its marker: the marker must
+    not stay behind (proposal_decided found nothing to remove)."""
+    sapi, plan = shown
+    scene = sapi.services.scene
+    _, _, c, n = _web(plan)
+    record = scene._on_propose
+
+    def record_then_dismiss(plan_id, patch, action="revise"):
+        pid = record(plan_id, patch, action=action)
+        assert sapi.post(f"/api/v1/scene/proposals/{pid}/dismiss").status_code == 200
+        return pid
+
+    scene._on_propose = record_then_dismiss
+    click = types.SimpleNamespace(client_id=1, ray_origin=c + n, ray_direction=-n)
+    scene._on_finding_click(click)
+    (done,) = sapi.get("/api/v1/scene/proposals", "viewer").json()
+    assert done["state"] == "dismissed"
+    assert scene.server.scene.get_handle_by_name(f"/findings/proposed/{done['id']}") is None
 
 
 # ---------------------------------------------------------- the picker alone
