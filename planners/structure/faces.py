@@ -179,6 +179,7 @@ def persistent_section(
     bin_length: float,
     min_share: float,
     max_points: float = np.inf,
+    min_kept: float = 0.0,
 ) -> np.ndarray:
     """(n,) mask of the section points in cells (``cell`` wide) that hold
     points in at least ``min_share`` of the member's occupied stretches
@@ -190,7 +191,9 @@ def persistent_section(
     when they hold more than ``max_points`` on average (a fine scan: the
     stubs are a few percent, which the box's 1–99 % extents leave out, and a
     face seen from one scanner only over part of the length is the
-    member's)."""
+    member's), or when the persistent cells hold fewer than ``min_kept`` of
+    the points (a member seen whole near a scanner and by one flange far
+    from it: those are its own cells, not stubs)."""
     n = len(uv)
     if n == 0 or cell <= 0 or bin_length <= 0:
         return np.ones(n, bool)
@@ -204,7 +207,9 @@ def persistent_section(
     pairs = np.unique(cell_id * (int(b.max()) + 1) + b)
     seen = np.bincount(pairs // (int(b.max()) + 1), minlength=int(cell_id.max()) + 1)
     keep = seen[cell_id] >= min_share * stretches
-    return keep if int(keep.sum()) >= 3 else np.ones(n, bool)
+    if int(keep.sum()) < max(3.0, min_kept * n):
+        return np.ones(n, bool)
+    return keep
 
 
 def face_axis(faces: list[Face], cs: CrossSection) -> np.ndarray | None:
