@@ -513,6 +513,10 @@ async function select(id) {
   renderPlans();
   const p = await api("GET", `/plans/${id}`);
   upsertPlan(p);
+  // A plan event re-selects the selected plan (its state changed); if the
+  // operator picked another plan while that fetch was out, the older answer
+  // must not redraw the detail over the newer choice.
+  if (state.selected !== id) return;
   renderDetail(p);
   renderComparison(p);
   // findings.js and replay.js follow the selected plan

@@ -673,3 +673,43 @@ def test_no_horizontal_overflow(browser, tmp_path: Path, width: int) -> None:
         )
         assert wide == [], wide
         assert not errors, errors
+
+
+def test_a_late_answer_for_an_earlier_selection_does_not_redraw_the_detail(
+    browser, tmp_path: Path
+) -> None:
+    """The plan event re-selects the selected plan when its state changes; if
+    the operator picks another plan while that fetch is out, its late answer
+    must not put the older plan back in the detail (CI saw the findings list
+    of a re-selected inspection hidden by a blast plan's late detail)."""
+    settings = make_settings(tmp_path / "var", port=free_port(), scene_port=free_port())
+    with live_server(settings) as (url, tokens, _app):
+        h = {"Authorization": f"Bearer {tokens['operator']}"}
+        ids = []
+        for end in ("c1", "c2"):
+            r = httpx.post(
+                f"{url}/api/v1/plans",
+                json={"kind": "demo.route", "params": {"end": end}},
+                headers=h,
+            )
+            ids.append(r.json()["id"])
+        older, newer = ids
+        page, errors = signed_in(browser, url, tokens["viewer"])
+        for pid in ids:
+            page.wait_for_selector(f"#plans tbody tr[data-id='{pid}'][data-state='planned']")
+        held: list = []
+        page.route(f"**/api/v1/plans/{older}", lambda route: held.append(route))
+        page.evaluate(f"() => {{ select('{older}'); }}")  # not awaited: its answer is held back
+        deadline = time.monotonic() + 10
+        while not held and time.monotonic() < deadline:
+            page.wait_for_timeout(50)
+        assert held, "the older selection's fetch never went out"
+        page.locator(f"#plans tbody tr[data-id='{newer}']").click()
+        page.wait_for_function(
+            f"document.querySelector('#d-title').textContent.startsWith('{newer}')"
+        )
+        held[0].continue_()  # the older answer arrives last
+        page.wait_for_timeout(1000)
+        assert page.evaluate("state.selected") == newer
+        assert page.inner_text("#d-title").startswith(newer)
+        assert not errors, errors
