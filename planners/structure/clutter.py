@@ -78,3 +78,74 @@ def plane_continuation(
     at_edge = np.bincount(edge // (n_x * n_y), minlength=2) / n_x
     # the better-covered side: a strip at the edge of the ground continues on one side only
     return float(np.minimum(per_side, at_edge).max())
+
+
+def parallel_rows(
+    tree: cKDTree,
+    pts: np.ndarray,
+    face: Face,
+    band: float,
+    tol: float,
+    cell: float,
+    own: np.ndarray | None = None,
+    along: float = 0.6,
+) -> float:
+    """Fraction of the ``cell``-wide lanes parallel to ``face``, in a
+    ``band`` beside it (the better side), whose plane points run along at
+    least ``along`` of the face's length, bridging gaps of one cell.
+
+    A coarse scan of the ground is rows: strips of points parallel to the
+    candidate, a row spacing apart, with empty cells between them, so the
+    cell coverage of :func:`plane_continuation` stays low while the plane
+    goes on.  Lanes see the rows whole.  A parallel member of the same
+    plane (the next girder, two metres away) fills one or two lanes of the
+    band; members crossing the candidate cover a lane over a short stretch
+    each, however many there are (a face-on truss's diagonals a metre
+    apart fill half the lanes beside its chord at 10 cm, in pieces).  Points flagged in ``own`` are not counted.
+    The KD-tree lookups cover the band in steps of ``band``, so the work is
+    bounded by its area."""
+    lo, hi = face.boundary.min(axis=0), face.boundary.max(axis=0)
+    length = float(hi[0] - lo[0])
+    if length <= 0 or hi[1] <= lo[1] or band <= 0:
+        return 0.0
+    mid = 0.5 * (lo[1] + hi[1])
+    xs = np.append(np.arange(lo[0], hi[0], band), hi[0])
+    centres = face.to_world(np.column_stack([xs, np.full(len(xs), mid)]))
+    reach = float(np.hypot(band, 0.5 * (hi[1] - lo[1]) + band)) + tol
+    found = tree.query_ball_point(centres, reach)
+    idx = np.unique(np.concatenate([np.asarray(f, dtype=np.int64) for f in found]))
+    if own is not None and len(idx):
+        idx = idx[~own[idx]]
+    if len(idx) == 0:
+        return 0.0
+    rel = pts[idx] - face.origin
+    x = rel @ face.x_axis
+    y = rel @ face.y_axis
+    z = rel @ face.normal
+    n_x = max(1, int(np.ceil(length / cell)))
+    n_y = max(1, int(np.ceil(band / cell)))
+    best = 0.0
+    for off in (lo[1] - y, y - hi[1]):
+        keep = (np.abs(z) <= tol) & (x >= lo[0]) & (x <= hi[0]) & (off > 0) & (off <= band)
+        if not keep.any():
+            continue
+        cx = np.minimum(((x[keep] - lo[0]) / cell).astype(np.int64), n_x - 1)
+        cy = np.minimum((off[keep] / cell).astype(np.int64), n_y - 1)
+        covered = np.zeros((n_y, n_x), bool)
+        covered[cy, cx] = True
+        # a row's points can miss one cell (noise, a pole's shadow)
+        if n_x > 2:
+            covered[:, 1:-1] |= covered[:, :-2] & covered[:, 2:]
+        best = max(best, float((_longest_runs(covered) >= along * n_x).mean()))
+    return best
+
+
+def _longest_runs(covered: np.ndarray) -> np.ndarray:
+    """Per row of a boolean grid, the length of its longest run of ``True``."""
+    edges = np.diff(np.pad(covered.astype(np.int8), ((0, 0), (1, 1))), axis=1)
+    rows_s, starts = np.nonzero(edges == 1)
+    _, ends = np.nonzero(edges == -1)
+    out = np.zeros(len(covered), dtype=np.int64)
+    # starts and ends pair up row by row in the same (row-major) order
+    np.maximum.at(out, rows_s, ends - starts)
+    return out

@@ -35,7 +35,7 @@ from planners.errors import EmptyInputError, InvalidInputError
 from planners.pointcloud._validate import as_points
 from planners.pointcloud.spacing import measure_spacing
 from planners.structure.assign import assign_points, gap_filled, grow_end, relabel_by_faces
-from planners.structure.clutter import plane_continuation
+from planners.structure.clutter import parallel_rows, plane_continuation
 from planners.structure.direction import compact_direction
 from planners.structure.faces import (
     CrossSection,
@@ -93,6 +93,12 @@ RESOLVED_SPACINGS = 4.0
 #: a candidate whose largest face's plane covers this fraction of the cells
 #: beside it or more is a piece of a larger surface
 CONTINUATION_MAX = 0.55
+#: a candidate with this fraction of the lanes beside it (in a band twice
+#: the continuation's) holding plane points along ``PARALLEL_ALONG`` of its
+#: length or more lies among the parallel rows of a larger surface: a
+#: coarse scan's ground (:func:`~planners.structure.clutter.parallel_rows`)
+PARALLEL_MAX = 0.45
+PARALLEL_ALONG = 0.6
 #: steel members crossing a candidate at more than this angle are not its
 #: plane going on (the diagonals beside a chord, :func:`_truss_planes`)
 CROSSING_DEG = 20.0
@@ -351,11 +357,11 @@ def model_structure(
             continue
         if m.length_m < prm.min_slenderness * max(m.depth_m, m.width_m):
             continue
-        if (
-            big is None
-            or plane_continuation(tree, pts, big, band, 2 * tol, cell, labels == m.id)
-            < CONTINUATION_MAX
-        ):
+        if big is None:
+            not_clutter.append(m)
+            continue
+        own = labels == m.id
+        if not _surface(tree, pts, big, band, 2 * tol, cell, own):
             not_clutter.append(m)
         else:
             plane_like.append((m, big, band, cell))
@@ -406,10 +412,11 @@ def _truss_planes(
 ) -> list[Member]:
     """The plane-like candidates whose plane is made of steel members
     crossing them: a chord's face lies in its truss's plane, and at coarse
-    spacing the diagonals (one a metre) fill the cells beside it (Warren and
-    Pratt at 10 cm lost both chords so).  The continuation is measured again
+    spacing the diagonals (one a metre) fill the cells beside it, or the
+    lanes beside it in pieces a cell apart (Warren and Pratt at 10 cm lost
+    both chords so).  The continuation is measured again
     without the points of the members kept as steel that cross it at more
-    than ``CROSSING_DEG``; pieces of ground cross each other too, but none of
+    than ``CROSSING_DEG`` (both tests of :func:`_surface`); pieces of ground cross each other too, but none of
     them was kept, so their plane still goes on."""
     if not plane_like or not steel:
         return []
@@ -421,9 +428,27 @@ def _truss_planes(
     for m, face, band, cell in plane_like:
         crossing = np.append(np.abs(dirs @ m.direction) < cos_cross, False) & is_steel
         own = (labels == m.id) | crossing[labels]
-        if plane_continuation(tree, pts, face, band, tol, cell, own) < CONTINUATION_MAX:
+        if not _surface(tree, pts, face, band, tol, cell, own):
             out.append(m)
     return out
+
+
+def _surface(
+    tree: cKDTree,
+    pts: np.ndarray,
+    face: Face,
+    band: float,
+    tol: float,
+    cell: float,
+    own: np.ndarray,
+) -> bool:
+    """Whether ``face``'s plane goes on beside it, not counting ``own``:
+    cells covered beside it (ground, slabs) or parallel rows in a band
+    twice as wide (a coarse scan's ground)."""
+    if plane_continuation(tree, pts, face, band, tol, cell, own) >= CONTINUATION_MAX:
+        return True
+    rows = parallel_rows(tree, pts, face, 2 * band, tol, cell, own, PARALLEL_ALONG)
+    return rows >= PARALLEL_MAX
 
 
 def _assign_and_refit(
