@@ -19,6 +19,24 @@ from scipy.spatial import cKDTree
 from planners.structure.model import Face
 
 
+def _near(
+    tree: cKDTree,
+    pts: np.ndarray,
+    face: Face,
+    centres: np.ndarray,
+    reach: float,
+    own: np.ndarray | None,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """In-plane x, y and height over ``face`` of the points within
+    ``reach`` of any of ``centres``, those flagged in ``own`` left out."""
+    found = tree.query_ball_point(centres, reach)
+    idx = np.unique(np.concatenate([np.asarray(f, dtype=np.int64) for f in found]))
+    if own is not None and len(idx):
+        idx = idx[~own[idx]]
+    rel = pts[idx] - face.origin
+    return rel @ face.x_axis, rel @ face.y_axis, rel @ face.normal
+
+
 def plane_continuation(
     tree: cKDTree,
     pts: np.ndarray,
@@ -48,19 +66,12 @@ def plane_continuation(
     gx, gy = np.meshgrid(xs, ys, indexing="ij")
     centres = face.to_world(np.column_stack([gx.ravel(), gy.ravel()]))
     reach = float(np.hypot(0.5 * step, 0.5 * band)) + tol
-    found = tree.query_ball_point(centres, reach)
-    idx = np.unique(np.concatenate([np.asarray(f, dtype=np.int64) for f in found]))
-    if own is not None:
-        idx = idx[~own[idx]]
+    x, y, z = _near(tree, pts, face, centres, reach, own)
     n_x = max(1, int(np.ceil(length / cell)))
     n_y = max(1, int(np.ceil(band / cell)))
     total = 2 * n_x * n_y
-    if len(idx) == 0:
+    if len(x) == 0:
         return 0.0
-    rel = pts[idx] - face.origin
-    x = rel @ face.x_axis
-    y = rel @ face.y_axis
-    z = rel @ face.normal
     left = (y < lo[1]) & (y >= lo[1] - band)
     right = (y > hi[1]) & (y <= hi[1] + band)
     beside = (np.abs(z) <= tol) & (x >= lo[0]) & (x <= hi[0]) & (left | right)
@@ -112,16 +123,9 @@ def parallel_rows(
     xs = np.append(np.arange(lo[0], hi[0], band), hi[0])
     centres = face.to_world(np.column_stack([xs, np.full(len(xs), mid)]))
     reach = float(np.hypot(band, 0.5 * (hi[1] - lo[1]) + band)) + tol
-    found = tree.query_ball_point(centres, reach)
-    idx = np.unique(np.concatenate([np.asarray(f, dtype=np.int64) for f in found]))
-    if own is not None and len(idx):
-        idx = idx[~own[idx]]
-    if len(idx) == 0:
+    x, y, z = _near(tree, pts, face, centres, reach, own)
+    if len(x) == 0:
         return 0.0
-    rel = pts[idx] - face.origin
-    x = rel @ face.x_axis
-    y = rel @ face.y_axis
-    z = rel @ face.normal
     n_x = max(1, int(np.ceil(length / cell)))
     n_y = max(1, int(np.ceil(band / cell)))
     best = 0.0
