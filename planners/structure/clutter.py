@@ -110,10 +110,11 @@ def parallel_rows(
     cell coverage of :func:`plane_continuation` stays low while the plane
     goes on.  Lanes see the rows whole.  A parallel member of the same
     plane (the next girder, two metres away) fills one or two lanes of the
-    band; members crossing the candidate cover a lane over a short stretch
-    each, however many there are (a face-on truss's diagonals a metre
-    apart fill half the lanes beside its chord at 10 cm, in pieces).  Points flagged in ``own`` are not counted.
-    The KD-tree lookups cover the band in steps of ``band``, so the work is
+    band; members crossing the candidate cover a lane in pieces, which the
+    one-cell bridge joins only when they stand about a metre apart or less
+    (a truss's posts and diagonals: the pipeline looks again without the
+    crossing steel).  Points flagged in ``own`` are not counted.  The
+    KD-tree lookups cover the band in steps of ``band``, so the work is
     bounded by its area."""
     lo, hi = face.boundary.min(axis=0), face.boundary.max(axis=0)
     length = float(hi[0] - lo[0])

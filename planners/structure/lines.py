@@ -37,7 +37,7 @@ LINK_K = 8
 #: Larger factors find more at 10 cm (2.0: Warren 0.870, Pratt 0.888) but
 #: link the scan rows on the ground into members (precision 0.873 / 0.896)
 #: and leave a 2 cm grillage member off the route.  With the pipeline's
-#: lanes test for ground rows, 2.5 keeps 10 cm precision near today's
+#: lanes test for ground rows, 2.5 keeps 10 cm precision near 1.2's
 #: (Warren 0.906 / 0.882, Pratt 0.904 / 0.922) but breaks five seeds the
 #: tests pin (docs/inspection.md); 0: off
 LINK_ROW = 1.2

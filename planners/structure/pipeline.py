@@ -414,10 +414,10 @@ def _truss_planes(
     crossing them: a chord's face lies in its truss's plane, and at coarse
     spacing the diagonals (one a metre) fill the cells beside it, or the
     lanes beside it in pieces a cell apart (Warren and Pratt at 10 cm lost
-    both chords so).  The continuation is measured again
+    both chords so).  Both tests of :func:`_surface` are measured again
     without the points of the members kept as steel that cross it at more
-    than ``CROSSING_DEG`` (both tests of :func:`_surface`); pieces of ground cross each other too, but none of
-    them was kept, so their plane still goes on."""
+    than ``CROSSING_DEG``; pieces of ground cross each other too, but none
+    of them was kept, so their plane still goes on."""
     if not plane_like or not steel:
         return []
     dirs = np.array([m.direction for m in members])
