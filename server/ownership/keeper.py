@@ -90,6 +90,13 @@ class LeaseKeeper:
         self.emulator_urls = dict(emulator_urls or {})
         self._stop = threading.Event()
         self._lock = threading.Lock()  # one adopt/drop pass at a time (loop vs fence)
+        # One claim or release at a time: a renewal still in flight when the
+        # service stops (its thread outlives ``stop``'s join on a slow store)
+        # must not commit after the release and hand the leases back to a
+        # server that is gone, with a fresh heartbeat that keeps a restarted
+        # server from taking its robots for a whole lease.
+        self._claim_lock = threading.Lock()
+        self._released = False
         self._last_ok: float | None = None  # monotonic start of the last renewal that committed
         self._peers_seen = False
         self._fenced = False
@@ -113,12 +120,26 @@ class LeaseKeeper:
         for t in self._threads:
             t.join(timeout=1.0)
 
-    def release(self) -> None:
-        """A clean shutdown, after the links closed: the leases go now, not in ``lease_s``."""
+    def release(self, wait_s: float = 5.0) -> None:
+        """A clean shutdown, after the links closed: the leases go now, not in ``lease_s``.
+
+        Waits up to ``wait_s`` for a renewal in flight to end, and no renewal
+        starts after it."""
+        if not self._claim_lock.acquire(timeout=wait_s):
+            log.error(
+                "a lease renewal is still running after %.1f s: the robot leases "
+                "are not released (they lapse in %.1f s)",
+                wait_s,
+                self.lease_s,
+            )
+            return
         try:
+            self._released = True
             self.store.unregister(self.server_id)
         except Exception:
             log.exception("could not release the robot leases (they lapse in %.1f s)", self.lease_s)
+        finally:
+            self._claim_lock.release()
 
     # ----------------------------------------------------------------- claims
     def _first_claim(self) -> None:
@@ -145,6 +166,12 @@ class LeaseKeeper:
             time.sleep(min(max(max(stale) - now + 0.05, 0.05), left))
 
     def _tick(self) -> dict[str, LeaseRow] | None:
+        with self._claim_lock:
+            if self._released:
+                return None
+            return self._claim_and_apply()
+
+    def _claim_and_apply(self) -> dict[str, LeaseRow] | None:
         started = time.monotonic()
         try:
             leases = self.store.claim(
@@ -166,6 +193,8 @@ class LeaseKeeper:
         with self._lock:
             self._last_ok = started
             self._fenced = False
+            if self._stop.is_set():
+                return leases  # stopping: the engine is shutting its links, adopt nothing
             self._apply(leases, stored, emulated)
             self._latch_held_estops()
         return leases

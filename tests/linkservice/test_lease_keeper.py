@@ -185,6 +185,45 @@ def test_a_clean_release_hands_over_at_the_next_tick(store) -> None:
         b.stop()
 
 
+def test_a_renewal_in_flight_at_shutdown_does_not_outlive_the_release(store) -> None:
+    """The CI failure of stop 31: a renewal still inside a slow store when the
+    service stopped committed after the release, so the leases came back with
+    a fresh heartbeat and a restarted server did not take its robots (nor
+    interrupt the run left on them) for a whole lease."""
+    a, eng_a = keeper(store, "a")
+    real_claim = a.store.claim
+    inside, gate = threading.Event(), threading.Event()
+
+    def slow_claim(*args: Any, **kwargs: Any) -> Any:
+        if a._ticks >= 1:  # the loop's renewals, not the first claim
+            inside.set()
+            gate.wait(10)
+        return real_claim(*args, **kwargs)
+
+    a.store.claim = slow_claim  # type: ignore[method-assign]
+    a.start()
+    assert set(eng_a.owned) == set(ROBOTS)
+    assert inside.wait(LEASE), "no renewal started"
+    a.stop()  # its join gives up on the stuck renewal, as on a loaded machine
+    releaser = threading.Thread(target=a.release)
+    releaser.start()
+    time.sleep(0.3)
+    gate.set()  # the store answers: the renewal commits, then the release runs
+    releaser.join(10)
+    for t in [releaser, *a._threads]:  # the renewal has ended, committed or not
+        t.join(10)
+        assert not t.is_alive()
+    own = OwnershipStore(store.db)
+    assert own.leases() == {} and own.servers() == []
+    # A server starting now takes every robot in its first claim.
+    b, eng_b = keeper(store, "b")
+    b.start()
+    try:
+        assert set(eng_b.owned) == set(ROBOTS)
+    finally:
+        b.stop()
+
+
 def test_a_server_that_cannot_renew_drops_its_robots_before_the_lease_lapses(store) -> None:
     a, eng_a = keeper(store, "a")
     b, _ = keeper(store, "b")
