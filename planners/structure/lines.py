@@ -25,22 +25,58 @@ from planners.structure.features import LineFeatures
 
 #: linear voxels each voxel may link to (its nearest ones)
 LINK_K = 8
-#: a link may also reach this many times the spacing of the voxel's
-#: neighbourhood along its line (2r / (n − 1), n voxels within r): a
-#: member far from every scanner is a sparse row (a cross girder seen in a
-#: 2 cm scan as 31 points over 2.7 m, 9 cm apart), each voxel beyond the cap
-#: from the next, and every voxel was a region of its own.  20 seeds, visible
-#: recall / precision, with ``PERSISTENT_MIN_KEPT`` of the pipeline: grillage
-#: 2 cm 0.925 / 0.956 → 0.971 / 0.967, Warren 0.960 / 0.982 → 0.970 / 0.986,
-#: grillage 10 cm 0.653 / 0.810 → 0.683 / 0.812, the rest within ±0.01
-#: but Pratt 5 mm recall 0.992 → 0.981 (docs/inspection.md says why).
-#: Larger factors find more at 10 cm (2.0: Warren 0.870, Pratt 0.888) but
-#: link the scan rows on the ground into members (precision 0.873 / 0.896)
-#: and leave a 2 cm grillage member off the route.  With the pipeline's
-#: lanes test for ground rows, 2.5 keeps 10 cm precision near 1.2's
-#: (Warren 0.906 / 0.882, Pratt 0.904 / 0.922) but breaks five seeds the
-#: tests pin (docs/inspection.md); 0: off
-LINK_ROW = 1.2
+#: a link may also reach this many times the step between a voxel's
+#: neighbours along its line (:func:`_row_step`): a member far from every
+#: scanner is a sparse row (a cross girder seen in a 2 cm scan as 31 points
+#: over 2.7 m, 9 cm apart; a diagonal in a 10 cm scan as one point every
+#: 10–30 cm, one or two across), each voxel beyond the plain cap from the
+#: next, and every voxel was a region of its own.  Such a long link is kept
+#: only along the voxel's own line (``LINK_ROW_ALIGN_DEG``) and within
+#: ``ROW_REACH_SPACINGS`` scan spacings.  20 seeds, visible recall /
+#: precision, 1.2 in any direction (the earlier setting) → 8 along the
+#: line: 10 cm Warren 0.831 / 0.895 → 0.925 / 0.929, Pratt 0.822 / 0.927 →
+#: 0.899 / 0.931, frame 0.960 / 0.946 → 0.982 / 0.921, grillage 0.683 /
+#: 0.829 → 0.802 / 0.821; every 2 cm row still met, 5 mm Pratt 0.981 /
+#: 0.992 → 0.971 / 0.987 and the other 5 mm rows unchanged
+#: (docs/inspection.md).  In any direction, factors above 2 linked the
+#: ground's scan rows and neighbouring members sideways (2.5: five seeds
+#: the tests pin broke); 0: off
+LINK_ROW = 8.0
+#: a link longer than the plain cap runs within this angle of the voxel's
+#: own direction: a sparse row continues along itself, while the ground's
+#: scan rows, a parallel member or a crossing one lie beside it.  At 6° a
+#: person-sized box under a 2 cm grillage's girder end became a member
+#: (seed 1), at 10° 10 cm grillage precision fell to 0.770; 4° keeps both
+LINK_ROW_ALIGN_DEG = 4.0
+#: the row link's reach in scan spacings at most (1.2 m at 10 cm, 0.24 m at
+#: 2 cm, 6 cm at 5 mm): two collinear members 0.5 m apart in a fine scan
+#: stay two regions (the fragment join decides later
+#: whether they are one member).  16 spacings found no more at 10 cm and
+#: changed the chaotic Pratt 5 mm seed 8 (recall 0.963 over 20 seeds); 8
+#: broke a sparse 2 cm row (12 cm steps, noise) into pieces
+ROW_REACH_SPACINGS = 12.0
+
+
+def _row_step(centres: np.ndarray, direction: np.ndarray, nb: np.ndarray) -> np.ndarray:
+    """(m,) median step between successive neighbours along each voxel's line.
+
+    ``centres`` (m, 3), ``direction`` (m, 3) unit, ``nb`` (m, k) the k nearest
+    (the voxel itself first; ``m`` where fewer exist).  ``2r / (n − 1)``, the
+    neighbourhood's spacing, assumes it full on both sides; at the end of a
+    row it is one-sided and twice the step, which let a row's last voxel
+    link across an occlusion gap.  The neighbours projected on the voxel's
+    direction and sorted give the step wherever the voxel is; ``inf`` where
+    all neighbours project to one place."""
+    m = len(nb)
+    inside = nb < m
+    rel = centres[np.where(inside, nb, 0)] - centres[:, None, :]
+    t = np.where(inside, np.einsum("ijk,ik->ij", rel, direction), np.nan)
+    steps = np.diff(np.sort(t, axis=1), axis=1)
+    steps = np.where(steps > 0, steps, np.nan)  # NaN sorts last: no step past it
+    ok = np.isfinite(steps).any(axis=1)
+    out = np.full(m, np.inf)
+    out[ok] = np.nanmedian(steps[ok], axis=1)
+    return out
 
 
 @dataclass
@@ -83,11 +119,17 @@ def fit_line(
 
 
 def grow_regions(
-    feat: LineFeatures, linearity_min: float, angle_deg: float, keep: np.ndarray
+    feat: LineFeatures,
+    linearity_min: float,
+    angle_deg: float,
+    keep: np.ndarray,
+    spacing: float,
 ) -> np.ndarray:
     """(V,) region id per finest voxel (−1: not on a line).  Voxels closer
     than 1.8 cells are neighbours; a link needs both ends linear and their
-    directions within ``angle_deg``."""
+    directions within ``angle_deg``.  A sparse row's voxels also link along
+    their line up to ``LINK_ROW`` steps, at most ``ROW_REACH_SPACINGS`` ×
+    ``spacing`` (the scan's measured point spacing, m)."""
     grid = feat.grid
     lin = (feat.linearity >= linearity_min) & keep
     ids = np.flatnonzero(lin)
@@ -102,15 +144,24 @@ def grow_regions(
     dist, nb = cKDTree(sub).query(sub, k=kk)
     dist = np.asarray(dist).reshape(len(ids), kk)
     nb = np.asarray(nb).reshape(len(ids), kk)
-    cap = np.maximum(0.25 * feat.radius[ids], 1.8 * grid.size)
+    base = np.maximum(0.25 * feat.radius[ids], 1.8 * grid.size)
+    cap = base
     if LINK_ROW > 0:
-        # a dense neighbourhood gives a row spacing below the cap: unchanged;
-        # a linear voxel has ≥ 5 in its neighbourhood, so this is ≤ 0.6 r
-        row = LINK_ROW * 2.0 * feat.radius[ids] / np.maximum(feat.neighbours[ids] - 1, 1)
-        cap = np.maximum(cap, row)
+        # a dense neighbourhood's step is below the plain cap: unchanged
+        row = np.minimum(
+            2.0 * feat.radius[ids] / np.maximum(feat.neighbours[ids] - 1, 1),
+            _row_step(sub, feat.direction[ids], nb),
+        )
+        reach = np.minimum(LINK_ROW * row, ROW_REACH_SPACINGS * spacing)
+        cap = np.maximum(cap, reach)
     rows = np.repeat(np.arange(len(ids)), kk)
     cols = nb.ravel()
     ok = (cols != rows) & (cols < len(ids)) & (dist.ravel() <= np.repeat(cap, kk))
+    far = np.flatnonzero(ok & (dist.ravel() > np.repeat(base, kk)))
+    if len(far):
+        v = sub[cols[far]] - sub[rows[far]]
+        along = np.abs(np.einsum("ij,ij->i", v, feat.direction[ids][rows[far]]))
+        ok[far] = along >= np.cos(np.radians(LINK_ROW_ALIGN_DEG)) * np.linalg.norm(v, axis=1)
     pairs = np.column_stack([rows[ok], cols[ok]])
     if len(pairs):
         d = feat.direction[ids]

@@ -304,7 +304,11 @@ def model_structure(
     stage("features", 0.35)
 
     region = grow_regions(
-        feat, prm.linearity_min, prm.link_angle_deg, np.ones(len(feat.linearity), bool)
+        feat,
+        prm.linearity_min,
+        prm.link_angle_deg,
+        np.ones(len(feat.linearity), bool),
+        spacing,
     )
     cands = candidates_from_regions(
         feat, region, prm.min_member_length_m, prm.link_angle_deg, prm.seed

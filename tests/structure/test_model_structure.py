@@ -701,9 +701,8 @@ def _row_regions(points: np.ndarray, spacing: float) -> np.ndarray:
     prm = StructureParams().resolve(spacing)
     assert prm.scales_m is not None
     feat = line_features(points, spacing, prm.scales_m, prm.k_neighbours, prm.max_voxels)
-    region = grow_regions(
-        feat, prm.linearity_min, prm.link_angle_deg, np.ones(len(feat.linearity), bool)
-    )
+    keep = np.ones(len(feat.linearity), bool)
+    region = grow_regions(feat, prm.linearity_min, prm.link_angle_deg, keep, spacing)
     return region[feat.grid.inverse]
 
 
