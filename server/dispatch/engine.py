@@ -251,6 +251,12 @@ class DispatchEngine:
                 return
             if self._active_execution_for(name, running_only=True):
                 return
+            # The caller read the store before an operator's change landed
+            # (the lease keeper's tick racing PUT /connection): its URL is
+            # stale, and acting on it would drop the link just made.
+            stored = self.store.robot_urls().get(name)
+            if stored is not None and stored != url:
+                return
             was_latched = r.link.estop_latched
             r.link.close(timeout=2)
             r.url = url
@@ -387,7 +393,16 @@ class DispatchEngine:
         return self.robot_status(name)
 
     def wait_connected(self, name: str, timeout: float) -> bool:
-        return self._robot(name).link.wait_connected(timeout)
+        """Whether ``name`` has a session within ``timeout`` s, whichever link
+        it is on: a reconnect (a new URL) replaces the link object, and a wait
+        on the one it replaced would never end well."""
+        deadline = time.monotonic() + timeout
+        while True:
+            left = deadline - time.monotonic()
+            if self._robot(name).link.wait_connected(min(max(left, 0.0), 0.25)):
+                return True
+            if left <= 0:
+                return False
 
     # ------------------------------------------------------------- dispatch
     def dispatch(

@@ -61,3 +61,45 @@ def test_a_stuck_store_write_does_not_stall_the_link(tmp_path) -> None:
             gate.set()
             engine.shutdown()
     store.close()
+
+
+def test_a_stale_url_from_the_lease_keeper_does_not_undo_an_operators_reconnect(
+    tmp_path,
+) -> None:
+    """CI of stop 32: the keeper read the robots' URLs, an operator's PUT
+    /connection then moved cmbot to a new robot, and the keeper's
+    ``sync_url`` with the URL it had read put the link back on the old one
+    for a tick, closing the link the PUT had made; a wait for the robot on
+    that link never ended well.  The stale URL is ignored now, and a wait
+    follows a link that is replaced while it waits."""
+    data = tmp_path / "var"
+    store = Store(data)
+    with Emulator("ara", time_scale=1.0) as old, Emulator("ara", secret=old.secret) as new:
+        engine = DispatchEngine(
+            store,
+            _Sink(),
+            Settings(data=data, emulators=False, scene_port=0),
+            emulator_urls={"ara": old.url},
+            secret_for=lambda name: old.secret if name == "ara" else None,
+        )
+        engine.start()
+        try:
+            assert engine.wait_connected("ara", 20)
+            engine.set_connection("ara", new.url, "admin")
+            link = engine._robots["ara"].link
+            engine.sync_url("ara", old.url)  # what the keeper had read before the PUT
+            assert engine._robots["ara"].url == new.url
+            assert engine._robots["ara"].link is link
+            assert engine.wait_connected("ara", 20)
+            # A wait begun on a dead URL ends when the robot is reconnected.
+            engine.set_connection("ara", "socket://127.0.0.1:9", "admin")
+            got: list[bool] = []
+            waiter = threading.Thread(target=lambda: got.append(engine.wait_connected("ara", 20)))
+            waiter.start()
+            time.sleep(0.5)
+            engine.set_connection("ara", new.url, "admin")
+            waiter.join(25)
+            assert got == [True]
+        finally:
+            engine.shutdown()
+    store.close()
