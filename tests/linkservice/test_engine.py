@@ -66,7 +66,7 @@ def test_a_stuck_store_write_does_not_stall_the_link(tmp_path) -> None:
 def test_a_stale_url_from_the_lease_keeper_does_not_undo_an_operators_reconnect(
     tmp_path,
 ) -> None:
-    """CI of stop 32: the keeper read the robots' URLs, an operator's PUT
+    """A fresh-clone run of this suite: the keeper read the robots' URLs, an operator's PUT
     /connection then moved cmbot to a new robot, and the keeper's
     ``sync_url`` with the URL it had read put the link back on the old one
     for a tick, closing the link the PUT had made; a wait for the robot on
