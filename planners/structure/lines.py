@@ -50,10 +50,10 @@ LINK_ROW = 8.0
 LINK_ROW_ALIGN_DEG = 4.0
 #: the row link's reach in scan spacings at most (1.2 m at 10 cm, 0.24 m at
 #: 2 cm, 6 cm at 5 mm): two collinear members 0.5 m apart in a fine scan
-#: stay two regions (the fragment join decides later
-#: whether they are one member).  16 spacings found no more at 10 cm and
-#: changed the chaotic Pratt 5 mm seed 8 (recall 0.963 over 20 seeds); 8
-#: broke a sparse 2 cm row (12 cm steps, noise) into pieces
+#: stay two regions (the fragment join decides later whether they are one
+#: member).  16 spacings found no more at 10 cm and changed the chaotic
+#: Pratt 5 mm seed 8 (recall 0.963 over 20 seeds); 8 broke a sparse 2 cm
+#: row (12 cm steps, noise) into pieces
 ROW_REACH_SPACINGS = 12.0
 
 

@@ -23,6 +23,17 @@ class _Sink:
             self.events.append((type_, data))
 
 
+def _engine(store: Store, data: Any, emu: Emulator) -> DispatchEngine:
+    """An engine driving ``ara`` at ``emu`` (with its secret), no embedded emulators."""
+    return DispatchEngine(
+        store,
+        _Sink(),
+        Settings(data=data, emulators=False, scene_port=0),
+        emulator_urls={"ara": emu.url},
+        secret_for=lambda name: emu.secret if name == "ara" else None,
+    )
+
+
 def test_a_stuck_store_write_does_not_stall_the_link(tmp_path) -> None:
     """A state-mirror write that hangs in SQLite (another process holding the
     database, a slow disk) must not stop heartbeats or state reports: with
@@ -39,13 +50,7 @@ def test_a_stuck_store_write_does_not_stall_the_link(tmp_path) -> None:
 
     store.save_robot_state = stuck_save  # type: ignore[method-assign]
     with Emulator("ara", time_scale=1.0) as emu:
-        engine = DispatchEngine(
-            store,
-            _Sink(),
-            Settings(data=data, emulators=False, scene_port=0),
-            emulator_urls={"ara": emu.url},
-            secret_for=lambda name: emu.secret if name == "ara" else None,
-        )
+        engine = _engine(store, data, emu)
         engine.start()
         try:
             assert engine.wait_connected("ara", 20)
@@ -75,13 +80,7 @@ def test_a_stale_url_from_the_lease_keeper_does_not_undo_an_operators_reconnect(
     data = tmp_path / "var"
     store = Store(data)
     with Emulator("ara", time_scale=1.0) as old, Emulator("ara", secret=old.secret) as new:
-        engine = DispatchEngine(
-            store,
-            _Sink(),
-            Settings(data=data, emulators=False, scene_port=0),
-            emulator_urls={"ara": old.url},
-            secret_for=lambda name: old.secret if name == "ara" else None,
-        )
+        engine = _engine(store, data, old)
         engine.start()
         try:
             assert engine.wait_connected("ara", 20)
