@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable
+from dataclasses import replace
 
 import numpy as np
 from scipy.spatial import cKDTree
@@ -56,6 +57,7 @@ from planners.structure.lines import (
 )
 from planners.structure.model import Face, Member, StructureModel
 from planners.structure.params import StructureParams
+from planners.structure.sparse import sparse_rows
 
 #: fewest points a member keeps after assignment
 MIN_MEMBER_POINTS = 8
@@ -71,6 +73,9 @@ RADIUS_PAD_SPACINGS = 1.0
 ENVELOPE_CAP_M = 0.05
 #: percent of a member cut off at each end before fitting its direction
 MIDDLE_TRIM = 5.0
+#: a core with fewer points takes its direction from all its member's
+#: points, the ones shared with neighbours too (0: always from the core)
+SHORT_CORE_POINTS = 12
 #: percent of a member cut off at each end before measuring its section box,
 #: when at least ``SECTION_TRIM_POINTS`` points remain: the ends sit in joints,
 #: where gussets and the neighbours' steel widen the box; the envelope grown
@@ -149,6 +154,8 @@ GROW_STEP_SPACINGS = 3.0
 #: collinear pieces up to this many ``max_gap_m`` apart are one member when
 #: the stretch between them is filled (:func:`.assign.gap_filled`); 0: never
 BRIDGE_GAPS = 4
+#: look for sparse rows among the points no candidate explains (:mod:`.sparse`)
+SPARSE_ROWS = True
 
 Progress = Callable[[float, str], None]
 
@@ -217,12 +224,17 @@ def _refit(
     ``points``: centre, direction, t-range, radius."""
     from planners.structure.lines import fit_line
 
-    c, d, _, _, _ = fit_line(core)
+    # under a dozen core points, the shared ones too: a 10 cm scan of a
+    # channel post is 17 points with 0.2 m of scatter across; its core
+    # shrank to the middle 10 over 0.57 m as the chords took its ends, and
+    # their line leaned 11° (Pratt seed 12), more than a joint's pull
+    src = core if len(core) >= SHORT_CORE_POINTS else points
+    c, d, _, _, _ = fit_line(src)
     # the direction again from the middle 90 %: the ends sit in joints, where
     # the neighbour's steel pulls a least-squares line
-    t = (core - c) @ d
+    t = (src - c) @ d
     lo, hi = np.percentile(t, [MIDDLE_TRIM, 100 - MIDDLE_TRIM])
-    middle = core[(t >= lo) & (t <= hi)]
+    middle = src[(t >= lo) & (t <= hi)]
     if len(middle) >= MIN_MEMBER_POINTS:
         c, d, _, _, _ = fit_line(middle)
     cs = cross_section(core, c, d)
@@ -319,6 +331,12 @@ def model_structure(
     stage("lines", 0.5)
 
     tree = cKDTree(pts)
+    if SPARSE_ROWS and cands:
+        # rows the features could not see, among the points no candidate's
+        # envelope holds; they are refitted and joined with the rest
+        lines = [replace(c, radius=max(c.radius, spacing)) for c in cands]
+        held, _ = assign_points(pts, *_arrays(lines), min(1.5 * spacing, ENVELOPE_CAP_M), tree)
+        cands = cands + sparse_rows(pts, held < 0, spacing, prm.min_member_length_m)
     labels, shared, members, radii = _assign_and_refit(pts, cands, spacing, prm, tree)
     stage("assign", 0.7)
 

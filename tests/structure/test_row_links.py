@@ -14,6 +14,7 @@ from hypothesis import strategies as st
 from scipy.spatial import cKDTree
 
 import planners.structure.lines as lines
+import planners.structure.pipeline as pipeline
 from planners.structure import StructureParams, model_structure
 from planners.structure.features import line_features
 from planners.structure.synthetic import make_scan, match_members
@@ -119,6 +120,9 @@ def test_long_links_along_the_line_find_a_10_cm_warren_s_diagonals(monkeypatch) 
         assert recall >= 0.95 and precision >= 0.94, (seed, recall, precision)
     monkeypatch.setattr(lines, "LINK_ROW", 1.2)
     monkeypatch.setattr(lines, "LINK_ROW_ALIGN_DEG", 90.0)
+    # the sparse rows (a later stage) recover some of these diagonals by
+    # another way; the links along the line are measured without them
+    monkeypatch.setattr(pipeline, "SPARSE_ROWS", False)
     for seed in (12, 17):
         recall, _ = _warren_10cm(seed)
         assert recall < 0.6, (seed, recall)
