@@ -56,6 +56,23 @@ _MAX_STEPS = 2_000
 _PLANE_DIRECTIONS = 16
 
 
+def _balls_along(
+    tree: cKDTree,
+    centre: np.ndarray,
+    d: np.ndarray,
+    lo: float,
+    hi: float,
+    step: float,
+    radius: float,
+) -> np.ndarray:
+    """Indices of the points within ``radius`` of samples ``step`` apart on the
+    stretch ``[lo, hi]`` of the line (bounded by the stretch's length)."""
+    ns = max(2, int(np.ceil((hi - lo) / step)) + 1)
+    samples = centre + np.outer(np.linspace(lo, hi, ns), d)
+    hits = tree.query_ball_point(samples, radius)
+    return np.unique(np.concatenate([np.asarray(h, dtype=np.int64) for h in hits]))
+
+
 def _along(
     pts: np.ndarray,
     tree: cKDTree,
@@ -67,10 +84,7 @@ def _along(
 ) -> np.ndarray:
     """Indices of the points within ``tol`` of the stretch ``[lo, hi]`` of the
     line (ball queries one ``tol`` apart: bounded by the stretch's length)."""
-    ns = max(2, int(np.ceil((hi - lo) / tol)) + 1)
-    samples = centre + np.outer(np.linspace(lo, hi, ns), d)
-    hits = tree.query_ball_point(samples, 1.5 * tol)
-    idx = np.unique(np.concatenate([np.asarray(h, dtype=np.int64) for h in hits]))
+    idx = _balls_along(tree, centre, d, lo, hi, tol, 1.5 * tol)
     if not len(idx):
         return idx
     rel = pts[idx] - centre
@@ -120,11 +134,7 @@ def _on_a_plane(
 ) -> int:
     """The most free points beside the row (within ``side``, beyond ``tol``)
     that lie within ``tol`` of one plane through the row."""
-    h = max(side, tol)
-    ns = max(2, int(np.ceil((hi - lo) / h)) + 1)
-    samples = centre + np.outer(np.linspace(lo, hi, ns), d)
-    hits = tree.query_ball_point(samples, 1.5 * side)
-    idx = np.unique(np.concatenate([np.asarray(x, dtype=np.int64) for x in hits]))
+    idx = _balls_along(tree, centre, d, lo, hi, max(side, tol), 1.5 * side)
     if not len(idx):
         return 0
     rel = pts[idx] - centre
