@@ -331,12 +331,15 @@ def model_structure(
     stage("lines", 0.5)
 
     tree = cKDTree(pts)
-    if SPARSE_ROWS and cands:
+    if SPARSE_ROWS:
         # rows the features could not see, among the points no candidate's
         # envelope holds; they are refitted and joined with the rest
-        lines = [replace(c, radius=max(c.radius, spacing)) for c in cands]
-        held, _ = assign_points(pts, *_arrays(lines), min(1.5 * spacing, ENVELOPE_CAP_M), tree)
-        cands = cands + sparse_rows(pts, held < 0, spacing, prm.min_member_length_m)
+        free = np.ones(len(pts), bool)
+        if cands:
+            lines = [replace(c, radius=max(c.radius, spacing)) for c in cands]
+            margin = min(1.5 * spacing, ENVELOPE_CAP_M)
+            free = assign_points(pts, *_arrays(lines), margin, tree)[0] < 0
+        cands = cands + sparse_rows(pts, free, spacing, prm.min_member_length_m)
     labels, shared, members, radii = _assign_and_refit(pts, cands, spacing, prm, tree)
     stage("assign", 0.7)
 
