@@ -126,7 +126,7 @@ def relabel_by_faces(
     return out
 
 
-def _near_line(
+def near_line(
     points: np.ndarray,
     tree: cKDTree,
     centre: np.ndarray,
@@ -185,7 +185,7 @@ def grow_end(
     if max_growth <= 0 or radius <= 0 or step <= 0:
         return 0.0
     far_end = t_end + sign * max_growth
-    idx, t, perp = _near_line(
+    idx, t, perp = near_line(
         points, tree, centre, direction, min(t_end, far_end), max(t_end, far_end), radius
     )
     mine = free[idx]
@@ -230,7 +230,7 @@ def gap_filled(
         return True
     if radius <= 0:
         return False
-    idx, t, perp = _near_line(points, tree, centre, direction, lo, hi, radius)
+    idx, t, perp = near_line(points, tree, centre, direction, lo, hi, radius)
     along = (t >= lo) & (t <= hi)
     inner = along & (perp <= radius)
     ring = along & (perp > radius) & (perp <= 2.0 * radius) & unlabelled[idx]

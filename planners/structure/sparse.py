@@ -29,6 +29,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.spatial import cKDTree
 
+from planners.structure.assign import near_line
 from planners.structure.lines import LineCandidate, fit_line
 
 #: inliers a sparse row needs at least
@@ -56,23 +57,6 @@ _MAX_STEPS = 2_000
 _PLANE_DIRECTIONS = 16
 
 
-def _balls_along(
-    tree: cKDTree,
-    centre: np.ndarray,
-    d: np.ndarray,
-    lo: float,
-    hi: float,
-    step: float,
-    radius: float,
-) -> np.ndarray:
-    """Indices of the points within ``radius`` of samples ``step`` apart on the
-    stretch ``[lo, hi]`` of the line (bounded by the stretch's length)."""
-    ns = max(2, int(np.ceil((hi - lo) / step)) + 1)
-    samples = centre + np.outer(np.linspace(lo, hi, ns), d)
-    hits = tree.query_ball_point(samples, radius)
-    return np.unique(np.concatenate([np.asarray(h, dtype=np.int64) for h in hits]))
-
-
 def _along(
     pts: np.ndarray,
     tree: cKDTree,
@@ -83,13 +67,8 @@ def _along(
     tol: float,
 ) -> np.ndarray:
     """Indices of the points within ``tol`` of the stretch ``[lo, hi]`` of the
-    line (ball queries one ``tol`` apart: bounded by the stretch's length)."""
-    idx = _balls_along(tree, centre, d, lo, hi, tol, 1.5 * tol)
-    if not len(idx):
-        return idx
-    rel = pts[idx] - centre
-    t = rel @ d
-    perp = np.linalg.norm(rel - np.outer(t, d), axis=1)
+    line (:func:`.assign.near_line`: bounded by the stretch's length)."""
+    idx, t, perp = near_line(pts, tree, centre, d, lo, hi, 0.5 * tol)
     return idx[(perp <= tol) & (t >= lo) & (t <= hi)]
 
 
@@ -134,13 +113,8 @@ def _on_a_plane(
 ) -> int:
     """The most free points beside the row (within ``side``, beyond ``tol``)
     that lie within ``tol`` of one plane through the row."""
-    idx = _balls_along(tree, centre, d, lo, hi, max(side, tol), 1.5 * side)
-    if not len(idx):
-        return 0
-    rel = pts[idx] - centre
-    t = rel @ d
-    off = rel - np.outer(t, d)
-    r = np.linalg.norm(off, axis=1)
+    idx, t, r = near_line(pts, tree, centre, d, lo, hi, 0.5 * side)
+    off = pts[idx] - centre - np.outer(t, d)
     near = (t >= lo) & (t <= hi) & (r > tol) & (r <= side)
     if not near.any():
         return 0
