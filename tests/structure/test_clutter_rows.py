@@ -121,14 +121,21 @@ def test_rows_with_gaps_of_a_lane_are_not_counted() -> None:
 
 
 def _ground_members(monkeypatch: pytest.MonkeyPatch, parallel_max: float) -> int:
-    """Members with most of their points on clutter, frame seeds 4 and 14 at 10 cm."""
+    """Members with most of their points on clutter, frame seeds 4 and 14 at
+    10 cm; lone members kept down to the former 2 m and stubby ones kept,
+    so that the count measures this test alone (the lone-member length and
+    the stubby-member rule drop some of the same rows)."""
+    from planners.structure import StructureParams
     from planners.structure.synthetic import make_scan
 
     monkeypatch.setattr(pipeline, "PARALLEL_MAX", parallel_max)
+    monkeypatch.setattr(pipeline, "STUBBY_SLENDERNESS", 0.0)
     count = 0
     for seed in (4, 14):
         scan = make_scan("frame", seed, spacing_m=0.1)
-        model = model_structure(scan.points / scan.scale)
+        model = model_structure(
+            scan.points / scan.scale, params=StructureParams(min_free_length_m=2.0)
+        )
         count += sum(
             float((scan.labels[model.labels == m.id] < 0).mean()) > 0.5 for m in model.members
         )
@@ -137,8 +144,9 @@ def _ground_members(monkeypatch: pytest.MonkeyPatch, parallel_max: float) -> int
 
 def test_a_10_cm_frame_s_ground_rows_stay_clutter(monkeypatch: pytest.MonkeyPatch) -> None:
     """Strips of a 10 cm scan's ground rows passed the cell coverage as
-    members; the lanes find the rows (frame seeds 4 and 14: 5 members
-    mostly on clutter without the test, 1 with it)."""
+    members; the lanes find the rows (frame seeds 4 and 14, lone members
+    kept down to 2 m, stubby ones kept: 7 members mostly on clutter without
+    the test, 4 with it; with every default 2 remain)."""
     with_test = _ground_members(monkeypatch, pipeline.PARALLEL_MAX)
     without = _ground_members(monkeypatch, 1.01)
     assert without >= with_test + 3, (without, with_test)
