@@ -22,6 +22,8 @@ from planners.structure.model import Face
 
 #: points a RANSAC hypothesis is scored on at most
 SCORE_SAMPLE = 1500
+#: a RANSAC hypothesis's two points are at least this many tolerances apart
+HYPOTHESIS_SEPARATION = 0.25
 
 
 @dataclass
@@ -68,7 +70,10 @@ def ransac_lines(
         b = idx[rng.integers(0, len(idx), trials)]
         dvec = uv[b] - uv[a]
         ln = np.hypot(dvec[:, 0], dvec[:, 1])
-        ok = ln > tol
+        # pairs a fraction of tol apart still give lines to score: a face
+        # seen as a blob hardly wider than tol (a tee's stem end-on, 4 cm
+        # at 2 cm spacing) has few or no pairs tol apart, and was lost
+        ok = ln > HYPOTHESIS_SEPARATION * tol
         if not ok.any():
             break
         n = np.column_stack([-dvec[ok, 1], dvec[ok, 0]]) / ln[ok, None]

@@ -39,7 +39,7 @@ from planners.pointcloud._validate import as_points
 from planners.pointcloud.spacing import measure_spacing
 from planners.structure.assign import assign_points, gap_filled, grow_end, relabel_by_faces
 from planners.structure.clutter import parallel_rows, plane_continuation
-from planners.structure.direction import compact_direction
+from planners.structure.direction import compact_direction, hull_direction
 from planners.structure.faces import (
     CrossSection,
     classify_profile,
@@ -78,6 +78,15 @@ MIDDLE_TRIM = 5.0
 #: a core with fewer points takes its direction from all its member's
 #: points, the ones shared with neighbours too (0: always from the core)
 SHORT_CORE_POINTS = 12
+#: a core of fewer than ``RESOLVED_POINTS`` (and at least ``HULL_MIN_POINTS``
+#: to search with) takes the direction across which its middle's convex hull
+#: is smallest (:func:`.direction.hull_direction`): over 20 seeds a type at
+#: 10 cm, recall +0.003…+0.007 and precision +0.010…+0.032.
+#: ``HULL_MIDDLE`` False searches with the ends too (Pratt precision 0.946:
+#: the ends sit in joints, as for the least-squares line)
+HULL_DIRECTION = True
+HULL_MIN_POINTS = 8
+HULL_MIDDLE = True
 #: percent of a member cut off at each end before measuring its section box,
 #: when at least ``SECTION_TRIM_POINTS`` points remain: the ends sit in joints,
 #: where gussets and the neighbours' steel widen the box; the envelope grown
@@ -252,6 +261,9 @@ def _refit(
     middle = src[(t >= lo) & (t <= hi)]
     if len(middle) >= MIN_MEMBER_POINTS:
         c, d, _, _, _ = fit_line(middle)
+    if HULL_DIRECTION and len(core) < RESOLVED_POINTS and len(src) >= HULL_MIN_POINTS:
+        hsrc = middle if HULL_MIDDLE and len(middle) >= HULL_MIN_POINTS else src
+        d = hull_direction(hsrc, d)
     cs = cross_section(core, c, d)
     if len(cs.uv) < 3:
         return None

@@ -40,13 +40,16 @@ def _lone_on_clutter(kind: str, seed: int, params: StructureParams | None) -> tu
 
 def test_a_10_cm_scan_s_lone_ground_rows_are_dropped() -> None:
     """Frame seeds 4, 6 and 11 at 10 cm: lone clutter members 2.4–4.9 m long
-    (rows on the ground, a person) were kept with a 2 m lone length; none
-    is with the default, and no true member is lost."""
+    (rows on the ground, a person) are kept with a 2 m lone length (2, 1
+    and 2 of them); none is with the default, and no true member is lost."""
+    kept_2m = 0
     for seed in (4, 6, 11):
         lone, recall = _lone_on_clutter("frame", seed, None)
         lone_2m, recall_2m = _lone_on_clutter("frame", seed, StructureParams(min_free_length_m=2.0))
-        assert lone == 0 and lone_2m >= 2, (seed, lone, lone_2m)
+        assert lone == 0 and lone_2m >= 1, (seed, lone, lone_2m)
         assert recall == recall_2m, (seed, recall, recall_2m)
+        kept_2m += lone_2m
+    assert kept_2m >= 5
 
 
 def test_long_lone_girders_are_kept() -> None:

@@ -203,10 +203,11 @@ def test_a_rejected_row_leaves_its_points_to_the_seeds_after_it(monkeypatch) -> 
     """Pratt seeds 6 and 14 at 10 cm: every member is found.  Retiring a
     rejected row's points with it (walks across a post from off it, too
     short or on a plane, took its points a few at a time) loses a post in
-    each: recall 0.89."""
+    seeds 4, 6 and 12: recall 0.92 → 0.77, 1.0 → 0.89, 0.84 → 0.68."""
     for seed in (6, 14):
         recall, precision = _scores("pratt", seed)
         assert recall == 1.0 and precision >= 0.9, (seed, recall, precision)
+    kept = {seed: _scores("pratt", seed)[0] for seed in (4, 6, 12)}
     monkeypatch.setattr(sparse, "RETIRE_REJECTED", True)
-    for seed in (6, 14):
-        assert _scores("pratt", seed)[0] < 0.9, seed
+    for seed in (4, 6, 12):
+        assert _scores("pratt", seed)[0] < kept[seed] - 0.1, (seed, kept[seed])
