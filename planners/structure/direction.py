@@ -13,6 +13,8 @@ cells (cells of about two spacings: the outline's thickness under noise).
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import numpy as np
 from scipy.spatial import ConvexHull, QhullError
 
@@ -87,24 +89,34 @@ def compact_direction(points: np.ndarray, d: np.ndarray, cell: float) -> np.ndar
         return d
     stride = -(-len(points) // MAX_POINTS)
     rel = points[::stride] - points[::stride].mean(axis=0)
-    first = int(_score(rel, d[None], cell)[0])
+    return _cone_search(d, lambda dirs: _score(rel, dirs, cell).astype(float), MIN_GAIN)
+
+
+def _cone_search(
+    d: np.ndarray, score: Callable[[np.ndarray], np.ndarray], min_gain: float
+) -> np.ndarray:
+    """The direction within ``RINGS_DEG[-1]`` of unit ``d`` with the lowest
+    ``score`` ((K, 3) directions → (K,) values): the coarse rings, then a
+    pattern search round the best (move while a neighbour is better, else
+    halve the step); ``d`` itself unless the best scores at most
+    ``min_gain`` of ``d``'s.  The sense of ``d`` is kept."""
+    first = float(score(d[None])[0])
     coarse = _cone(d, RINGS_DEG, AZIMUTHS)
-    counts = _score(rel, coarse, cell)
-    k = int(np.argmin(counts))
+    values = score(coarse)
+    k = int(np.argmin(values))
     best_d, best = d, first
-    if counts[k] < best:
-        best_d, best = coarse[k], int(counts[k])
-        # pattern search: move while a neighbour is better, else halve the step
+    if values[k] < best:
+        best_d, best = coarse[k], float(values[k])
         step = FINE_START_DEG
         while step >= FINE_END_DEG:
             near = _cone(best_d, (step,), FINE_AZIMUTHS)
-            counts = _score(rel, near, cell)
-            k = int(np.argmin(counts))
-            if counts[k] < best:
-                best_d, best = near[k] / np.linalg.norm(near[k]), int(counts[k])
+            values = score(near)
+            k = int(np.argmin(values))
+            if values[k] < best:
+                best_d, best = near[k] / np.linalg.norm(near[k]), float(values[k])
             else:
                 step /= 2
-    if best > MIN_GAIN * first:
+    if best > min_gain * first:
         return d
     best_d = best_d / np.linalg.norm(best_d)
     return best_d if float(best_d @ d) >= 0 else -best_d
@@ -141,23 +153,4 @@ def hull_direction(points: np.ndarray, d: np.ndarray) -> np.ndarray:
     if len(points) < 4:
         return d
     rel = points[:MAX_POINTS] - points[:MAX_POINTS].mean(axis=0)
-    first = float(_hull_areas(rel, d[None])[0])
-    coarse = _cone(d, RINGS_DEG, AZIMUTHS)
-    areas = _hull_areas(rel, coarse)
-    k = int(np.argmin(areas))
-    best_d, best = d, first
-    if areas[k] < best:
-        best_d, best = coarse[k], float(areas[k])
-        step = FINE_START_DEG
-        while step >= FINE_END_DEG:
-            near = _cone(best_d, (step,), FINE_AZIMUTHS)
-            areas = _hull_areas(rel, near)
-            k = int(np.argmin(areas))
-            if areas[k] < best:
-                best_d, best = near[k] / np.linalg.norm(near[k]), float(areas[k])
-            else:
-                step /= 2
-    if best > HULL_MIN_GAIN * first:
-        return d
-    best_d = best_d / np.linalg.norm(best_d)
-    return best_d if float(best_d @ d) >= 0 else -best_d
+    return _cone_search(d, lambda dirs: _hull_areas(rel, dirs), HULL_MIN_GAIN)

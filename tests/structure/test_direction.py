@@ -42,6 +42,17 @@ def _web_then_flange(rng: np.random.Generator, n: int = 3000) -> np.ndarray:
     return np.vstack([web, flange]) + rng.normal(0, 0.002, (n, 3))
 
 
+def box_section_points(rng: np.random.Generator, n: int, length: float, noise: float) -> np.ndarray:
+    """``n`` points on the four sides of a 0.2 m box section along x, ``length`` long."""
+    side = rng.integers(0, 4, n)
+    s = rng.uniform(-0.1, 0.1, n)
+    yz = np.where(side[:, None] == 0, np.column_stack([s, np.full(n, 0.1)]),
+         np.where(side[:, None] == 1, np.column_stack([s, np.full(n, -0.1)]),
+         np.where(side[:, None] == 2, np.column_stack([np.full(n, 0.1), s]),
+                  np.column_stack([np.full(n, -0.1), s]))))  # fmt: skip
+    return np.column_stack([rng.uniform(0, length, n), yz]) + rng.normal(0, noise, (n, 3))
+
+
 @settings(max_examples=40, deadline=None)
 @given(st.integers(0, 10_000), st.floats(0.01, 0.5))
 def test_occupied_cells_equals_brute_force(seed: int, cell: float) -> None:
@@ -80,14 +91,7 @@ def test_never_leaves_the_cone_and_keeps_a_true_axis(seed: int, tilt: float) -> 
     """From a start ``tilt`` degrees off a whole box section's axis: the
     result is within the search cone of the start and within the fine step of the truth."""
     rng = np.random.default_rng(seed)
-    n = 4000
-    side = rng.integers(0, 4, n)
-    s = rng.uniform(-0.1, 0.1, n)
-    yz = np.where(side[:, None] == 0, np.column_stack([s, np.full(n, 0.1)]),
-         np.where(side[:, None] == 1, np.column_stack([s, np.full(n, -0.1)]),
-         np.where(side[:, None] == 2, np.column_stack([np.full(n, 0.1), s]),
-                  np.column_stack([np.full(n, -0.1), s]))))  # fmt: skip
-    pts = np.column_stack([rng.uniform(0, 3, n), yz]) + rng.normal(0, 0.002, (n, 3))
+    pts = box_section_points(rng, 4000, 3.0, 0.002)
     x = np.array([1.0, 0.0, 0.0])
     a = np.radians(tilt)
     start = np.cos(a) * x + np.sin(a) * np.array([0.0, np.cos(seed), np.sin(seed)])

@@ -11,6 +11,7 @@ from hypothesis import strategies as st
 from planners.structure import pipeline
 from planners.structure.direction import RINGS_DEG, hull_direction, section_frames
 from planners.structure.lines import fit_line
+from tests.structure.test_direction import box_section_points
 from tests.structure.test_sparse_rows import _scores
 
 
@@ -62,14 +63,7 @@ def test_never_leaves_the_cone_and_keeps_a_true_axis(seed: int, tilt: float) -> 
     start, is never further from the truth than the start (beyond the fine
     step), and keeps the start's sense."""
     rng = np.random.default_rng(seed)
-    n = 50
-    side = rng.integers(0, 4, n)
-    s = rng.uniform(-0.1, 0.1, n)
-    yz = np.where(side[:, None] == 0, np.column_stack([s, np.full(n, 0.1)]),
-         np.where(side[:, None] == 1, np.column_stack([s, np.full(n, -0.1)]),
-         np.where(side[:, None] == 2, np.column_stack([np.full(n, 0.1), s]),
-                  np.column_stack([np.full(n, -0.1), s]))))  # fmt: skip
-    pts = np.column_stack([rng.uniform(0, 1.5, n), yz]) + rng.normal(0, 0.003, (n, 3))
+    pts = box_section_points(rng, 50, 1.5, 0.003)
     x = np.array([1.0, 0.0, 0.0])
     a = np.radians(tilt)
     start = np.cos(a) * x + np.sin(a) * np.array([0.0, np.cos(seed), np.sin(seed)])
