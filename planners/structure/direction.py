@@ -30,7 +30,7 @@ FINE_AZIMUTHS = 8
 #: a direction is taken only when it occupies at most this share of the
 #: cells the first estimate does (ties and noise keep the first estimate)
 MIN_GAIN = 0.9
-#: the same for the hull search (any gain, 0.999: 10 cm recall +0.003…+0.004,
+#: the same for the hull search (any gain, 0.999: 10 cm recall +0.000…+0.004,
 #: precision −0.014 (Pratt) … +0.019 (grillage): not taken)
 HULL_MIN_GAIN = 0.9
 
