@@ -8,7 +8,9 @@ where the points are (the web seen at one end, the flange at the other),
 which tilts a short, deep member by several degrees (a 2 m UPN 300 cross
 girder at 2 cm: 6–12°).  This module searches a cone of directions around a
 first estimate for the one whose projection occupies the fewest section
-cells (cells of about two spacings: the outline's thickness under noise).
+cells (cells of about two spacings: the outline's thickness under noise),
+or, for a member of a few dozen points whose section is a cell or two
+wide, the one whose projection has the smallest convex hull.
 """
 
 from __future__ import annotations
@@ -87,9 +89,15 @@ def compact_direction(points: np.ndarray, d: np.ndarray, cell: float) -> np.ndar
     d = d / np.linalg.norm(d)
     if len(points) < 3 or cell <= 0:
         return d
-    stride = -(-len(points) // MAX_POINTS)
-    rel = points[::stride] - points[::stride].mean(axis=0)
+    rel = _centred_sample(points)
     return _cone_search(d, lambda dirs: _score(rel, dirs, cell).astype(float), MIN_GAIN)
+
+
+def _centred_sample(points: np.ndarray) -> np.ndarray:
+    """At most ``MAX_POINTS`` of ``points`` (a deterministic stride), minus their mean."""
+    stride = -(-len(points) // MAX_POINTS)
+    sample = points[::stride]
+    return sample - sample.mean(axis=0)
 
 
 def _cone_search(
@@ -152,5 +160,5 @@ def hull_direction(points: np.ndarray, d: np.ndarray) -> np.ndarray:
     d = d / np.linalg.norm(d)
     if len(points) < 4:
         return d
-    rel = points[:MAX_POINTS] - points[:MAX_POINTS].mean(axis=0)
+    rel = _centred_sample(points)
     return _cone_search(d, lambda dirs: _hull_areas(rel, dirs), HULL_MIN_GAIN)
