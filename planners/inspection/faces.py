@@ -35,20 +35,28 @@ __all__ = ["FaceGeom", "driving_face", "face_continuity", "foot_centres"]
 NEAR_AREA = 0.8
 
 
-def driving_face(member: Member) -> Face | None:
+def driving_face(member: Member, foot_width_m: float | None = None) -> Face | None:
     """The face the robot drives on along ``member``, or ``None`` without faces.
 
-    Flanges are preferred (the outer flange of an I, channel or tee is where
-    the ARA's feet sit); among the candidates the largest by area wins, and
-    faces within 20 % of the largest count as equal (an I's two flanges,
-    measured on a scan that sees one better than the other),
-    of which the one whose normal points most upwards (+z) is taken — the
-    top flange — then the lowest face id, so the choice is deterministic.
+    With ``foot_width_m``, faces at least that wide across (the outline's
+    extent across the member) come first: an IPE 200's 100 mm flanges take
+    no 120 mm foot, its 200 mm web does (the ARA holds on by magnets, so a
+    web is a surface to drive on as a flange is).  Among the candidates
+    flanges are preferred (the outer flange of an I, channel or tee is where
+    the ARA's feet sit); among those the largest by area wins, and faces
+    within 20 % of the largest count as equal (an I's two flanges, measured
+    on a scan that sees one better than the other), of which the one whose
+    normal points most upwards (+z) is taken — the top flange — then the
+    lowest face id, so the choice is deterministic.
     """
     if not member.faces:
         return None
-    flanges = [f for f in member.faces if f.kind == "flange"]
-    pool = flanges or list(member.faces)
+    pool = list(member.faces)
+    if foot_width_m is not None:
+        wide = [f for f in pool if _across(f) >= foot_width_m]
+        pool = wide or pool
+    flanges = [f for f in pool if f.kind == "flange"]
+    pool = flanges or pool
     top = max(float(f.area_m2) for f in pool)
     near = [f for f in pool if float(f.area_m2) >= NEAR_AREA * top]
 
@@ -58,6 +66,13 @@ def driving_face(member: Member) -> Face | None:
         return float(n[2]) / norm if norm > 0 else -math.inf
 
     return max(near, key=lambda f: (upness(f), -f.id))
+
+
+def _across(face: Face) -> float:
+    """A face's extent across its member: its outline's in-plane ``y`` span
+    (``x`` runs along the member)."""
+    b = np.asarray(face.boundary, float)
+    return float(np.ptp(b[:, 1])) if len(b) else 0.0
 
 
 @dataclass(frozen=True)

@@ -447,7 +447,7 @@ def _summary(
     """Model, graph, routes, transitions and gaps as the scene drawer reads them."""
     members = []
     for m in model.members:
-        drive = driving_face(m)
+        drive = driving_face(m, inspection.foot_width_m if inspection is not None else None)
         members.append(
             {
                 "id": m.id,

@@ -128,7 +128,7 @@ class TransitionContext:
     def face(self, member: int) -> FaceGeom | None:
         """The driving face of ``member`` with its frame (cached)."""
         if member not in self._geom:
-            f = driving_face(self.members[member])
+            f = driving_face(self.members[member], self.params.foot_width_m)
             self._geom[member] = FaceGeom.of(f) if f is not None else None
         return self._geom[member]
 

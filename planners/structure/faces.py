@@ -17,6 +17,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.spatial import cKDTree
 
 from planners.structure.model import Face
 
@@ -24,6 +25,21 @@ from planners.structure.model import Face
 SCORE_SAMPLE = 1500
 #: a RANSAC hypothesis's two points are at least this many tolerances apart
 HYPOTHESIS_SEPARATION = 0.25
+#: a section fewer spacings deep than this is not classified (final pass)
+UNRESOLVED_SPACINGS = 3.0
+#: fewest points across a section per spacing of its length to read it (final pass)
+UNRESOLVED_ACROSS = 2.0
+#: a side bin is occupied from this share of the best face's points per bin (final pass)
+OCCUPIED_SHARE = 0.01
+#: neighbours of a point whose plane measures the surface noise
+NOISE_NEIGHBOURS = 8
+#: the percentile of the neighbourhoods' plane RMS taken: the flat middles
+#: of faces, not their edges and corners (most of a thin member's points)
+NOISE_QUANTILE = 25.0
+#: that percentile in units of σ on a noisy plane (measured, k = 8)
+NOISE_CALIBRATION = 0.58
+#: points whose neighbourhoods measure the surface noise, at most
+NOISE_SAMPLE = 2000
 
 
 @dataclass
@@ -47,6 +63,35 @@ def cross_section(points: np.ndarray, centre: np.ndarray, direction: np.ndarray)
     v = np.cross(d, u)
     rel = points - centre
     return CrossSection(centre, d, u, v, rel @ d, np.column_stack([rel @ u, rel @ v]))
+
+
+def surface_noise(points: np.ndarray) -> float:
+    """Estimated Gaussian noise σ (m) of a member's surface points.
+
+    For (a stride sample of) its points, the RMS distance of the
+    ``NOISE_NEIGHBOURS`` nearest neighbours from their own plane (the square
+    root of the least eigenvalue of their covariance, as in the seed's
+    normal estimation); the ``NOISE_QUANTILE`` percentile of those keeps to
+    the flat middles of faces, and ``NOISE_CALIBRATION`` turns it into σ
+    (measured on noisy planes: the percentile is 0.57–0.62 σ while σ is
+    under half the spacing).  On a face that is the scanner's range noise —
+    the same 2–5 mm whatever the point spacing — where a spacing-based
+    tolerance grows with the spacing.  It reads low where σ nears the
+    spacing (no neighbourhood then spans a plane: 0.4 σ at σ = 2 spacings)
+    and about 0 on a row of single points (a coarse scan of a thin member).
+    ``nan`` with too few points."""
+    n = len(points)
+    k = NOISE_NEIGHBOURS
+    if n <= k:
+        return float("nan")
+    centred = points - points.mean(axis=0)
+    query = centred[:: -(-n // NOISE_SAMPLE)]
+    _, idx = cKDTree(centred).query(query, k=k)
+    nb = centred[idx]  # (≤ NOISE_SAMPLE, k, 3): bounded by the sample
+    nb = nb - nb.mean(axis=1, keepdims=True)
+    cov = np.einsum("nki,nkj->nij", nb, nb) / k
+    least = np.linalg.eigvalsh(cov)[:, 0]
+    return float(np.sqrt(max(float(np.percentile(least, NOISE_QUANTILE)), 0.0))) / NOISE_CALIBRATION
 
 
 def ransac_lines(
@@ -226,10 +271,24 @@ def face_axis(faces: list[Face], cs: CrossSection) -> np.ndarray | None:
 
 
 def classify_profile(
-    uv: np.ndarray, faces: list[Face], cs: CrossSection, spacing: float
+    uv: np.ndarray,
+    faces: list[Face],
+    cs: CrossSection,
+    spacing: float,
+    band: float | None = None,
 ) -> tuple[str, float, float, np.ndarray]:
     """``(profile, depth_m, width_m, depth axis)`` from the cross-section's
-    occupancy; the depth axis (2D, in the cross-section) runs along the web."""
+    occupancy; the depth axis (2D, in the cross-section) runs along the web.
+
+    ``band``: the faces' tolerance when it was measured from the surface
+    noise (:func:`surface_noise`); the box sides and middle lines are then
+    read in bands of twice that, and a section under
+    ``UNRESOLVED_SPACINGS`` spacings deep, or with fewer than
+    ``UNRESOLVED_ACROSS`` points across it per spacing of length, is
+    ``"unknown"`` — its few points
+    across cannot tell an I from a channel or a plate.  ``None``: bands of
+    two spacings (the model's first passes, which only need depth and
+    width)."""
     if len(uv) < 12:
         return "unknown", 0.0, 0.0, np.array([1.0, 0.0])
     vt, mu, box = section_box(uv, face_axis(faces, cs))
@@ -239,6 +298,13 @@ def classify_profile(
     big = vt[int(np.argmax(ext))]
     if depth <= 0:
         return "unknown", 0.0, 0.0, np.array([1.0, 0.0])
+    if band is not None:
+        # too few points to read a section: under three spacings deep, or
+        # few points across per spacing of length (a girder seen as a row
+        # of its flange's underside)
+        across = len(uv) * spacing / max(float(np.ptp(cs.t)), spacing)
+        if depth < UNRESOLVED_SPACINGS * spacing or across < UNRESOLVED_ACROSS:
+            return "unknown", depth, width, big
     # circle fit (Kåsa): a tube's points lie on one circle
     A = np.column_stack([2 * uv, np.ones(len(uv))])
     b = (uv**2).sum(axis=1)
@@ -250,22 +316,31 @@ def classify_profile(
     if (
         r > 0
         and r < depth
-        and np.percentile(res, 90) < max(0.05 * r, 1.5 * spacing)
+        and np.percentile(res, 90) < max(0.05 * r, 1.5 * spacing if band is None else 2 * band)
         and biggest < 0.4 * len(uv)
     ):
         ang = np.arctan2(uv[:, 1] - sol[1], uv[:, 0] - sol[0])
         if np.ptp(ang) > np.pi / 2:
             return "tube", 2 * r, 2 * r, big
-    tol = max(2.0 * spacing, 0.05 * depth)
-    if width < max(3 * spacing, 0.12 * depth):
+    tol = max(2.0 * (spacing if band is None else band), 0.05 * depth)
+    # flat: thinner than three spacings, or (measured band) than the noise
+    # allows — an unresolved flange two spacings wide is not a plate
+    if width < max(3 * spacing if band is None else 3 * band, 0.12 * depth):
         return "plate", depth, width, big
 
-    # occupancy of the four box sides and the two middle lines
+    # occupancy of the four box sides and the two middle lines; with a
+    # measured band a bin counts from a share of what the best-seen face
+    # holds per bin: stray points (a neighbour's at a joint, mixed pixels
+    # along an edge) dot an I's open sides all along, and made it a box
+    least = 1
+    if band is not None and biggest:
+        least = max(1, int(OCCUPIED_SHARE * biggest / 8))
+
     def occ(mask: np.ndarray, coord: np.ndarray, lo: float, hi: float) -> float:
         if not mask.any():
             return 0.0
         bins = np.clip(((coord[mask] - lo) / max(hi - lo, 1e-9) * 8).astype(int), 0, 7)
-        return len(np.unique(bins)) / 8.0
+        return int((np.bincount(bins, minlength=8) >= least).sum()) / 8.0
 
     x, y = q[:, 0], q[:, 1]
     (x0, y0), (x1, y1) = box

@@ -12,8 +12,10 @@ Accuracy: for every structure type, spacing and seed, a scan from
 spacing: member recall over all true members and over the *visible* ones
 (points on at least half of the member's length — a member no scanner saw
 cannot be found), precision, the share of found members on a route (one per piece the
-jumps cannot join), and
-the mean time per stage.  A member is found by the issue's criterion
+jumps cannot join), the share of found members whose profile is their
+section's (I, channel, angle, tee, box, tube; each true member counted once)
+and the share called ``"unknown"`` (a section under three spacings deep is
+not classified), and the mean time per stage.  A member is found by the issue's criterion
 (:func:`planners.structure.synthetic.match_members`: axis within
 max(5 cm, 0.6 × depth) over ≥ 80 % of the length, within 5°).  Targets:
 recall ≥ 95 %, precision ≥ 90 %.
@@ -76,6 +78,13 @@ def run_one(kind: str, seed: int, spacing: float) -> dict:
     # pairs are (true, found); recall over the visible members only
     true_ids = {t_ for t_, _ in mm.pairs}
     rec_vis = len(true_ids & set(np.flatnonzero(vis))) / max(int(vis.sum()), 1)
+    # profile of each found true member (its first pair) against its section's
+    first: dict[int, int] = {}
+    for t_, f_ in mm.pairs:
+        first.setdefault(t_, f_)
+    said = [
+        (scan.members[t_].section.profile, model.members[f_].profile) for t_, f_ in first.items()
+    ]
     on_route = float("nan")
     t_route = 0.0
     if model.members:
@@ -90,6 +99,8 @@ def run_one(kind: str, seed: int, spacing: float) -> dict:
         "recall_visible": rec_vis,
         "precision": mm.precision,
         "on_route": on_route,
+        "profile": float(np.mean([a == b for a, b in said])) if said else float("nan"),
+        "unknown": float(np.mean([b == "unknown" for _, b in said])) if said else float("nan"),
         "stages": dict(model.timings_s),
         "model_s": t_model,
         "route_s": t_route,
@@ -98,14 +109,15 @@ def run_one(kind: str, seed: int, spacing: float) -> dict:
 
 def accuracy(kinds: list[str], seeds: int, spacings: list[float]) -> None:
     print(f"{'type':>9} {'spacing':>7} {'seeds':>5} {'points':>8} {'recall':>7} {'rec vis':>7} "
-          f"{'prec':>6} {'on rte':>6} {'model s':>8} {'route s':>8}  stages (mean s)")  # fmt: skip
+          f"{'prec':>6} {'on rte':>6} {'profile':>7} {'unknown':>7} {'model s':>8} {'route s':>8}  stages (mean s)")  # fmt: skip
     for spacing in spacings:
         for kind in kinds:
             rows = []
             for seed in range(seeds):
                 rows.append(run_one(kind, seed, spacing))
             mean = {k: float(np.nanmean([r[k] for r in rows])) for k in
-                    ("points", "recall", "recall_visible", "precision", "on_route", "model_s", "route_s")}  # fmt: skip
+                    ("points", "recall", "recall_visible", "precision", "on_route", "profile", "unknown",
+                     "model_s", "route_s")}  # fmt: skip
             stages = {k: round(float(np.mean([r["stages"].get(k, 0.0) for r in rows])), 2)
                       for k in rows[0]["stages"]}  # fmt: skip
             flag = (
@@ -115,6 +127,7 @@ def accuracy(kinds: list[str], seeds: int, spacings: list[float]) -> None:
             )
             print(f"{kind:>9} {spacing:7.3f} {seeds:5d} {mean['points']:8.0f} {mean['recall']:7.3f} "
                   f"{mean['recall_visible']:7.3f} {mean['precision']:6.3f} {mean['on_route']:6.3f} "
+                  f"{mean['profile']:7.3f} {mean['unknown']:7.3f} "
                   f"{mean['model_s']:8.2f} {mean['route_s']:8.2f}  {stages}  [{flag}]", flush=True)  # fmt: skip
 
 

@@ -22,6 +22,7 @@ from planners.errors import (
     UnknownVertexError,
 )
 from planners.inspection import ARA_JUMP_REACH_M, InspectionParams, plan_inspection
+from planners.inspection.faces import driving_face
 from planners.structure.model import StructureModel
 from tests.inspection._models import structure
 
@@ -95,12 +96,23 @@ def test_l_joint_horizontal_to_vertical_is_a_feasible_inchworm():
     assert plan.jumps == 1 and plan.length_m == pytest.approx(2.0)
 
 
-def test_l_joint_onto_a_flange_narrower_than_the_foot_fails_area():
-    m = structure(L_NODES, [([0, 1], {}), ([1, 2], {"width": 0.10})])
+def test_l_joint_onto_faces_all_narrower_than_the_foot_fails_area():
+    m = structure(L_NODES, [([0, 1], {}), ([1, 2], {"width": 0.10, "depth": 0.10})])
     (t,) = plan_inspection(m).transitions
     av = t.availability
     assert t.mode == "inchworm" and av["plane"] and not av["area"] and not t.feasible
     assert av["footholds"] == 0 and "S_am" in t.reason
+
+
+def test_l_joint_onto_narrow_flanges_lands_on_the_web_the_foot_fits():
+    """An IPE 200-like column: 100 mm flanges take no 120 mm foot, its
+    200 mm web does, and the driving face is the web."""
+    m = structure(L_NODES, [([0, 1], {}), ([1, 2], {"width": 0.10, "depth": 0.20})])
+    (t,) = plan_inspection(m).transitions
+    web = next(f for f in m.members[1].faces if f.kind == "web")
+    assert t.to_face == web.id
+    assert t.availability["area"] and t.feasible
+    assert driving_face(m.members[1]).kind == "flange"  # without a foot: the flange first
 
 
 def test_l_joint_landing_beyond_the_reach_fails_height():
@@ -371,8 +383,9 @@ def test_turning_in_the_plane_of_the_flanges_is_mobile(yaw):
 @given(width=st.one_of(st.floats(0.05, 0.115), st.floats(0.14, 0.5)))
 def test_area_availability_follows_the_foot_width(width):
     """S_am on the column of an L: the 0.18 × 0.12 m foot fits iff the flange is
-    at least 0.12 m wide (placements on a 2 cm grid: ≥ 0.14 m is sure to hit one)."""
-    m = structure(L_NODES, [([0, 1], {}), ([1, 2], {"width": width})])
+    at least 0.12 m wide (placements on a 2 cm grid: ≥ 0.14 m is sure to hit one);
+    the column is as deep as wide, so its web is no wider."""
+    m = structure(L_NODES, [([0, 1], {}), ([1, 2], {"width": width, "depth": width})])
     (t,) = plan_inspection(m).transitions
     assert t.availability["area"] == (width >= 0.12) == t.feasible
 
