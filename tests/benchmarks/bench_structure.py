@@ -20,6 +20,10 @@ not classified), and the mean time per stage.  A member is found by the issue's 
 max(5 cm, 0.6 × depth) over ≥ 80 % of the length, within 5°).  Targets:
 recall ≥ 95 %, precision ≥ 90 %.
 
+``--first-pass-sections`` turns the final sections stage off: the same
+members, with the faces and profiles of the first passes (the baseline of
+the profile column).
+
 Scaling (``--scaling``): one frame scan at 5 mm, thinned to 50k, 100k,
 300k and 1M points, each modelled and routed in a fresh process so that
 its peak RSS is its own.  Printed: time per stage, total, the ratio to the
@@ -180,7 +184,17 @@ def main() -> None:
     ap.add_argument("--scaling", action="store_true")
     ap.add_argument("--no-accuracy", action="store_true")
     ap.add_argument("--tmp", default="/tmp")
+    ap.add_argument(
+        "--first-pass-sections",
+        action="store_true",
+        help="report the faces and profiles of the first passes (the baseline of the "
+        "sections stage: pipeline.SECTION_PASS off); members and axes are the same",
+    )
     args = ap.parse_args()
+    if args.first_pass_sections:
+        from planners.structure import pipeline
+
+        pipeline.SECTION_PASS = False
     if not args.no_accuracy:
         accuracy(args.kinds.split(","), args.seeds, [float(s) for s in args.spacings.split(",")])
     if args.scaling:
