@@ -29,6 +29,8 @@ HYPOTHESIS_SEPARATION = 0.25
 UNRESOLVED_SPACINGS = 3.0
 #: fewest points across a section per spacing of its length to read it (final pass)
 UNRESOLVED_ACROSS = 2.0
+#: the box sides' and middle lines' half band in section depths at least (final pass)
+SIDE_BAND_DEPTHS = 0.08
 #: a side bin is occupied from this share of the best face's points per bin (final pass)
 OCCUPIED_SHARE = 0.01
 #: neighbours of a point whose plane measures the surface noise
@@ -322,7 +324,11 @@ def classify_profile(
         ang = np.arctan2(uv[:, 1] - sol[1], uv[:, 0] - sol[0])
         if np.ptp(ang) > np.pi / 2:
             return "tube", 2 * r, 2 * r, big
-    tol = max(2.0 * (spacing if band is None else band), 0.05 * depth)
+    tol = (
+        max(2.0 * spacing, 0.05 * depth)
+        if band is None
+        else max(2.0 * band, SIDE_BAND_DEPTHS * depth)
+    )
     # flat: thinner than three spacings, or (measured band) than the noise
     # allows — an unresolved flange two spacings wide is not a plate
     if width < max(3 * spacing if band is None else 3 * band, 0.12 * depth):
