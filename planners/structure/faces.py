@@ -283,13 +283,15 @@ def classify_profile(
     occupancy; the depth axis (2D, in the cross-section) runs along the web.
 
     ``band``: the faces' tolerance when it was measured from the surface
-    noise (:func:`surface_noise`); the box sides and middle lines are then
-    read in bands of twice that, and a section under
-    ``UNRESOLVED_SPACINGS`` spacings deep, or with fewer than
-    ``UNRESOLVED_ACROSS`` points across it per spacing of length, is
-    ``"unknown"`` — its few points
-    across cannot tell an I from a channel or a plate.  ``None``: bands of
-    two spacings (the model's first passes, which only need depth and
+    noise (:func:`surface_noise`).  The box sides and middle lines are then
+    read in half bands of twice that or ``SIDE_BAND_DEPTHS`` section
+    depths, a bin counting from ``OCCUPIED_SHARE`` of the best face's
+    points per bin; the plate and tube tests take the band for the
+    spacing; and a section under ``UNRESOLVED_SPACINGS`` spacings deep, or
+    with fewer than ``UNRESOLVED_ACROSS`` points across it per spacing of
+    length, is ``"unknown"`` — its few points across cannot tell an I from
+    a channel or a plate.  ``None``: half bands of two spacings and any
+    point counts (the model's first passes, which only need depth and
     width)."""
     if len(uv) < 12:
         return "unknown", 0.0, 0.0, np.array([1.0, 0.0])
