@@ -47,9 +47,10 @@ CLOUDS = {
 PLANE_PICK = 1
 
 #: Form edits per kind (field → value typed or picked); the rest stay default.
-#: ara.inspect: the default Warren scan (seed 0) has web members (angle
-#: legs of 80–120 mm) narrower than the 0.12 m foot, so its route is honestly
-#: rejected; the seed-1 scan is one the ARA can drive.
+#: ara.inspect: the default sample (Warren seed 2, UPN 200 web members) is one
+#: the ARA can drive; seed 0's web members are L 80 angles, narrower than the
+#: 0.12 m foot, so its route is honestly rejected.  The form is edited to seed
+#: 2 anyway, so that typing into a field is exercised.
 EDITS: dict[str, dict[str, str]] = {"ara.inspect": {"sample_seed": "2"}}
 
 KINDS = [
