@@ -657,12 +657,32 @@ def _fit_faces(
     for m in members:
         mp = pts[labels == m.id]
         m.n_points = len(mp)
-        cs = cross_section(mp, m.axis[0], m.direction)
-        faces = member_faces(cs, m.id, face_id, tol, max(12, len(mp) // 20), rng)
-        profile, depth, width, axis2 = classify_profile(cs.uv, faces, cs, spacing)
-        _face_kinds(profile, faces, axis2[0] * cs.u + axis2[1] * cs.v)
-        m.profile, m.depth_m, m.width_m, m.faces = profile, depth, width, faces
-        face_id += len(faces)
+        face_id += _fit_section(m, mp, face_id, spacing, tol, rng, band=None)
+
+
+def _fit_section(
+    m: Member,
+    mp: np.ndarray,
+    first_face_id: int,
+    spacing: float,
+    tol: float,
+    rng: np.random.Generator,
+    band: float | None,
+) -> int:
+    """Set ``m``'s faces (RANSAC at ``tol``), profile, depth and width from
+    its points ``mp``; ``band`` as :func:`.faces.classify_profile` takes it
+    (a measured band also leaves a tube without faces).  Returns the number
+    of faces."""
+    cs = cross_section(mp, m.axis[0], m.direction)
+    faces = member_faces(cs, m.id, first_face_id, tol, max(12, len(mp) // 20), rng)
+    profile, depth, width, axis2 = classify_profile(cs.uv, faces, cs, spacing, band=band)
+    if band is not None and profile == "tube":
+        # lines RANSAC finds on an arc are chords, not surfaces a foot or a
+        # blast disc can use
+        faces = []
+    _face_kinds(profile, faces, axis2[0] * cs.u + axis2[1] * cs.v)
+    m.profile, m.depth_m, m.width_m, m.faces = profile, depth, width, faces
+    return len(faces)
 
 
 def _fit_sections(
@@ -687,7 +707,6 @@ def _fit_sections(
     face_id = 0
     for m in members:
         mp = pts[labels == m.id]
-        cs = cross_section(mp, m.axis[0], m.direction)
         noise = surface_noise(mp)
         t = (
             tol
@@ -695,15 +714,7 @@ def _fit_sections(
             else float(np.clip(SECTION_NOISE_TOLS * noise, 0.004, tol))
         )
         rng = np.random.default_rng([seed, _points_key(mp)])
-        faces = member_faces(cs, m.id, face_id, t, max(12, len(mp) // 20), rng)
-        profile, depth, width, axis2 = classify_profile(cs.uv, faces, cs, spacing, band=t)
-        if profile == "tube":
-            # lines RANSAC finds on an arc are chords, not surfaces a foot
-            # or a blast disc can use
-            faces = []
-        _face_kinds(profile, faces, axis2[0] * cs.u + axis2[1] * cs.v)
-        m.profile, m.depth_m, m.width_m, m.faces = profile, depth, width, faces
-        face_id += len(faces)
+        face_id += _fit_section(m, mp, face_id, spacing, t, rng, band=t)
 
 
 def _points_key(points: np.ndarray) -> int:
