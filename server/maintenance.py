@@ -134,7 +134,12 @@ def scan_cloud_id(store: Store, source: Any, actor: str) -> str:
         return str(params["cloud_id"])
     from planners.structure.synthetic import SCAN_SAMPLES
 
-    name, seed = str(params.get("sample")), int(params.get("sample_seed", 0))
+    name = str(params.get("sample"))
+    if "sample_seed" not in params:
+        # a stored plan's params are the full validated model, seed included;
+        # guessing one would rebuild another structure than the one inspected
+        raise MaintenanceError("plan_id", f"plan {source.id}'s params name no sample_seed")
+    seed = int(params["sample_seed"])
     if name not in SCAN_SAMPLES:
         raise MaintenanceError("plan_id", f"plan {source.id}'s sample {name!r} is unknown here")
     pts = np.asarray(SCAN_SAMPLES[name](seed), dtype=float)

@@ -19,7 +19,8 @@ Stages (each timed in ``StructureModel.timings_s``):
 6. joints and graph (:mod:`.joints`); members meeting nothing and shorter
    than ``min_free_length_m``, and members stubbier than
    ``STUBBY_SLENDERNESS`` section depths meeting fewer than two joints, are
-   clutter and are dropped;
+   clutter and are dropped; rows of a few points left unlabelled that span
+   between two kept members are added (:mod:`.bridges`);
 7. sections — the kept members' faces and profiles fitted again at the
    tolerance their own surface noise allows (``_fit_sections``): the
    reported section, not the one that found the member.
@@ -42,6 +43,12 @@ from planners.errors import EmptyInputError, InvalidInputError
 from planners.pointcloud._validate import as_points
 from planners.pointcloud.spacing import measure_spacing
 from planners.structure.assign import assign_points, gap_filled, grow_end, relabel_by_faces
+from planners.structure.bridges import (
+    BRIDGE_MAX_ATTEMPTS,
+    BRIDGE_MIN_POINTS,
+    bridging_rows,
+    seed_points,
+)
 from planners.structure.clutter import parallel_rows, plane_continuation
 from planners.structure.direction import compact_direction, hull_direction
 from planners.structure.faces import (
@@ -64,7 +71,7 @@ from planners.structure.lines import (
 )
 from planners.structure.model import Face, Member, StructureModel
 from planners.structure.params import StructureParams
-from planners.structure.sparse import sparse_rows
+from planners.structure.sparse import sparse_rows, walk_rows
 
 #: fewest points a member keeps after assignment
 MIN_MEMBER_POINTS = 8
@@ -172,6 +179,12 @@ GROW_STEP_SPACINGS = 3.0
 BRIDGE_GAPS = 4
 #: look for sparse rows among the points no candidate explains (:mod:`.sparse`)
 SPARSE_ROWS = True
+#: add the rows of a few unlabelled points that span between two kept
+#: members (:mod:`.bridges`).  20 seeds at 10 cm, visible recall /
+#: precision: grillage 0.866 / 0.934 → 0.896 / 0.940, Pratt 0.963 / 0.963
+#: → 0.977 / 0.964, Warren 0.963 / 0.967 → 0.968 / 0.962, frame unchanged;
+#: at 2 cm no row changes
+BRIDGE_ROWS = True
 #: a member stubbier than this many section depths (its length over the
 #: larger of depth and width) that meets fewer than ``STUBBY_JOINTS``
 #: joints is not a member between others: a person-sized box standing
@@ -454,6 +467,10 @@ def model_structure(
     ]
     if len(keep) < len(members):
         labels, members, radii, joints = _renumber(labels, members, radii, keep, spacing)
+    if BRIDGE_ROWS:
+        labels, members, radii, joints = _add_bridges(
+            pts, labels, members, radii, joints, spacing, prm
+        )
     extend_to_joints(members, joints)
     graph = member_graph(members, joints, end_tol=float(radii.max()) if len(radii) else 0.0)
     stage("graph", 0.95)
@@ -630,6 +647,77 @@ def _assign_and_refit(
         for i, ln in enumerate(lines)
     ]
     return labels, shared, members, np.array([ln.radius for ln in lines])
+
+
+def _add_bridges(
+    pts: np.ndarray,
+    labels: np.ndarray,
+    members: list[Member],
+    radii: np.ndarray,
+    joints: list,
+    spacing: float,
+    prm: StructureParams,
+) -> tuple[np.ndarray, list[Member], np.ndarray, list]:
+    """The members seen as a few unlabelled points between two members
+    (:mod:`.bridges`) added, with the joints found again."""
+    reach = max(JOINT_REACH_SPACINGS * spacing, JOINT_REACH_M)
+    free = labels < 0
+    min_len = float(prm.min_member_length_m or 0.0)
+    # the points left free now, walked again: the first walk saw other free
+    # points (before the refits, joins and clutter tests)
+    rows, short = walk_rows(
+        pts,
+        free,
+        spacing,
+        min_len,
+        BRIDGE_MIN_POINTS,
+        BRIDGE_MAX_ATTEMPTS,
+        seeds=seed_points(pts, free, spacing),
+    )
+    bridges = bridging_rows(
+        pts,
+        free,
+        rows + short,
+        members,
+        radii,
+        spacing,
+        min_len,
+        reach,
+    )
+    if not bridges:
+        return labels, members, radii, joints
+    return _with_members(
+        labels, members, radii, [(b.axis, b.points, b.radius) for b in bridges], spacing
+    )
+
+
+def _with_members(
+    labels: np.ndarray,
+    members: list[Member],
+    radii: np.ndarray,
+    new: list[tuple[np.ndarray, np.ndarray, float]],
+    spacing: float,
+) -> tuple[np.ndarray, list[Member], np.ndarray, list]:
+    """``members`` and ``new`` ones (axis, point indices, radius; their
+    sections are fitted in the sections stage), and the joints of all."""
+    labels = labels.copy()
+    for axis, points, _ in new:
+        mid = len(members)
+        labels[points] = mid
+        members.append(
+            Member(
+                id=mid,
+                axis=axis,
+                profile="unknown",
+                depth_m=0.0,
+                width_m=0.0,
+                n_points=len(points),
+            )
+        )
+    radii = np.concatenate([radii, np.array([r for _, _, r in new])])
+    reach = max(JOINT_REACH_SPACINGS * spacing, JOINT_REACH_M)
+    joints = find_joints(members, radii, reach=reach, side_tol=3 * spacing)
+    return labels, members, radii, joints
 
 
 def _arrays(

@@ -20,8 +20,10 @@ and is not a piece of something larger: the free points beside it within
 ``SPARSE_SIDE_SPACINGS`` lie off every plane through it (at most
 ``SPARSE_PLANE_MAX`` per inlier on the best one; a scan ring on the ground
 has the next rings beside it).  Rows go through the same assignment,
-refit, joins and clutter tests as the features' candidates.  Every query is
-a ball or k-nearest query of bounded size; nothing is pairwise.
+refit, joins and clutter tests as the features' candidates; rows of fewer
+points (down to a caller's ``short_points``) are reported apart, for
+:mod:`.bridges` to look for between members.  Every query is a ball or
+k-nearest query of bounded size; nothing is pairwise.
 """
 
 from __future__ import annotations
@@ -132,19 +134,27 @@ def _on_a_plane(
     return int((dist <= tol).sum(axis=0).max())
 
 
-def _linear(pts: np.ndarray, tree: cKDTree, side: float) -> tuple[np.ndarray, np.ndarray]:
-    """``(score, direction)`` per point: its nearest ``SPARSE_K`` neighbours
-    within ``side`` and their principal direction; the score is how many
-    they are when they make a line ((λ1 − λ2)/λ1 ≥ ``SPARSE_LINEARITY``),
-    else 0 (a point of a scan ring on the ground has the next rings beside
-    it).  k is fixed: bounded."""
-    k = min(SPARSE_K + 1, len(pts))
+def _linear(
+    pts: np.ndarray, tree: cKDTree, side: float, at: np.ndarray | None = None
+) -> tuple[np.ndarray, np.ndarray]:
+    """``(score, direction)`` per point of ``pts`` (``tree`` is theirs), or per
+    point ``at`` (indices) only: its nearest ``SPARSE_K`` neighbours within
+    ``side`` and their principal direction; the score is how many they are
+    when they make a line ((λ1 − λ2)/λ1 ≥ ``SPARSE_LINEARITY``), else 0 (a
+    point of a scan ring on the ground has the next rings beside it).  k is
+    fixed: bounded."""
+    data = pts
+    if at is not None:
+        pts = pts[at]
+    k = min(SPARSE_K + 1, len(data))
+    if len(pts) == 0:
+        return np.zeros(0, np.int64), np.zeros((0, 3))
     dist, nb = tree.query(pts, k=k, distance_upper_bound=side)
     dist = np.asarray(dist).reshape(len(pts), k)
     nb = np.asarray(nb).reshape(len(pts), k)
     ok = np.isfinite(dist)
     n = ok.sum(axis=1)
-    q = pts[np.where(ok, nb, 0)]  # (N, k, 3)
+    q = data[np.where(ok, nb, 0)]  # (N, k, 3)
     w = ok[:, :, None].astype(float)
     mean = (q * w).sum(axis=1) / np.maximum(n, 1)[:, None]
     r = (q - mean[:, None, :]) * w
@@ -162,20 +172,53 @@ def sparse_rows(
     min_length: float,
 ) -> list[LineCandidate]:
     """Line candidates (no voxels) through sparse rows of the ``free``
-    points (a boolean mask over ``points``) at least ``min_length`` long.
+    points (a boolean mask over ``points``) at least ``min_length`` long,
+    of ``SPARSE_MIN_POINTS`` or more (:func:`walk_rows`)."""
+    return walk_rows(points, free, spacing, min_length)[0]
+
+
+def walk_rows(
+    points: np.ndarray,
+    free: np.ndarray,
+    spacing: float,
+    min_length: float,
+    short_points: int | None = None,
+    max_attempts: int | None = None,
+    seeds: np.ndarray | None = None,
+) -> tuple[list[LineCandidate], list[LineCandidate]]:
+    """``(rows, short)``: line candidates (no voxels) through sparse rows of
+    the ``free`` points (a boolean mask over ``points``) at least
+    ``min_length`` long, of ``SPARSE_MIN_POINTS`` or more; and the rows that
+    pass every test but hold only ``short_points`` to ``SPARSE_MIN_POINTS``
+    − 1 points (none when ``short_points`` is ``None``).  A short row keeps
+    its points free for the seeds after it, as a rejected one does, so
+    asking for them changes no row.  At most ``max_attempts`` seeds (default ``SPARSE_MAX_ATTEMPTS``) are walked,
+    and only free points also in ``seeds`` (a mask over ``points``) seed
+    rows when it is given; rows take their points from every free point.
     Deterministic: seeds are tried most isolated first (linear neighbours
     per point within ``SPARSE_SIDE_SPACINGS``; then the most neighbours, a
     row's middle before its ends), each along its neighbours' principal
     direction."""
+    min_points = SPARSE_MIN_POINTS
+    if max_attempts is None:
+        max_attempts = SPARSE_MAX_ATTEMPTS
+    least = min_points if short_points is None else min(short_points, min_points)
     idx = np.flatnonzero(free)
-    if len(idx) < SPARSE_MIN_POINTS:
-        return []
+    if len(idx) < least:
+        return [], []
     pts = points[idx]
     tree = cKDTree(pts)
     tol = SPARSE_TOL_SPACINGS * spacing
     gap = SPARSE_GAP_SPACINGS * spacing
     side = SPARSE_SIDE_SPACINGS * spacing
-    score, dirs = _linear(pts, tree, side)
+    if seeds is None:
+        score, dirs = _linear(pts, tree, side)
+    else:
+        # only the points allowed to seed a row are scored
+        at = np.flatnonzero(seeds[idx])
+        score = np.zeros(len(pts), np.int64)
+        dirs = np.zeros((len(pts), 3))
+        score[at], dirs[at] = _linear(pts, tree, side, at)
     order = np.flatnonzero(score)
     # isolated rows first: a point of a row has few free points round it
     # besides its row's, a point of a ring on the ground the next rings too
@@ -184,7 +227,8 @@ def sparse_rows(
     order = order[np.lexsort((order, -score[order], -priority))]
     alive = np.ones(len(pts), bool)
     out: list[LineCandidate] = []
-    for i in order[:SPARSE_MAX_ATTEMPTS]:
+    short: list[LineCandidate] = []
+    for i in order[:max_attempts]:
         if not alive[i]:
             continue
         inl = _grow(pts, tree, pts[i], dirs[i], 0.0, tol, gap)
@@ -203,15 +247,19 @@ def sparse_rows(
         alive[i] = False
         if RETIRE_REJECTED:
             alive[inl] = False
-        if len(inl) < SPARSE_MIN_POINTS:
+        if len(inl) < least:
             continue
         c, d, t0, t1, rad = fit_line(pts[inl], 0.0, 100.0)
         if t1 - t0 < min_length:
             continue
         if _on_a_plane(pts, tree, c, d, t0, t1, tol, side) > SPARSE_PLANE_MAX * len(inl):
             continue
+        row = LineCandidate(np.zeros(0, np.int64), c, d, t0, t1, max(rad, spacing))
+        if len(inl) < min_points:
+            short.append(row)
+            continue
         alive[inl] = False
-        out.append(LineCandidate(np.zeros(0, np.int64), c, d, t0, t1, max(rad, spacing)))
+        out.append(row)
         if len(out) >= SPARSE_MAX_ROWS:
             break
-    return out
+    return out, short

@@ -237,3 +237,17 @@ def test_spots_count_only_acknowledged_way_points() -> None:
     assert spots_acknowledged(program, [0, 1, 2], spot) == (1, 3)
     assert spots_acknowledged(program, [0, 1, 2, 3, 4], spot) == (2, 3)
     assert spots_acknowledged(program, list(range(7)), spot) == (3, 3)
+
+
+def test_a_sample_plan_without_its_seed_names_what_is_missing() -> None:
+    """The scan behind a sample inspection is generated again from its name
+    and seed; params without the seed are refused with why, rather than
+    rebuilt from a guessed seed (another structure than the one inspected)."""
+    from types import SimpleNamespace
+
+    from server.maintenance import MaintenanceError, scan_cloud_id
+
+    source = SimpleNamespace(id="p1", params={"sample": "scan_warren"}, result={})
+    with pytest.raises(MaintenanceError) as err:
+        scan_cloud_id(None, source, "alice")  # type: ignore[arg-type]
+    assert "sample_seed" in str(err.value)

@@ -112,6 +112,10 @@ def test_sparse_rows_find_members_a_10_cm_scan_s_features_missed(monkeypatch) ->
     recall, precision = _scores("pratt", 4)
     assert recall >= 0.75 and precision >= 0.8, (recall, precision)
     monkeypatch.setattr(pipeline, "SPARSE_ROWS", False)
+    # the bridging rows (a later stage) take some of these members between
+    # chords another way (Pratt 4: 0.62 without the sparse rows); the sparse
+    # rows are measured without them
+    monkeypatch.setattr(pipeline, "BRIDGE_ROWS", False)
     assert _scores("warren", 1)[0] < 0.9
     assert _scores("pratt", 4)[0] < 0.6
 
@@ -207,6 +211,10 @@ def test_a_rejected_row_leaves_its_points_to_the_seeds_after_it(monkeypatch) -> 
     for seed in (6, 14):
         recall, precision = _scores("pratt", seed)
         assert recall == 1.0 and precision >= 0.9, (seed, recall, precision)
+    # the bridging rows walk the points left free again and take the lost
+    # post of seed 6 back between its chords: the first walk is measured
+    # without them, both ways
+    monkeypatch.setattr(pipeline, "BRIDGE_ROWS", False)
     kept = {seed: _scores("pratt", seed)[0] for seed in (4, 6, 12)}
     monkeypatch.setattr(sparse, "RETIRE_REJECTED", True)
     for seed in (4, 6, 12):

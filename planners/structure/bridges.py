@@ -1,0 +1,194 @@
+"""Bridging rows: members seen as a handful of points between two members.
+
+A cross girder far from every scanner, or seen past a main girder, can come
+out of a 10 cm scan as five to seven points along one flange: too few for a
+line feature or a sparse row on its own (:mod:`.sparse` asks for
+``SPARSE_MIN_POINTS``), where a random row of five points in clutter is
+common.  What tells the two apart is the structure round it: the row's
+line, carried on past both of its ends, meets a member at each, crossing it
+— the way a cross girder spans between main girders, or a diagonal between
+chords.  That is a line hypothesis (a RANSAC-style consensus, Fischler &
+Bolles 1981) verified by the members already found rather than by its
+own points alone.
+
+The rows come from the sparse-row walk (:func:`.sparse.walk_rows`) over
+the points still unlabelled once the members are kept (the first walk ran
+before the refits, joins and clutter tests freed or took points), rows of
+``BRIDGE_MIN_POINTS`` or more.  A row becomes a member when:
+
+* it is not a piece of a member already found: no member within
+  ``DUPLICATE_DEG`` of its direction passes within that member's section
+  radius plus ``DUPLICATE_SPACINGS`` of the row's middle;
+* its line, lengthened past each end by ``BRIDGE_REACH_LENGTHS`` of its own
+  length (at least the joints' reach), comes within a member's section
+  radius plus one spacing of two different members, one beyond each end,
+  each crossing it at ``CROSSING_DEG`` or more;
+* it still holds ``BRIDGE_MIN_POINTS`` points no earlier bridge took, and
+  they lie within an RMS distance of ``BRIDGE_MAX_RMS_SPACINGS`` of its
+  line (a row on a flange lies at 0.1–0.25 spacings, a diagonal's
+  scattered section up to 0.5; points strewn evenly over the walk's
+  one-spacing tube at about 0.7).
+
+The new member's axis runs along the row's line between the two crossings;
+its points are the row's, its section is fitted in the sections stage (a
+handful of points: ``unknown``).  Every query is bounded: one ball query
+per row sample, and rows × members closest-point tests with the rows
+capped by the walk's ``BRIDGE_MAX_ATTEMPTS``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from planners.structure.assign import near_line
+from planners.structure.joints import closest_points
+from planners.structure.lines import LineCandidate
+from planners.structure.model import Member
+
+#: unlabelled points a bridging row needs at least
+BRIDGE_MIN_POINTS = 5
+#: seeds the walk over the points left free tries at most
+BRIDGE_MAX_ATTEMPTS = 150
+#: rows are seeded from at most ``BRIDGE_SEED_POINTS`` free points, those
+#: in the cells (``BRIDGE_CELL_SPACINGS`` wide) holding the fewest free
+#: points: a row of a handful of points is alone in its cells, while a
+#: surface (ground, a slab) fills them; bounds the walk's scoring on a fine
+#: scan (a 5 mm Warren leaves 375k points free, 1.4 s to score them all)
+BRIDGE_CELL_SPACINGS = 10.0
+BRIDGE_SEED_POINTS = 3000
+#: the row's points lie within this RMS distance (spacings) of its line:
+#: points strewn evenly over the walk's one-spacing tube lie at ~0.7
+BRIDGE_MAX_RMS_SPACINGS = 0.5
+#: the row's line is carried this many of its own lengths past each end
+BRIDGE_REACH_LENGTHS = 1.0
+#: a member it meets crosses it at this angle or more
+CROSSING_DEG = 20.0
+#: a row this close (degrees) to a member's direction and near its axis is a
+#: piece of that member
+DUPLICATE_DEG = 20.0
+DUPLICATE_SPACINGS = 4.0
+
+
+@dataclass
+class Bridge:
+    """A row accepted as a member: ``axis`` (2, 3) between the two members
+    it meets (``ends``), ``points`` the indices of its points."""
+
+    axis: np.ndarray
+    points: np.ndarray
+    ends: tuple[int, int]
+    radius: float
+
+
+def seed_points(points: np.ndarray, free: np.ndarray, spacing: float) -> np.ndarray:
+    """Mask of the ``BRIDGE_SEED_POINTS`` ``free`` points in the emptiest
+    cells of ``BRIDGE_CELL_SPACINGS`` spacings (ties by index: deterministic;
+    one ``np.unique`` over the cell keys and one sort: n log n)."""
+    out = np.zeros(len(points), bool)
+    idx = np.flatnonzero(free)
+    if len(idx) <= BRIDGE_SEED_POINTS:
+        out[idx] = True
+        return out
+    ijk = np.floor((points[idx] - points[idx].min(axis=0)) / (BRIDGE_CELL_SPACINGS * spacing))
+    _, inverse, counts = np.unique(
+        ijk.astype(np.int64), axis=0, return_inverse=True, return_counts=True
+    )
+    emptiest = np.argsort(counts[inverse.reshape(-1)], kind="stable")[:BRIDGE_SEED_POINTS]
+    out[idx[emptiest]] = True
+    return out
+
+
+def _is_duplicate(
+    mid: np.ndarray, d: np.ndarray, members: list[Member], radii: np.ndarray, spacing: float
+) -> bool:
+    cos_dup = float(np.cos(np.radians(DUPLICATE_DEG)))
+    for m, r in zip(members, radii, strict=True):
+        if abs(float(m.direction @ d)) < cos_dup:
+            continue
+        p, q, _, _ = closest_points(mid, mid, m.axis[0], m.axis[1])
+        if float(np.linalg.norm(p - q)) <= r + DUPLICATE_SPACINGS * spacing:
+            return True
+    return False
+
+
+def _supports(
+    c: np.ndarray,
+    d: np.ndarray,
+    t0: float,
+    t1: float,
+    members: list[Member],
+    radii: np.ndarray,
+    spacing: float,
+    reach: float,
+) -> tuple[tuple[int, float] | None, tuple[int, float] | None]:
+    """The nearest member crossing the line beyond each end of the row
+    ``[t0, t1]`` (within ``reach``): ``(member index, parameter)`` or ``None``."""
+    cos_cross = float(np.cos(np.radians(CROSSING_DEG)))
+    length = t1 - t0
+    seg = (c + (t0 - reach) * d, c + (t1 + reach) * d)
+    ends: list[tuple[int, float] | None] = [None, None]
+    for j, m in enumerate(members):
+        if abs(float(m.direction @ d)) > cos_cross:
+            continue
+        p, q, _, _ = closest_points(seg[0], seg[1], m.axis[0], m.axis[1])
+        if float(np.linalg.norm(p - q)) > radii[j] + spacing:
+            continue
+        t = float((p - c) @ d)
+        # a crossing inside the row's last tenth still meets its end
+        if t <= t0 + 0.1 * length:
+            k, gap = 0, t0 - t
+        elif t >= t1 - 0.1 * length:
+            k, gap = 1, t - t1
+        else:
+            continue
+        best = ends[k]
+        if best is None or gap < abs(best[1] - (t0 if k == 0 else t1)):
+            ends[k] = (j, t)
+    return ends[0], ends[1]
+
+
+def bridging_rows(
+    points: np.ndarray,
+    free: np.ndarray,
+    rows: list[LineCandidate],
+    members: list[Member],
+    radii: np.ndarray,
+    spacing: float,
+    min_length: float,
+    joint_reach: float,
+) -> list[Bridge]:
+    """The ``rows`` that span between two of ``members`` (``radii``: their
+    section radii) through at least ``BRIDGE_MIN_POINTS`` of the ``free``
+    points (mask over ``points``), each as a :class:`Bridge`.  A point goes
+    to one bridge at most."""
+    if len(members) < 2 or not rows or int(free.sum()) < BRIDGE_MIN_POINTS:
+        return []
+    idx = np.flatnonzero(free)
+    sub = points[idx]
+    tree = cKDTree(sub)
+    taken = np.zeros(len(idx), bool)
+    out: list[Bridge] = []
+    for row in rows:
+        c, d, t0, t1 = row.centre, row.direction, row.t0, row.t1
+        if _is_duplicate(c + 0.5 * (t0 + t1) * d, d, members, radii, spacing):
+            continue
+        reach = max(BRIDGE_REACH_LENGTHS * (t1 - t0), joint_reach)
+        start, end = _supports(c, d, t0, t1, members, radii, spacing, reach)
+        if start is None or end is None or start[0] == end[0]:
+            continue
+        if end[1] - start[1] < min_length:
+            continue
+        near, t, perp = near_line(sub, tree, c, d, t0, t1, 0.5 * spacing)
+        on = (perp <= spacing) & (t >= t0) & (t <= t1) & ~taken[near]
+        mine = near[on]
+        if len(mine) < BRIDGE_MIN_POINTS:
+            continue
+        if float(np.sqrt(np.mean(perp[on] ** 2))) > BRIDGE_MAX_RMS_SPACINGS * spacing:
+            continue
+        taken[mine] = True
+        axis = np.array([c + start[1] * d, c + end[1] * d])
+        out.append(Bridge(axis, idx[mine], (start[0], end[0]), max(row.radius, spacing)))
+    return out
