@@ -686,36 +686,13 @@ def _add_bridges(
     )
     if not bridges:
         return labels, members, radii, joints
-    return _with_members(
-        labels, members, radii, [(b.axis, b.points, b.radius) for b in bridges], spacing
-    )
-
-
-def _with_members(
-    labels: np.ndarray,
-    members: list[Member],
-    radii: np.ndarray,
-    new: list[tuple[np.ndarray, np.ndarray, float]],
-    spacing: float,
-) -> tuple[np.ndarray, list[Member], np.ndarray, list]:
-    """``members`` and ``new`` ones (axis, point indices, radius; their
-    sections are fitted in the sections stage), and the joints of all."""
     labels = labels.copy()
-    for axis, points, _ in new:
-        mid = len(members)
-        labels[points] = mid
-        members.append(
-            Member(
-                id=mid,
-                axis=axis,
-                profile="unknown",
-                depth_m=0.0,
-                width_m=0.0,
-                n_points=len(points),
-            )
-        )
-    radii = np.concatenate([radii, np.array([r for _, _, r in new])])
-    reach = max(JOINT_REACH_SPACINGS * spacing, JOINT_REACH_M)
+    for b in bridges:
+        labels[b.points] = len(members)
+        # the section is fitted in the sections stage (a handful of points:
+        # ``unknown``)
+        members.append(Member(len(members), b.axis, "unknown", 0.0, 0.0, n_points=len(b.points)))
+    radii = np.concatenate([radii, [b.radius for b in bridges]])
     joints = find_joints(members, radii, reach=reach, side_tol=3 * spacing)
     return labels, members, radii, joints
 

@@ -133,14 +133,29 @@ def test_a_row_between_parallel_members_is_not_a_crossing() -> None:
     assert _bridges(row, _girders(2.0)) == []
 
 
-def test_random_points_between_girders_make_no_member() -> None:
-    """Clutter between two girders (uniform points at about the scan's
-    spacing, 20 draws): no row of them is taken for a member."""
-    members = _girders(2.0)
-    for seed in range(20):
-        rng = np.random.default_rng(seed)
-        pts = rng.uniform([0.5, 0.2, -1.0], [5.5, 1.8, 0.5], size=(60, 3))
-        assert _bridges(pts, members) == [], seed
+def test_random_points_between_girders_make_no_member(monkeypatch) -> None:
+    """Clutter between two girders (100 uniform points, about four spacings
+    apart, 20 draws): the walk finds rows in it, and none is taken for a
+    member.  Without the RMS rule one draw's row of 8 points strewn through
+    the walk's tube (0.64 spacings RMS) was."""
+
+    def draws() -> tuple[int, int]:
+        rows = made = 0
+        for seed in range(20):
+            rng = np.random.default_rng(seed)
+            pts = rng.uniform([0.5, 0.2, -1.0], [5.5, 1.8, 0.5], size=(100, 3))
+            prm = StructureParams().resolve(SPACING)
+            found = walk_rows(
+                pts, np.ones(len(pts), bool), SPACING, float(prm.min_member_length_m or 0.0), 5
+            )
+            rows += len(found[0]) + len(found[1])
+            made += len(_bridges(pts, _girders(2.0)))
+        return rows, made
+
+    rows, made = draws()
+    assert rows >= 5 and made == 0
+    monkeypatch.setattr(bridges, "BRIDGE_MAX_RMS_SPACINGS", 1.0)
+    assert draws()[1] >= 1
 
 
 def test_rows_are_seeded_from_the_emptiest_cells_and_still_bridged(monkeypatch) -> None:
