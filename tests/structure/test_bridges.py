@@ -180,7 +180,8 @@ def test_grillage_cross_girders_seen_as_five_points_are_found_and_routed(monkeyp
     """Grillage seed 0 at 10 cm: cross girders 6 and 10 (UPN 300) are five
     points each along one flange, which no line feature or sparse row
     takes.  They are found, meet a main girder at both ends and are on the
-    route; without the bridges neither is found."""
+    route, and every transition onto them fails its check (no face to land
+    on); without the bridges neither is found."""
     scan = make_scan("grillage", 0, spacing_m=0.1)
     pts = scan.points / scan.scale
 
@@ -202,5 +203,8 @@ def test_grillage_cross_girders_seen_as_five_points_are_found_and_routed(monkeyp
         assert sum(f in j.members for j in model.joints) == 2
         assert f in driven
         assert model.members[f].profile == "unknown"  # five points tell no section
+        # no face to land on: the plan's check fails and names the member
+        onto = [t_ for t_ in plan.transitions if t_.to_member == f]
+        assert onto and all(not t_.feasible and "no faces" in t_.reason for t_ in onto)
     monkeypatch.setattr(pipeline, "BRIDGE_ROWS", False)
     assert not ({6, 10} & found()[0])
