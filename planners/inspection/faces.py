@@ -68,6 +68,12 @@ def driving_face(member: Member, foot_width_m: float | None = None) -> Face | No
     return max(near, key=lambda f: (upness(f), -f.id))
 
 
+def placeable(member: Member, foot_width_m: float) -> bool:
+    """Whether a face of ``member`` is at least ``foot_width_m`` across it:
+    a face the robot can be set down on (and driven along)."""
+    return any(_across(f) >= foot_width_m for f in member.faces)
+
+
 def _across(face: Face) -> float:
     """A face's extent across its member: its outline's in-plane ``y`` span
     (``x`` runs along the member)."""

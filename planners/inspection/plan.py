@@ -34,6 +34,7 @@ from planners.errors import (
     UnknownVertexError,
 )
 from planners.inspection.close import close_route
+from planners.inspection.faces import placeable
 from planners.inspection.gaps import Gap, component_gaps, join_gaps
 from planners.inspection.params import InspectionParams
 from planners.inspection.transitions import Transition, TransitionContext, route_transitions
@@ -104,7 +105,10 @@ def plan_inspection(
     ``start``/``end``: vertices of ``model.graph``; ``None`` picks, in each
     piece, the two ``"end"`` vertices furthest apart (any two vertices
     furthest apart when a piece has fewer than two free ends); one given, the
-    other is the free end furthest from it.
+    other is the free end furthest from it.  A start picked so lies on a
+    member with a face the foot fits across, where the piece has one among
+    those vertices (the crew sets the robot down there; every later member
+    is landed on by a checked transition).
 
     Raises (``planners.errors``, all ``ValueError``): ``InvalidInputError``
     (not a StructureModel / InspectionParams, a directed graph, a vertex
@@ -155,6 +159,7 @@ def plan_inspection(
 
     t = time.perf_counter()
     parts = _pieces(graph)  # after joining
+    can_start = frozenset(m.id for m in model.members if placeable(m, params.foot_width_m))
     fixed = [x for x in (start, end) if x is not None]
     homes = {i for i, p in enumerate(parts) for x in fixed if x in p}
     if fixed and len(homes) != 1:
@@ -177,7 +182,7 @@ def plan_inspection(
         order = order[:1]  # one route: the piece holding start (or the largest)
     for rank, i in enumerate(order):
         sub: nx.MultiGraph = nx.MultiGraph(graph.subgraph(parts[i]))
-        s, e = _ends(sub, start if rank == 0 else None, end if rank == 0 else None)
+        s, e = _ends(sub, start if rank == 0 else None, end if rank == 0 else None, can_start)
         if params.close_member is not None:
             r = close_route(sub, s, params.close_member, weight="route_weight")
             need = math.fsum(
@@ -312,9 +317,16 @@ def _gaps(g: nx.MultiGraph, pieces: list[set[Hashable]], params: InspectionParam
 
 
 def _ends(
-    g: nx.MultiGraph, start: Hashable | None, end: Hashable | None
+    g: nx.MultiGraph,
+    start: Hashable | None,
+    end: Hashable | None,
+    placeable: frozenset[int] = frozenset(),
 ) -> tuple[Hashable, Hashable]:
-    """Start and end of a piece's route: the given ones, else far-apart free ends."""
+    """Start and end of a piece's route: the given ones, else far-apart free
+    ends, the start on a span of a ``placeable`` member where one is in the
+    pool (the crew sets the ARA down on the start member: it needs a face
+    the foot fits across; every later member is landed on by a transition,
+    whose checks look at that)."""
     if start is not None and end is not None:
         return start, end
     nodes = [n for n in g.nodes if g.degree(n) > 0]
@@ -322,20 +334,38 @@ def _ends(
     fixed = start if start is not None else end
     pool = free if len(free) >= (1 if fixed is not None else 2) else nodes
     pos = np.array([g.nodes[n]["pos"] for n in pool], float)
-    if fixed is not None:
-        others = [i for i, n in enumerate(pool) if n != fixed]
+    ok = np.array(
+        [
+            any(
+                d.get("kind", "span") == "span" and int(d.get("member", -1)) in placeable
+                for _, _, d in g.edges(n, data=True)
+            )
+            for n in pool
+        ],
+        dtype=bool,
+    )
+    if start is not None:
+        others = [i for i, n in enumerate(pool) if n != start]
         if not others:
-            return fixed, fixed
-        p = np.asarray(g.nodes[fixed]["pos"], float)
-        dist = np.linalg.norm(pos[others] - p, axis=1)
-        far = pool[others[int(np.argmax(dist))]]
-        return (fixed, far) if start is not None else (far, fixed)
+            return start, start
+        dist = np.linalg.norm(pos[others] - np.asarray(g.nodes[start]["pos"], float), axis=1)
+        return start, pool[others[int(np.argmax(dist))]]
+    if end is not None:
+        others = [i for i, n in enumerate(pool) if n != end]
+        if not others:
+            return end, end
+        if ok[others].any():
+            others = [i for i in others if ok[i]]
+        dist = np.linalg.norm(pos[others] - np.asarray(g.nodes[end]["pos"], float), axis=1)
+        return pool[others[int(np.argmax(dist))]], end
     if len(pool) < 2:
         return pool[0], pool[0]
+    starts = np.flatnonzero(ok) if ok.any() else np.arange(len(pool))
     best, pair = -1.0, (0, 1)
-    for i in range(len(pool) - 1):  # O(n) memory: one row of distances at a time
-        dist = np.linalg.norm(pos[i + 1 :] - pos[i], axis=1)
+    for i in starts:  # O(n) memory: one row of distances at a time
+        dist = np.linalg.norm(pos - pos[i], axis=1)
+        dist[i] = -1.0
         j = int(np.argmax(dist))
         if float(dist[j]) > best:
-            best, pair = float(dist[j]), (i, i + 1 + j)
+            best, pair = float(dist[j]), (int(i), j)
     return pool[pair[0]], pool[pair[1]]

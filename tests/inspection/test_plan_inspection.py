@@ -489,3 +489,20 @@ def test_flush_faces_continue_when_their_outlines_are_within_tolerance_plus_slac
     limit = params.contact_tolerance_m + slack
     if abs(gap - limit) > 1e-9:
         assert c.continues == (gap <= limit)
+
+
+def test_the_default_start_is_on_a_member_the_foot_fits():
+    """Two far-apart free ends, one on a member whose faces are all narrower
+    than the foot (100 mm): the route starts at the other, where the crew
+    can set the ARA down (by vertex order alone it started on the narrow
+    one).  With the end fixed there, no placeable start is left and the
+    far end is taken as before; a start given is kept."""
+    m = structure(L_NODES, [([0, 1], {"width": 0.10, "depth": 0.10}), ([1, 2], {})])
+    plan = plan_inspection(m)
+    assert (plan.route.start, plan.route.end) == (2, 0)
+    assert plan_inspection(m, end=2).route.start == 0
+    assert plan_inspection(m, start=0).route.start == 0
+    # a piece where no member fits the foot: far-apart ends by vertex order
+    narrow = {"width": 0.10, "depth": 0.10}
+    m2 = structure(L_NODES, [([0, 1], narrow), ([1, 2], narrow)])
+    assert (plan_inspection(m2).route.start, plan_inspection(m2).route.end) == (0, 2)
