@@ -104,6 +104,7 @@ def seed_points(points: np.ndarray, free: np.ndarray, spacing: float) -> np.ndar
 def _is_duplicate(
     mid: np.ndarray, d: np.ndarray, members: list[Member], radii: np.ndarray, spacing: float
 ) -> bool:
+    """Whether a member along ``d`` passes near ``mid`` (the row is a piece of it)."""
     cos_dup = float(np.cos(np.radians(DUPLICATE_DEG)))
     for m, r in zip(members, radii, strict=True):
         if abs(float(m.direction @ d)) < cos_dup:
@@ -139,9 +140,9 @@ def _supports(
         t = float((p - c) @ d)
         # a crossing inside the row's last tenth still meets its end
         if t <= t0 + 0.1 * length:
-            k, gap = 0, t0 - t
+            k, gap = 0, abs(t0 - t)
         elif t >= t1 - 0.1 * length:
-            k, gap = 1, t - t1
+            k, gap = 1, abs(t - t1)
         else:
             continue
         best = ends[k]
