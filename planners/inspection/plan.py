@@ -334,6 +334,12 @@ def _ends(
     fixed = start if start is not None else end
     pool = free if len(free) >= (1 if fixed is not None else 2) else nodes
     pos = np.array([g.nodes[n]["pos"] for n in pool], float)
+    if start is not None:
+        others = [i for i, n in enumerate(pool) if n != start]
+        if not others:
+            return start, start
+        dist = np.linalg.norm(pos[others] - np.asarray(g.nodes[start]["pos"], float), axis=1)
+        return start, pool[others[int(np.argmax(dist))]]
     ok = np.array(
         [
             any(
@@ -344,12 +350,6 @@ def _ends(
         ],
         dtype=bool,
     )
-    if start is not None:
-        others = [i for i, n in enumerate(pool) if n != start]
-        if not others:
-            return start, start
-        dist = np.linalg.norm(pos[others] - np.asarray(g.nodes[start]["pos"], float), axis=1)
-        return start, pool[others[int(np.argmax(dist))]]
     if end is not None:
         others = [i for i, n in enumerate(pool) if n != end]
         if not others:

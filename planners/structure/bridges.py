@@ -169,7 +169,7 @@ def bridging_rows(
         return []
     idx = np.flatnonzero(free)
     sub = points[idx]
-    tree = cKDTree(sub)
+    tree: cKDTree | None = None  # built for the first row that meets two members
     taken = np.zeros(len(idx), bool)
     out: list[Bridge] = []
     for row in rows:
@@ -182,6 +182,8 @@ def bridging_rows(
             continue
         if end[1] - start[1] < min_length:
             continue
+        if tree is None:
+            tree = cKDTree(sub)
         near, t, perp = near_line(sub, tree, c, d, t0, t1, 0.5 * spacing)
         on = (perp <= spacing) & (t >= t0) & (t <= t1) & ~taken[near]
         mine = near[on]

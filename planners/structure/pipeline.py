@@ -448,7 +448,7 @@ def model_structure(
     joints = find_joints(
         members,
         radii,
-        reach=max(JOINT_REACH_SPACINGS * spacing, JOINT_REACH_M),
+        reach=_joint_reach(spacing),
         side_tol=3 * spacing,
     )
     n_joints = np.bincount(
@@ -649,6 +649,11 @@ def _assign_and_refit(
     return labels, shared, members, np.array([ln.radius for ln in lines])
 
 
+def _joint_reach(spacing: float) -> float:
+    """How far past a member's last point its joints are looked for."""
+    return max(JOINT_REACH_SPACINGS * spacing, JOINT_REACH_M)
+
+
 def _add_bridges(
     pts: np.ndarray,
     labels: np.ndarray,
@@ -660,12 +665,12 @@ def _add_bridges(
 ) -> tuple[np.ndarray, list[Member], np.ndarray, list]:
     """The members seen as a few unlabelled points between two members
     (:mod:`.bridges`) added, with the joints found again."""
-    reach = max(JOINT_REACH_SPACINGS * spacing, JOINT_REACH_M)
+    reach = _joint_reach(spacing)
     free = labels < 0
     min_len = float(prm.min_member_length_m or 0.0)
     # the points left free now, walked again: the first walk saw other free
     # points (before the refits, joins and clutter tests)
-    rows, short = walk_rows(
+    rows = walk_rows(
         pts,
         free,
         spacing,
@@ -677,7 +682,7 @@ def _add_bridges(
     bridges = bridging_rows(
         pts,
         free,
-        rows + short,
+        rows,
         members,
         radii,
         spacing,
@@ -806,7 +811,7 @@ def _renumber(
     joints = find_joints(
         keep,
         new_radii,
-        reach=max(JOINT_REACH_SPACINGS * spacing, JOINT_REACH_M),
+        reach=_joint_reach(spacing),
         side_tol=3 * spacing,
     )
     return new_labels, keep, new_radii, joints

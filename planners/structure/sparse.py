@@ -20,9 +20,8 @@ and is not a piece of something larger: the free points beside it within
 ``SPARSE_SIDE_SPACINGS`` lie off every plane through it (at most
 ``SPARSE_PLANE_MAX`` per inlier on the best one; a scan ring on the ground
 has the next rings beside it).  Rows go through the same assignment,
-refit, joins and clutter tests as the features' candidates; rows of fewer
-points (down to a caller's ``short_points``) are reported apart, for
-:mod:`.bridges` to look for between members.  Every query is a ball or
+refit, joins and clutter tests as the features' candidates; :mod:`.bridges`
+asks the same walk for rows of fewer points (down to ``short_points``).  Every query is a ball or
 k-nearest query of bounded size; nothing is pairwise.
 """
 
@@ -174,7 +173,7 @@ def sparse_rows(
     """Line candidates (no voxels) through sparse rows of the ``free``
     points (a boolean mask over ``points``) at least ``min_length`` long,
     of ``SPARSE_MIN_POINTS`` or more (:func:`walk_rows`)."""
-    return walk_rows(points, free, spacing, min_length)[0]
+    return walk_rows(points, free, spacing, min_length)
 
 
 def walk_rows(
@@ -185,16 +184,17 @@ def walk_rows(
     short_points: int | None = None,
     max_attempts: int | None = None,
     seeds: np.ndarray | None = None,
-) -> tuple[list[LineCandidate], list[LineCandidate]]:
-    """``(rows, short)``: line candidates (no voxels) through sparse rows of
-    the ``free`` points (a boolean mask over ``points``) at least
-    ``min_length`` long, of ``SPARSE_MIN_POINTS`` or more; and the rows that
-    pass every test but hold only ``short_points`` to ``SPARSE_MIN_POINTS``
-    − 1 points (none when ``short_points`` is ``None``).  A short row keeps
-    its points free for the seeds after it, as a rejected one does, so
-    asking for them changes no row.  At most ``max_attempts`` seeds (default ``SPARSE_MAX_ATTEMPTS``) are walked,
-    and only free points also in ``seeds`` (a mask over ``points``) seed
-    rows when it is given; rows take their points from every free point.
+) -> list[LineCandidate]:
+    """Line candidates (no voxels) through sparse rows of the ``free``
+    points (a boolean mask over ``points``) at least ``min_length`` long, of
+    ``SPARSE_MIN_POINTS`` or more; then the rows that pass every test but
+    hold only ``short_points`` to ``SPARSE_MIN_POINTS`` − 1 points (none when
+    ``short_points`` is ``None``).  A short row keeps its points free for
+    the seeds after it, as a rejected one does, so asking for them changes
+    no other row.  At most ``max_attempts`` seeds (default
+    ``SPARSE_MAX_ATTEMPTS``) are walked, and only free points also in
+    ``seeds`` (a mask over ``points``) seed rows when it is given; rows take
+    their points from every free point.
     Deterministic: seeds are tried most isolated first (linear neighbours
     per point within ``SPARSE_SIDE_SPACINGS``; then the most neighbours, a
     row's middle before its ends), each along its neighbours' principal
@@ -205,7 +205,7 @@ def walk_rows(
     least = min_points if short_points is None else min(short_points, min_points)
     idx = np.flatnonzero(free)
     if len(idx) < least:
-        return [], []
+        return []
     pts = points[idx]
     tree = cKDTree(pts)
     tol = SPARSE_TOL_SPACINGS * spacing
@@ -262,4 +262,4 @@ def walk_rows(
         out.append(row)
         if len(out) >= SPARSE_MAX_ROWS:
             break
-    return out, short
+    return out + short

@@ -42,12 +42,12 @@ def _row(y0: float, y1: float, n: int, rng: np.random.Generator, x: float = 3.0)
 def _bridges(pts: np.ndarray, members: list[Member], radii: np.ndarray | None = None):
     prm = StructureParams().resolve(SPACING)
     min_len = float(prm.min_member_length_m or 0.0)
-    reach = max(pipeline.JOINT_REACH_SPACINGS * SPACING, pipeline.JOINT_REACH_M)
+    reach = pipeline._joint_reach(SPACING)
     free = np.ones(len(pts), bool)
     seeds = seed_points(pts, free, SPACING)
-    rows, short = walk_rows(pts, free, SPACING, min_len, BRIDGE_MIN_POINTS, seeds=seeds)
+    rows = walk_rows(pts, free, SPACING, min_len, BRIDGE_MIN_POINTS, seeds=seeds)
     radii = np.full(len(members), RADIUS) if radii is None else radii
-    return bridging_rows(pts, free, rows + short, members, radii, SPACING, min_len, reach)
+    return bridging_rows(pts, free, rows, members, radii, SPACING, min_len, reach)
 
 
 def _moved(members: list[Member], pts: np.ndarray, rot: Rotation, shift: np.ndarray):
@@ -148,7 +148,7 @@ def test_random_points_between_girders_make_no_member(monkeypatch) -> None:
             found = walk_rows(
                 pts, np.ones(len(pts), bool), SPACING, float(prm.min_member_length_m or 0.0), 5
             )
-            rows += len(found[0]) + len(found[1])
+            rows += len(found)
             made += len(_bridges(pts, _girders(2.0)))
         return rows, made
 
