@@ -123,6 +123,9 @@ class DispatchEngine:
         self._streamer_robot: dict[str, str] = {}
         self._detached: set[str] = set()
         self._store_emulated: dict[str, str] = {}
+        # Set by :meth:`shutdown` before it closes the links: the link losses
+        # that follow are this engine's doing, not the robots' (see _on_fault).
+        self._stopping = False
 
     # ------------------------------------------------------------- lifecycle
     def start(self, *, leased: bool = False) -> None:
@@ -156,7 +159,17 @@ class DispatchEngine:
         return link.start()
 
     def shutdown(self) -> None:
+        """Close every link, then the streamers.
+
+        What was running stays as the store shows it: the link losses this
+        causes are not recorded as the robots' (``_on_fault``).  The run's
+        next driver interrupts it, once, with the true reason (:meth:`adopt`:
+        a server that takes the robot's released or lapsed lease, this one
+        after a restart included; :meth:`start` without leases), the same
+        whether this process stops in order or is killed outright.
+        """
         with self._lock:
+            self._stopping = True
             streamers = list(self._streamers.values())
             robots = list(self._robots.values())
         # Links first: a closed connection stops a TCP robot at once (and a
@@ -620,6 +633,13 @@ class DispatchEngine:
 
     def _on_fault(self, execution_id: str, fault: StreamFault) -> None:
         if execution_id in self._detached:
+            return
+        if self._stopping:
+            # Shutting down (a clean stop, or this service's web server killed):
+            # the link loss is the closing of our own links, not a robot's
+            # fault; recorded as one ("robot", "link_lost: closed") it hid why
+            # the run stopped, and the next driver found nothing to interrupt.
+            log.info("execution %s left to its next driver: %s while stopping", execution_id, fault)
             return
         action = "interrupt" if fault.kind.value == "link_lost" else "fault"
         self._transition(execution_id, action, "robot", str(fault), fault=str(fault))

@@ -153,6 +153,12 @@ def test_server_restart_mid_run_resumes_without_loss(make_api, tmp_path) -> None
     ex = second.get(f"/api/v1/executions/{eid}").json()
     assert ex["state"] == "interrupted"
     assert second.get(f"/api/v1/plans/{plan['id']}").json()["state"] == "interrupted"
+    # Interrupted once, by the server that drives the robot now, saying why.  The
+    # first server closing its own links as it stopped is no link loss of the
+    # robot's: recorded as one ("robot", "link_lost: closed") it hid the reason.
+    interrupts = [(e["actor"], e["reason"]) for e in ex["audit"] if e["action"] == "interrupt"]
+    assert len(interrupts) == 1, ex["audit"]
+    assert interrupts[0][0] == "system" and "took the robot over" in interrupts[0][1], interrupts
     assert second.services.dispatch.wait_connected("ara", 20)
     r = second.post(f"/api/v1/executions/{eid}/resume")
     assert r.status_code == 200, r.text
