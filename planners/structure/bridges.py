@@ -21,8 +21,9 @@ before the refits, joins and clutter tests freed or took points), rows of
   radius plus ``DUPLICATE_SPACINGS`` of the row's middle;
 * its line, lengthened past each end by ``BRIDGE_REACH_LENGTHS`` of its own
   length (at least the joints' reach), comes within a member's section
-  radius plus one spacing of two different members, one beyond each end,
-  each crossing it at ``CROSSING_DEG`` or more;
+  radius (at least the largest section's expected, a quarter of
+  ``max_section_m``) plus one spacing of two different members, one
+  beyond each end, each crossing it at ``CROSSING_DEG`` or more;
 * it still holds ``BRIDGE_MIN_POINTS`` points no earlier bridge took, and
   they lie within an RMS distance of ``BRIDGE_MAX_RMS_SPACINGS`` of its
   line (a row on a flange lies at 0.1–0.25 spacings, a diagonal's
@@ -101,16 +102,17 @@ def seed_points(points: np.ndarray, free: np.ndarray, spacing: float) -> np.ndar
     return out
 
 
-def _is_duplicate(
-    mid: np.ndarray, d: np.ndarray, members: list[Member], radii: np.ndarray, spacing: float
+def along_member(
+    mid: np.ndarray, d: np.ndarray, members: list[Member], radii: np.ndarray, slack: float
 ) -> bool:
-    """Whether a member along ``d`` passes near ``mid`` (the row is a piece of it)."""
+    """Whether a member within ``DUPLICATE_DEG`` of ``d`` passes within its
+    radius plus ``slack`` of ``mid``: a line there is a piece of it."""
     cos_dup = float(np.cos(np.radians(DUPLICATE_DEG)))
     for m, r in zip(members, radii, strict=True):
         if abs(float(m.direction @ d)) < cos_dup:
             continue
         p, q, _, _ = closest_points(mid, mid, m.axis[0], m.axis[1])
-        if float(np.linalg.norm(p - q)) <= r + DUPLICATE_SPACINGS * spacing:
+        if float(np.linalg.norm(p - q)) <= r + slack:
             return True
     return False
 
@@ -124,9 +126,12 @@ def _supports(
     radii: np.ndarray,
     spacing: float,
     reach: float,
+    min_radius: float = 0.0,
 ) -> tuple[tuple[int, float] | None, tuple[int, float] | None]:
     """The nearest member crossing the line beyond each end of the row
-    ``[t0, t1]`` (within ``reach``): ``(member index, parameter)`` or ``None``."""
+    ``[t0, t1]`` (within ``reach``), passing within its section radius (at
+    least ``min_radius``) plus a spacing: ``(member index, parameter)`` or
+    ``None``."""
     cos_cross = float(np.cos(np.radians(CROSSING_DEG)))
     length = t1 - t0
     seg = (c + (t0 - reach) * d, c + (t1 + reach) * d)
@@ -135,7 +140,7 @@ def _supports(
         if abs(float(m.direction @ d)) > cos_cross:
             continue
         p, q, _, _ = closest_points(seg[0], seg[1], m.axis[0], m.axis[1])
-        if float(np.linalg.norm(p - q)) > radii[j] + spacing:
+        if float(np.linalg.norm(p - q)) > max(radii[j], min_radius) + spacing:
             continue
         t = float((p - c) @ d)
         # a crossing inside the row's last tenth still meets its end
@@ -160,11 +165,17 @@ def bridging_rows(
     spacing: float,
     min_length: float,
     joint_reach: float,
+    min_radius: float = 0.0,
 ) -> list[Bridge]:
     """The ``rows`` that span between two of ``members`` (``radii``: their
-    section radii) through at least ``BRIDGE_MIN_POINTS`` of the ``free``
-    points (mask over ``points``), each as a :class:`Bridge`.  A point goes
-    to one bridge at most."""
+    section radii, each taken as at least ``min_radius``) through at least
+    ``BRIDGE_MIN_POINTS`` of the ``free`` points (mask over ``points``),
+    each as a :class:`Bridge`.  A point goes to one bridge at most.
+
+    ``min_radius``: a girder seen by one flange at a coarse spacing
+    measures that flange's radius (0.16 m for an HEB 400 whose cross
+    girders frame in 0.37 m from the flange's line); the model passes the
+    largest section's radius it expects."""
     if len(members) < 2 or not rows or int(free.sum()) < BRIDGE_MIN_POINTS:
         return []
     idx = np.flatnonzero(free)
@@ -174,10 +185,10 @@ def bridging_rows(
     out: list[Bridge] = []
     for row in rows:
         c, d, t0, t1 = row.centre, row.direction, row.t0, row.t1
-        if _is_duplicate(c + 0.5 * (t0 + t1) * d, d, members, radii, spacing):
+        if along_member(c + 0.5 * (t0 + t1) * d, d, members, radii, DUPLICATE_SPACINGS * spacing):
             continue
         reach = max(BRIDGE_REACH_LENGTHS * (t1 - t0), joint_reach)
-        start, end = _supports(c, d, t0, t1, members, radii, spacing, reach)
+        start, end = _supports(c, d, t0, t1, members, radii, spacing, reach, min_radius)
         if start is None or end is None or start[0] == end[0]:
             continue
         if end[1] - start[1] < min_length:

@@ -39,7 +39,12 @@ def _row(y0: float, y1: float, n: int, rng: np.random.Generator, x: float = 3.0)
     return pts + rng.normal(scale=0.02, size=pts.shape)
 
 
-def _bridges(pts: np.ndarray, members: list[Member], radii: np.ndarray | None = None):
+def _bridges(
+    pts: np.ndarray,
+    members: list[Member],
+    radii: np.ndarray | None = None,
+    min_radius: float = 0.0,
+):
     prm = StructureParams().resolve(SPACING)
     min_len = float(prm.min_member_length_m or 0.0)
     reach = pipeline._joint_reach(SPACING)
@@ -47,7 +52,7 @@ def _bridges(pts: np.ndarray, members: list[Member], radii: np.ndarray | None = 
     seeds = seed_points(pts, free, SPACING)
     rows = walk_rows(pts, free, SPACING, min_len, BRIDGE_MIN_POINTS, seeds=seeds)
     radii = np.full(len(members), RADIUS) if radii is None else radii
-    return bridging_rows(pts, free, rows, members, radii, SPACING, min_len, reach)
+    return bridging_rows(pts, free, rows, members, radii, SPACING, min_len, reach, min_radius)
 
 
 def _moved(members: list[Member], pts: np.ndarray, rot: Rotation, shift: np.ndarray):
@@ -110,6 +115,26 @@ def test_a_row_too_far_short_of_a_member_is_not_a_member() -> None:
     row = _row(0.3, 1.1, 6, np.random.default_rng(2))
     assert len(_bridges(row, _girders(1.5))) == 1
     assert _bridges(row, _girders(2.6)) == []
+
+
+def test_a_girder_seen_by_one_flange_still_carries_a_row() -> None:
+    """Grillage seed 11 at 10 cm: a main girder found by its bottom flange
+    measures a 0.16 m radius, and the cross girder framing in at the top
+    lies 0.37 m from that line.  With the radius taken as at least the
+    largest section's (0.3 m, what the model passes) the row is bridged;
+    with the measured radius alone it is not, and a row 0.7 m clear of the
+    girder is not bridged either way."""
+    rng = np.random.default_rng(9)
+    row = _row(0.3, 1.3, 6, rng)
+    members = [
+        Member(0, np.array([[0.0, 0.0, -0.52], [6.0, 0.0, -0.52]]), "I", 0.5, 0.2),
+        _girders(2.0)[1],
+    ]
+    radii = np.array([0.16, RADIUS])
+    assert _bridges(row, members, radii) == []
+    assert len(_bridges(row, members, radii, min_radius=0.3)) == 1
+    far = [Member(0, members[0].axis + [0.0, 0.0, -0.35], "I", 0.5, 0.2), members[1]]
+    assert _bridges(row, far, radii, min_radius=0.3) == []
 
 
 def test_a_row_beside_a_member_along_it_is_a_piece_of_it() -> None:
