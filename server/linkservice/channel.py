@@ -22,6 +22,11 @@ _LEN = struct.Struct("<I")
 MAX_MESSAGE = 16 * 1024 * 1024
 
 
+#: The web server's last message on the RPC channel when it stops in order
+#: (no reply): the service then releases this server's robot leases.
+STOP_OP = "stop"
+
+
 class ChannelClosed(ConnectionError):
     """The other end closed the channel (or the bytes stopped making sense)."""
 

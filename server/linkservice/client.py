@@ -34,7 +34,7 @@ import numpy as np
 
 from server.dispatch.engine import DispatchError
 from server.lifecycle import IllegalTransitionError
-from server.linkservice.channel import Channel, ChannelClosed
+from server.linkservice.channel import STOP_OP, Channel, ChannelClosed
 from server.settings import Settings
 from server.store import ExecutionRecord, NotFoundError, Store
 
@@ -219,6 +219,11 @@ class LinkServiceClient:
         self._closing = True
         self._want_spawn.set()  # lets the spawner thread end
         proc = self._proc
+        if self._rpc is not None:
+            # A stop in order: the service releases this server's leases (a
+            # killed server sends nothing, and its leases lapse).
+            with contextlib.suppress(ChannelClosed, OSError):
+                self._rpc.send({"op": STOP_OP})
         for ch in (self._rpc, self._estop):
             if ch is not None:
                 ch.close()

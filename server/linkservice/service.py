@@ -42,7 +42,7 @@ from robots.background_io import log_through_a_queue
 from server.dispatch.engine import DispatchEngine, DispatchError
 from server.lifecycle import IllegalTransitionError
 from server.lifetime import die_with_parent
-from server.linkservice.channel import Channel, ChannelClosed
+from server.linkservice.channel import STOP_OP, Channel, ChannelClosed
 from server.settings import Settings
 from server.store import NotFoundError, Store
 
@@ -141,12 +141,10 @@ class LinkService:
         *,
         server_id: str = "",
         server_url: str = "",
-        parent_pid: int | None = None,
     ) -> None:
         self.settings = settings
         self.server_id = server_id
         self.server_url = server_url
-        self.parent_pid = parent_pid
         self.emulator_urls = dict(emulator_urls)
         self.keeper: Any = None  # server.ownership.LeaseKeeper once running
         self.rpc = rpc
@@ -164,6 +162,13 @@ class LinkService:
         self.pool = concurrent.futures.ThreadPoolExecutor(8, thread_name_prefix="link-rpc")
         self._book = concurrent.futures.ThreadPoolExecutor(1, thread_name_prefix="estop-book")
         self.stopping = threading.Event()
+        # Set by the web server's "stop" message (LinkServiceClient.shutdown):
+        # only then are the leases released.  A parent-pid check could not
+        # tell: a killed server's process can outlive the thread that started
+        # this one (the kernel then reparents us to a sibling thread, and
+        # getppid() still names the dying server), and the channels' EOF comes
+        # either way.
+        self.asked_to_stop = False
         self.estops = 0
 
     def _secret_for(self, name: str) -> bytes | None:
@@ -209,6 +214,11 @@ class LinkService:
             except ChannelClosed:
                 self.stopping.set()
                 return
+            if req.get("op") == STOP_OP:
+                # Read here, in order, not on the pool: the channel's EOF that
+                # follows must not overtake it.
+                self.asked_to_stop = True
+                continue
             self.pool.submit(self._handle, req)
 
     def _handle(self, req: dict[str, Any]) -> None:
@@ -294,10 +304,13 @@ class LinkService:
         threading.Thread(target=self.estop_loop, name="estop", daemon=True).start()
         threading.Thread(target=self.rpc_loop, name="link-rpc reader", daemon=True).start()
         self.outbox.publish("linkservice", {"state": "ready", "pid": os.getpid()})
-        # SIGTERM is blocked in every thread (main() blocks it before the first
-        # thread starts) and taken here synchronously: a Python handler calling
-        # Event.set() can deadlock on the lock its own thread holds inside
-        # Event.wait(), which once left an orphaned service running for good.
+        # SIGTERM is blocked in every thread main() starts and taken here
+        # synchronously: a Python handler calling Event.set() can deadlock on
+        # the lock its own thread holds inside Event.wait(), which once left an
+        # orphaned service running for good.  (Threads started while importing,
+        # before main() blocks it — OpenBLAS's — may take it instead, and the
+        # process ends at once: its sockets close, TCP robots stop, and nothing
+        # is recorded, as after an orderly stop that was not asked for.)
         while not self.stopping.is_set():
             if signal.sigtimedwait({signal.SIGTERM}, 0.5) is not None:
                 break
@@ -314,10 +327,10 @@ class LinkService:
         if self.keeper is not None:
             self.keeper.stop()
         self.engine.shutdown()
-        # Released only when the web server asked us to stop (it is still our
-        # parent): a killed server's leases lapse instead, after its robots'
-        # watchdogs have stopped them for certain.
-        if self.keeper is not None and os.getppid() == self.parent_pid:
+        # Released only when the web server asked us to stop: a killed
+        # server's leases lapse instead, after its robots' watchdogs have
+        # stopped them for certain.
+        if self.keeper is not None and self.asked_to_stop:
             self.keeper.release()
         self.pool.shutdown(wait=False, cancel_futures=True)
         self._book.shutdown(wait=False, cancel_futures=True)
@@ -391,7 +404,6 @@ def main(argv: list[str] | None = None) -> int:
         cfg.get("emulator_urls") or {},
         server_id=str(cfg.get("server_id") or ""),
         server_url=str(cfg.get("server_url") or ""),
-        parent_pid=ns.parent_pid,
     )
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # the parent decides when we stop
     service.run()

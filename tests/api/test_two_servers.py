@@ -264,3 +264,27 @@ def test_killed_owner_robot_taken_over_after_the_lease_and_run_interrupted(pair:
     assert check_exactly_once(emu.execution_log(), done["run_id"], done["total"]) == []
     # All four robots are B's now.
     assert {r["owner"] for r in b.robots().values()} == {took["owner"]}
+
+
+def test_a_server_stopped_in_order_hands_its_robots_over_within_a_renewal(
+    tmp_path: Path,
+) -> None:
+    """The counterpart of the kill above: a server stopped in order (SIGTERM)
+    tells its robot-link service so, which releases the leases after closing
+    the links, and the other server takes the robots at its next renewal —
+    sooner than a lapsed lease could be taken (the kill test waits at least
+    ``LEASE_S`` − 1.05 s).  SQLite only: the release path does not depend on
+    the store."""
+    p = Pair(tmp_path / "var")
+    try:
+        a, b = p.a, p.b
+        wait_for(lambda: set(owners(b).values()) == {a.robots()["ara"]["owner"]}, 30, "A owns all")
+        stopped_at = time.monotonic()
+        a.stop()
+        p.alive.remove(a)
+        wait_for(lambda: b.get("/robots/ara/state")["owned_here"], LEASE_S + 10, "B takes ara")
+        waited = time.monotonic() - stopped_at
+        assert waited < LEASE_S - 1.05, waited
+        assert all(r["owner"] == b.robots()["ara"]["owner"] for r in b.robots().values())
+    finally:
+        p.close()
