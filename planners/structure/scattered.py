@@ -14,13 +14,16 @@ section (its radius is at most ``SCATTER_MAX_SPACINGS`` spacings):
 
 * a hypothesis is the line through a free point and a free point 2–6 m
   from it; hypotheses are scored in batches (bounded arrays) by the free
-  points within the tube radius of their line;
-* the best ones are refitted (principal axis of their inliers) and kept
-  when the inliers along the longest stretch with no gap over
-  ``max_gap_m`` number ``SCATTER_MIN_POINTS`` or more over
+  points within the tube radius of their line, and beside it, within
+  ``PAIR_MAX_M`` of the first point;
+* those with the fewest free points beside the tube for those in it are
+  refitted first (principal axis of their inliers, ``REFINE_ROUNDS``
+  rounds) and kept when the inliers along the longest stretch with no
+  gap over ``max_gap_m`` number ``SCATTER_MIN_POINTS`` or more over
   ``SCATTER_MIN_LENGTH_M`` or more, and the free points in the ring
-  between one and two tube radii are at most ``SCATTER_RING_MAX`` of them
-  (a strip of ground has as many beside the tube as in it);
+  between one and ``SCATTER_RING_RADII`` tube radii are at most
+  ``SCATTER_RING_MAX`` of them (a strip of ground has more beside the
+  tube than in it);
 * it is not a member already found (no member within ``DUPLICATE_DEG``
   passes within its radius plus the tube's of the stretch's middle), and
   at least ``SCATTER_MIN_CROSSINGS`` other members cross it within the
@@ -44,7 +47,8 @@ from planners.structure.lines import fit_line
 from planners.structure.model import Member
 
 #: the tube's radius, as a share of the largest section expected
-#: (``max_section_m``): 0.3 m by default, an IPE 500's half-diagonal
+#: (``max_section_m``): 0.3 m by default, about an IPE 500's
+#: half-diagonal (0.27 m)
 SCATTER_RADIUS_SECTIONS = 0.25
 #: only where the tube's radius is at most this many spacings: a finer
 #: scan resolves such a section, and its line features find it
@@ -126,7 +130,7 @@ def _score(
 ) -> tuple[np.ndarray, np.ndarray]:
     """Points of ``pool`` within ``radius`` of each line (``origins``, unit
     ``dirs``) and ``PAIR_MAX_M`` of its origin, and those in the ring
-    between one and two radii: one (batch, pool) array."""
+    between one and ``SCATTER_RING_RADII`` radii: one (batch, pool) array."""
     rel = pool[None, :, :] - origins[:, None, :]
     along = np.einsum("bnk,bk->bn", rel, dirs)
     perp2 = np.einsum("bnk,bnk->bn", rel, rel) - along**2
