@@ -668,11 +668,12 @@ def _add_members(
     spacing: float,
     prm: StructureParams,
 ) -> tuple[np.ndarray, list[Member], np.ndarray, list]:
-    """The members the line features missed added, each with the joints
-    found again: on a coarse scan those seen as points scattered along a
+    """The members the line features missed added, and the joints found
+    again once if any was: on a coarse scan those seen as points scattered along a
     section-wide tube (:mod:`.scattered`), then those seen as a few
     unlabelled points between two members (:mod:`.bridges`)."""
     reach = _joint_reach(spacing)
+    added = False
     if SCATTERED_LINES:
         found = scattered_lines(
             pts,
@@ -685,17 +686,16 @@ def _add_members(
             reach,
             prm.seed,
         )
-        if found:
-            new = [(line.axis, line.points, line.radius) for line in found]
-            labels, members, radii, joints = _with_members(
-                labels, members, radii, new, spacing, reach
-            )
+        new = [(line.axis, line.points, line.radius) for line in found]
+        labels, radii = _with_members(labels, members, radii, new)
+        added = bool(new)
     if BRIDGE_ROWS:
         new = _bridge_rows(pts, labels, members, radii, spacing, prm, reach)
-        if new:
-            labels, members, radii, joints = _with_members(
-                labels, members, radii, new, spacing, reach
-            )
+        labels, radii = _with_members(labels, members, radii, new)
+        added = added or bool(new)
+    if added:
+        # once, for the members as they end up: the rows do not use joints
+        joints = find_joints(members, radii, reach=reach, side_tol=3 * spacing)
     return labels, members, radii, joints
 
 
@@ -747,19 +747,17 @@ def _with_members(
     members: list[Member],
     radii: np.ndarray,
     new: list[tuple[np.ndarray, np.ndarray, float]],
-    spacing: float,
-    reach: float,
-) -> tuple[np.ndarray, list[Member], np.ndarray, list]:
-    """``new`` members (axis, point indices, radius) appended, their points
-    labelled, and the joints found again.  Their sections are fitted in the
-    sections stage."""
+) -> tuple[np.ndarray, np.ndarray]:
+    """``new`` members (axis, point indices, radius) appended to ``members``
+    (in place): the labels and radii with them.  Their sections are fitted
+    in the sections stage."""
+    if not new:
+        return labels, radii
     labels = labels.copy()
     for axis, points, _ in new:
         labels[points] = len(members)
         members.append(Member(len(members), axis, "unknown", 0.0, 0.0, n_points=len(points)))
-    radii = np.concatenate([radii, [r for _, _, r in new]])
-    joints = find_joints(members, radii, reach=reach, side_tol=3 * spacing)
-    return labels, members, radii, joints
+    return labels, np.concatenate([radii, [r for _, _, r in new]])
 
 
 def _arrays(
