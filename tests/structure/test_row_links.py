@@ -120,11 +120,12 @@ def test_long_links_along_the_line_find_a_10_cm_warren_s_diagonals(monkeypatch) 
         assert recall >= 0.95 and precision >= 0.94, (seed, recall, precision)
     monkeypatch.setattr(lines, "LINK_ROW", 1.2)
     monkeypatch.setattr(lines, "LINK_ROW_ALIGN_DEG", 90.0)
-    # the sparse rows and the bridging rows (later stages) recover some of
-    # these diagonals by other ways; the links along the line are measured
-    # without them
+    # the sparse rows, the bridging rows and the refit without crowded
+    # stretches (later stages) recover some of these diagonals by other
+    # ways; the links along the line are measured without them
     monkeypatch.setattr(pipeline, "SPARSE_ROWS", False)
     monkeypatch.setattr(pipeline, "BRIDGE_ROWS", False)
+    monkeypatch.setattr(pipeline, "CROWDED_REFIT", False)
     for seed in (12, 17):
         recall, _ = _warren_10cm(seed)
         assert recall < 0.6, (seed, recall)
