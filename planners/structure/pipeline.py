@@ -189,7 +189,7 @@ SPARSE_ROWS = True
 #: after the last assignment, refit each member whose points hold
 #: another member's steel in a few stretches from its own points
 #: (:mod:`.crowding`).  20 seeds at 10 cm, visible members missed:
-#: grillage 20 → 16 (rows of cross girders joined across main girders,
+#: grillage 20 → 15 (rows of cross girders joined across main girders,
 #: leaned by the mains' flange points), Warren 14 → 13, Pratt 8 → 6,
 #: frame 7 → 6.  Only on a coarse scan, as the scattered lines (the
 #: largest section's radius at most ``SCATTER_MAX_SPACINGS`` spacings): at

@@ -75,7 +75,7 @@ def test_crossing_points_are_left_out() -> None:
     """40 draws each of one, two and three crossings (the last at both ends
     and in the middle, as a row of cross girders joined across main girders
     has them): in most, at least half of the crossing girders' points are
-    left out.  Over 200 draws that held in 200, 198 and 149 at this
+    left out.  Over 200 draws that held in 200, 198 and 150 at this
     spacing (200, 200 and 173 at 0.13 m); three crossings are three of
     about nine stretches, and two of them at the member's ends, where a
     stretch is short of points."""
