@@ -192,8 +192,9 @@ SPARSE_ROWS = True
 #: grillage 20 → 15 (rows of cross girders joined across main girders,
 #: leaned by the mains' flange points), Warren 14 → 13, Pratt 8 → 6,
 #: frame 7 → 6.  Only on a coarse scan, as the scattered lines (the
-#: largest section's radius at most ``SCATTER_MAX_SPACINGS`` spacings): at
-#: 2 cm it changed no member found but leaned an angle's sections
+#: largest section's radius at most ``SCATTER_MAX_SPACINGS`` spacings): run
+#: at 2 cm (margin one spacing) it lost one of the grillage's 244 visible
+#: members and found none more
 CROWDED_REFIT = True
 #: add the rows of a few unlabelled points that span between two kept
 #: members (:mod:`.bridges`).  20 seeds at 10 cm, visible recall /
