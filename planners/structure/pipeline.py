@@ -77,7 +77,7 @@ from planners.structure.lines import (
 )
 from planners.structure.model import Face, Member, StructureModel
 from planners.structure.params import StructureParams
-from planners.structure.scattered import SCATTER_MAX_SPACINGS, scattered_lines, tube_radius
+from planners.structure.scattered import coarse_scan, scattered_lines, tube_radius
 from planners.structure.sparse import sparse_rows, walk_rows
 
 #: fewest points a member keeps after assignment
@@ -653,7 +653,7 @@ def _assign_and_refit(
         ):
             break
     labels, shared = assign_points(pts, *_arrays(lines), margin, tree)
-    coarse = tube_radius(prm.max_section_m) <= SCATTER_MAX_SPACINGS * spacing
+    coarse = coarse_scan(spacing, prm.max_section_m)
     if CROWDED_REFIT and coarse and _refit_uncrowded(pts, labels, shared, lines, spacing):
         labels, shared = assign_points(pts, *_arrays(lines), margin, tree)
     members = [

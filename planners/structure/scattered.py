@@ -94,6 +94,12 @@ def tube_radius(max_section: float) -> float:
     return SCATTER_RADIUS_SECTIONS * max_section
 
 
+def coarse_scan(spacing: float, max_section: float) -> bool:
+    """Whether the scan is too coarse to resolve the largest section expected
+    (its tube radius at most ``SCATTER_MAX_SPACINGS`` spacings)."""
+    return tube_radius(max_section) <= SCATTER_MAX_SPACINGS * spacing
+
+
 def _stretch(t: np.ndarray, max_gap: float) -> tuple[float, float, int]:
     """The longest run of sorted parameters ``t`` with no gap over ``max_gap``:
     its ends and how many it holds."""
@@ -158,7 +164,7 @@ def scattered_lines(
     most.  Nothing where the scan resolves a section of ``max_section``
     (the tube is wider than ``SCATTER_MAX_SPACINGS`` spacings)."""
     radius = tube_radius(max_section)
-    if radius > SCATTER_MAX_SPACINGS * spacing or len(members) < SCATTER_MIN_CROSSINGS:
+    if not coarse_scan(spacing, max_section) or len(members) < SCATTER_MIN_CROSSINGS:
         return []
     pool_idx = np.flatnonzero(seed_points(points, free, spacing))
     if len(pool_idx) < SCATTER_MIN_POINTS:
