@@ -27,6 +27,9 @@ LIFT = 0.003  # overlays this far off the steel, toward the nozzle
 PLAYBACK_SPEEDUP = 4.0
 NOZZLE_M = 0.1
 CONE_RGB = (240, 200, 60)
+#: A plane's pick marker's radius as a fraction of the cloud's diagonal (2 %:
+#: about 8 px in the framed view, clear of its neighbours on the samples).
+PLANE_MARKER_FRACTION = 0.02
 
 
 #: What this module draws (read by server.scene.drawers): kind → (function, robot shown live).
@@ -145,11 +148,14 @@ def draw(ctx: DrawContext, plan: PlanView) -> None:
             def pick(i: int) -> None:
                 ctx.propose({"plane_index": int(i)})
 
+            # Pick targets sized to the scene: a fixed 3 cm drew 4 px wide in
+            # the framed view of a 3 m sample, too small to hit on a tablet.
+            extent = float(np.linalg.norm(np.ptp(cp, axis=0))) if len(cp) else 0.0
             add_spheres(
                 scene,
                 f"{root}/planes",
                 cent,
-                radius=0.03,
+                radius=float(np.clip(PLANE_MARKER_FRACTION * extent, 0.03, 0.25)),
                 colors=label_colors(np.arange(len(planes))),
                 on_click=pick,
             )
