@@ -11,10 +11,8 @@ from __future__ import annotations
 
 import importlib
 from pathlib import Path
-from typing import TYPE_CHECKING
 
-if TYPE_CHECKING:  # the model pulls in URDF and mesh libraries: only load_robot needs it
-    from robots.model import RobotModel
+from robots.model import RobotModel
 
 
 def _discover(root: Path) -> tuple[str, ...]:

@@ -29,11 +29,16 @@ from typing import Any
 
 import numpy as np
 import pinocchio as pin
-import yourdfpy
 
 
 @cache
 def _description(path: str) -> Any:
+    # Imported here, not at the top: yourdfpy loads trimesh (0.9 s), and every
+    # ``robots.*`` import runs this package's ``__init__`` — the robot-link
+    # service, which imports only the protocol and adapters, would pay it at
+    # every start and restart.
+    import yourdfpy
+
     # Primitive geometry only: no meshes to load, no scene graph to build.
     return yourdfpy.URDF.load(
         path,
