@@ -28,6 +28,7 @@ from tests.browser.test_console import (  # noqa: F401 (browser: a fixture)
 )
 from tests.conftest import make_settings
 from tests.support.live import free_port, live_server
+from tests.support.waiting import wait_for
 
 TIME_SCALE = 40.0
 
@@ -278,19 +279,19 @@ def _pick_in_the_scene(page: Any, app: Any, plan_id: str, kind: str) -> str:
     if kind == "blast":
         assert PLANE_PICK in inside, "the plane to pick is off screen"
         keys = {"plane_index"}
-        # One click proposes.  A real pointer click in a software-drawn WebGL
-        # canvas on a loaded machine can land before the client has mounted
-        # what it was sent; an operator clicks again, and so does this test
-        # (at most three times), each time at the marker seen by the camera
-        # the client reports then.
+        # One click proposes.  Once in CI a click here made no proposal, for a
+        # reason never established (it did not recur here, loaded or not); an
+        # operator clicks again, and so does this test (at most three times),
+        # each time at the marker seen by the camera the client reports then.
         tries: list[str] = []
-        for _ in range(3):
+        for attempt in range(3):
+            if attempt:
+                cam = _settled_camera(service, view)
+                px, inside = on_screen()
             click(px, PLANE_PICK)
-            if _wait_pending(service, 10.0):
+            if _pending(service, 10.0):
                 break
             tries.append(_diagnosis(service, cam, px[PLANE_PICK]))
-            cam = _settled_camera(service, view)
-            px, inside = on_screen()
         assert service.proposals.list("pending"), "no proposal after 3 clicks: " + "; ".join(tries)
     else:
         assert len(inside) >= 2, "fewer than two vertices on screen"
@@ -300,7 +301,7 @@ def _pick_in_the_scene(page: Any, app: Any, plan_id: str, kind: str) -> str:
         keys = {"start", "end"}
         for i in (a, b):
             click(px, i)
-        assert _wait_pending(service, 30.0), "no proposal: " + _diagnosis(service, cam, px[b])
+        assert _pending(service, 30.0), "no proposal: " + _diagnosis(service, cam, px[b])
     page.wait_for_selector("#proposals tr[data-proposal]", timeout=30_000)
     (prop,) = service.proposals.list("pending")
     assert set(prop.patch) == keys, prop.patch
@@ -354,13 +355,13 @@ def _settled_camera(service: Any, view: dict[str, Any], timeout: float = 30.0) -
     raise AssertionError(f"the scene's camera never settled on the framed view {view}")
 
 
-def _wait_pending(service: Any, timeout: float) -> bool:
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        if service.proposals.list("pending"):
-            return True
-        time.sleep(0.2)
-    return False
+def _pending(service: Any, timeout: float) -> bool:
+    """Whether a proposal is pending within ``timeout`` seconds."""
+    try:
+        wait_for(lambda: service.proposals.list("pending"), timeout, "a proposal", poll_s=0.2)
+    except AssertionError:
+        return False
+    return True
 
 
 def _diagnosis(service: Any, cam: Any, clicked: np.ndarray) -> str:
