@@ -1,10 +1,10 @@
 """The web server's handle on the robot-link service process.
 
-:class:`LinkServiceClient` starts ``python -m server.linkservice`` with two
-``socketpair`` ends, and offers the dispatch engine's methods as blocking
-calls (for FastAPI's sync handlers, which run in worker threads).  Events the
-service pushes are published on the web server's :class:`EventBus` and mirrored
-into the scene by one reader thread.
+:class:`LinkServiceClient` starts ``python -m server.linkservice`` (behind
+:data:`BOOTSTRAP`) with two ``socketpair`` ends, and offers the dispatch
+engine's methods as blocking calls (for FastAPI's sync handlers, which run in
+worker threads).  Events the service pushes are published on the web server's
+:class:`EventBus` and mirrored into the scene by one reader thread.
 
 :meth:`LinkServiceClient.estop` uses its own channel and writes from the
 caller's thread: it never waits behind an RPC, the event reader, or the
@@ -44,6 +44,17 @@ log = logging.getLogger(__name__)
 #: the store and starts a streamer: milliseconds; this is a wedge detector).
 RPC_TIMEOUT_S = 15.0
 ESTOP_TIMEOUT_S = 2.0
+
+#: How the service is started: ``python -m server.linkservice`` behind a
+#: bootstrap that blocks SIGTERM before any import.  Threads inherit the mask
+#: of the thread that starts them, and importing the package starts some (a
+#: BLAS pool when numpy loads): one that left SIGTERM open would take it and end
+#: the process at once, without the orderly shutdown (main() takes SIGTERM with
+#: ``sigtimedwait``).
+BOOTSTRAP = (
+    "import signal; signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGTERM}); "
+    "import runpy; runpy.run_module('server.linkservice', run_name='__main__', alter_sys=True)"
+)
 
 
 def new_server_id() -> str:
@@ -186,8 +197,8 @@ class LinkServiceClient:
         }
         cmd = [
             sys.executable,
-            "-m",
-            "server.linkservice",
+            "-c",
+            BOOTSTRAP,
             "--rpc-fd",
             str(rpc_child.fileno()),
             "--estop-fd",

@@ -307,10 +307,9 @@ class LinkService:
         # SIGTERM is blocked in every thread main() starts and taken here
         # synchronously: a Python handler calling Event.set() can deadlock on
         # the lock its own thread holds inside Event.wait(), which once left an
-        # orphaned service running for good.  (Threads started while importing,
-        # before main() blocks it — OpenBLAS's — may take it instead, and the
-        # process ends at once: its sockets close, TCP robots stop, and nothing
-        # is recorded, as after an orderly stop that was not asked for.)
+        # orphaned service running for good.  Threads started while importing,
+        # before main() runs (OpenBLAS's), block it too: the client's bootstrap
+        # blocks it before the first import (client.BOOTSTRAP).
         while not self.stopping.is_set():
             if signal.sigtimedwait({signal.SIGTERM}, 0.5) is not None:
                 break

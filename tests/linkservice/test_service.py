@@ -138,3 +138,34 @@ def test_a_clear_right_after_an_estop_sticks_and_the_next_dispatch_runs(lapi) ->
         "second run finished",
     )
     assert done.state == "completed", done
+
+
+def _sigterm_open_threads(pid: int) -> list[str]:
+    """The service's threads, but the main one, that leave SIGTERM unblocked.
+
+    The main thread blocks SIGTERM too, but the kernel opens it while that
+    thread sits in ``sigtimedwait`` (which is how the service takes it)."""
+    bit = 1 << (signal.SIGTERM - 1)
+    open_ = []
+    for tid in os.listdir(f"/proc/{pid}/task"):
+        if int(tid) == pid:
+            continue
+        try:
+            with open(f"/proc/{pid}/task/{tid}/status") as f:
+                fields = dict(line.split(":", 1) for line in f if ":" in line)
+        except FileNotFoundError:  # the thread ended meanwhile
+            continue
+        if not int(fields["SigBlk"].strip(), 16) & bit:
+            open_.append(f"{tid} ({fields['Name'].strip()})")
+    return open_
+
+
+def test_no_thread_of_the_link_service_but_the_main_one_takes_sigterm(lapi) -> None:
+    """A SIGTERM taken by any other thread ends the process at once, without
+    the orderly shutdown (links stopped, leases kept or released, the store
+    closed): threads started while importing (a BLAS pool) must not exist or
+    must block it."""
+    pid = lapi.services.dispatch.pid
+    assert pid is not None and pid != os.getpid()
+    open_ = _sigterm_open_threads(pid)
+    assert open_ == [], f"threads of the link service that take SIGTERM: {open_}"
