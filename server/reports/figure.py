@@ -21,9 +21,6 @@ from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
-from matplotlib.backends.backend_agg import FigureCanvasAgg
-from matplotlib.figure import Figure
-from matplotlib.ticker import MaxNLocator
 
 from server.reports.data import FindingData
 from server.store.records import PlanRecord
@@ -202,6 +199,12 @@ def render_png(plan: PlanRecord, findings: Sequence[FindingData]) -> bytes | Non
     names = [
         f"{a} (m)" if o == 0 else f"{a} − {o:.0f} (m)" for a, o in zip("xyz", origin, strict=True)
     ]
+    # matplotlib (0.3 s) is imported by the first report drawn, not by every
+    # server start-up
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+    from matplotlib.ticker import MaxNLocator
+
     fig = Figure(figsize=FIG_SIZE, dpi=DPI)
     FigureCanvasAgg(fig)
     ax3 = fig.add_subplot(1, 2, 1, projection="3d")
