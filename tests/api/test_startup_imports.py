@@ -16,10 +16,7 @@ DEFERRED = ("matplotlib", "ompl", "trimesh", "viser")
 
 
 def test_the_app_imports_without_the_libraries_few_requests_need() -> None:
-    code = (
-        "import sys, server.app\n"
-        f"print(' '.join(m for m in {DEFERRED!r} if m in sys.modules))\n"
-    )
+    code = f"import sys, server.app\nprint(' '.join(m for m in {DEFERRED!r} if m in sys.modules))\n"
     out = subprocess.run(
         [sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, timeout=120
     )
