@@ -14,81 +14,37 @@ completed exactly once, the interrupted one continued rather than repeated.
 from __future__ import annotations
 
 import contextlib
+import itertools
 import math
-import os
-import signal
-import subprocess
-import sys
 import time
 from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
-import httpx
 import pytest
 
 from robots.emulator.robot import check_exactly_once
-from server.linkservice.emulators import EmulatorProcess
-from tests.support.live import free_port
 from tests.support.procstat import proc_stat
+from tests.support.serve import ServeProcess, stop_emulators
+from tests.support.serve import emulator as emulator_evidence
 from tests.support.waiting import wait_for as _wait
 
 pytestmark = pytest.mark.slow
 
-ROOT = Path(__file__).resolve().parents[2]
 
+class Server(ServeProcess):
+    """One ``steelpath serve`` process on ``data``, planning in worker
+    processes (the default) with its emulators at ``time_scale``."""
 
-class Server:
-    """One ``steelpath serve`` process on ``data``."""
+    _started = itertools.count()
 
     def __init__(self, data: Path, time_scale: float) -> None:
-        self.data = data
-        self.port = free_port()
-        self.url = f"http://127.0.0.1:{self.port}"
-        env = {
-            **os.environ,
-            "STEELPATH_DATA": str(data),
-            "STEELPATH_PORT": str(self.port),
-            "STEELPATH_SCENE_PORT": "0",
-            "STEELPATH_TOKEN_FILE": str(data.parent / "admin.token"),
-            "STEELPATH_EMULATOR_TIME_SCALE": str(time_scale),
-            "STEELPATH_LOG_LEVEL": "warning",
-            "PYTHONPATH": str(ROOT),
-        }
-        self.log = open(data.parent / f"server-{self.port}.log", "wb")  # noqa: SIM115
-        self.proc = subprocess.Popen(
-            [sys.executable, "-m", "server.cli", "serve"],
-            env=env,
-            stdout=self.log,
-            stderr=subprocess.STDOUT,
-            cwd=str(data.parent),
+        super().__init__(
+            data,
+            f"crash-{next(self._started)}",
+            emulator_time_scale=str(time_scale),
+            job_mode="process",
         )
-        deadline = time.monotonic() + 90
-        while True:
-            with contextlib.suppress(httpx.HTTPError):
-                if httpx.get(f"{self.url}/api/v1/health", timeout=2).status_code == 200:
-                    break
-            if self.proc.poll() is not None or time.monotonic() > deadline:
-                raise AssertionError(f"server did not start: {self.tail()}")
-            time.sleep(0.1)
-        token = (data.parent / "admin.token").read_text().strip().splitlines()[-1]
-        self.http = httpx.Client(
-            base_url=f"{self.url}/api/v1", headers={"Authorization": f"Bearer {token}"}, timeout=60
-        )
-
-    def tail(self) -> str:
-        self.log.flush()
-        return Path(self.log.name).read_text(errors="replace")[-3000:]
-
-    def get(self, path: str) -> Any:
-        r = self.http.get(path)
-        assert r.status_code == 200, (path, r.status_code, r.text)
-        return r.json()
-
-    def post(self, path: str, body: dict[str, Any] | None = None, status: int = 200) -> Any:
-        r = self.http.post(path, json=body or {})
-        assert r.status_code == status, (path, r.status_code, r.text)
-        return r.json()
 
     def robot(self, name: str) -> dict[str, Any]:
         return self.get(f"/robots/{name}/state")
@@ -102,31 +58,6 @@ class Server:
             f"{name} up",
         )
 
-    def kill9(self) -> None:
-        self.proc.send_signal(signal.SIGKILL)
-        self.proc.wait(timeout=10)
-        self.http.close()
-
-    def stop(self) -> None:
-        if self.proc.poll() is None:
-            self.proc.send_signal(signal.SIGTERM)
-            try:
-                self.proc.wait(timeout=20)
-            except subprocess.TimeoutExpired:
-                self.proc.kill()
-                self.proc.wait()
-        self.http.close()
-        self.log.close()
-
-
-def _emulators_stopped(data: Path) -> None:
-    """Stop emulator processes a test left (they run in sessions of their own)."""
-    import json
-
-    for port_file in (data / "emulators").glob("*.port.json"):
-        with contextlib.suppress(Exception):
-            os.kill(int(json.loads(port_file.read_text())["pid"]), signal.SIGTERM)
-
 
 @pytest.fixture
 def servers(tmp_path) -> Iterator[list[Server]]:
@@ -134,7 +65,7 @@ def servers(tmp_path) -> Iterator[list[Server]]:
     yield started
     for s in started:
         s.stop()
-    _emulators_stopped(tmp_path / "var")
+    stop_emulators(tmp_path / "var")
 
 
 def planned_end(program: list[dict[str, Any]], odometry0: list[float]) -> dict[str, Any]:
@@ -216,14 +147,7 @@ def test_kill9_mid_command_restart_resume_ends_on_the_plan(servers, tmp_path, ca
     k = _wait(executing_target, 120, f"a {op} command executing")
     time.sleep(program[k]["duration_s"] / scale * 0.4)
     first.kill9()
-    emu = EmulatorProcess(
-        robot,
-        "",
-        0,
-        data / "emulators" / f"{robot}.log.jsonl",
-        data / "emulators" / f"{robot}.state.json",
-        False,
-    )
+    emu = emulator_evidence(data, robot)
     interrupted = _wait(
         lambda: [
             r
