@@ -8,7 +8,7 @@ from fastapi import APIRouter, Depends, HTTPException, Query, Request, Response
 from fastapi.concurrency import run_in_threadpool
 from pydantic import BaseModel, Field, field_validator
 
-from server.auth import Admin, Operator, Viewer, token_from_request
+from server.auth import Admin, Operator, Principal, Viewer, token_from_request
 from server.dispatch import DispatchError
 from server.linkservice import LinkServiceClient
 from server.ownership.peers import FORWARDED_HEADER
@@ -317,17 +317,31 @@ def execution_recording(
     )
 
 
+def _execution_op(
+    op: Literal["pause", "abort"],
+    execution_id: str,
+    services: Services,
+    who: Principal,
+    request: Request,
+    response: Response,
+) -> dict[str, Any]:
+    """Pause or abort, on the server that drives the execution's robot."""
+    fwd = _forward(services, request, response, _execution_robot(services, execution_id))
+    if fwd is not None:
+        return fwd
+    eng = engine(services)
+    act = eng.pause if op == "pause" else eng.abort
+    try:
+        return act(execution_id, who.actor).public()
+    except DispatchError as exc:
+        raise _refuse(exc) from None
+
+
 @router.post("/executions/{execution_id}/pause")
 def pause(
     execution_id: str, services: Svc, who: Operator, request: Request, response: Response
 ) -> dict[str, Any]:
-    fwd = _forward(services, request, response, _execution_robot(services, execution_id))
-    if fwd is not None:
-        return fwd
-    try:
-        return engine(services).pause(execution_id, who.actor).public()
-    except DispatchError as exc:
-        raise _refuse(exc) from None
+    return _execution_op("pause", execution_id, services, who, request, response)
 
 
 @router.post("/executions/{execution_id}/resume")
@@ -354,10 +368,4 @@ def resume(
 def abort(
     execution_id: str, services: Svc, who: Operator, request: Request, response: Response
 ) -> dict[str, Any]:
-    fwd = _forward(services, request, response, _execution_robot(services, execution_id))
-    if fwd is not None:
-        return fwd
-    try:
-        return engine(services).abort(execution_id, who.actor).public()
-    except DispatchError as exc:
-        raise _refuse(exc) from None
+    return _execution_op("abort", execution_id, services, who, request, response)
