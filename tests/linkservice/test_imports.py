@@ -4,11 +4,7 @@ libraries the planners and the scene use."""
 
 from __future__ import annotations
 
-import subprocess
-import sys
-from pathlib import Path
-
-ROOT = Path(__file__).resolve().parents[2]
+from tests.support.imports import loaded_by
 
 #: Libraries the service never needs: mesh handling and URDF parsing (1 s of
 #: the 1.5 s it took to import before), plotting, OMPL, the 3D scene and the
@@ -17,15 +13,8 @@ HEAVY = ("trimesh", "yourdfpy", "matplotlib", "ompl", "viser", "planners")
 
 
 def test_the_link_service_starts_without_the_heavy_libraries() -> None:
-    code = (
-        "import sys, server.linkservice.service\n"
-        f"print(' '.join(m for m in {HEAVY!r} if m in sys.modules))\n"
-    )
-    out = subprocess.run(
-        [sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, timeout=120
-    )
-    assert out.returncode == 0, out.stderr
-    assert out.stdout.split() == [], f"the link service imports {out.stdout.strip()}"
+    loaded = loaded_by("server.linkservice.service", HEAVY)
+    assert loaded == [], f"the link service imports {' '.join(loaded)}"
 
 
 def test_the_robot_models_still_parse_their_urdf() -> None:
