@@ -26,6 +26,8 @@ Stages (each timed in ``StructureModel.timings_s``):
    scattered over their whole section along a tube that members cross are
    added (:mod:`.scattered`, RANSAC); rows of a few points left unlabelled
    that span between two kept members are added (:mod:`.bridges`);
+   members seen as collinear pieces across occlusion shadows longer than
+   the refit rounds bridge are joined into one (:mod:`.chains`);
 7. sections — the kept members' faces and profiles fitted again at the
    tolerance their own surface noise allows (``_fit_sections``): the
    reported section, not the one that found the member.
@@ -54,6 +56,7 @@ from planners.structure.bridges import (
     bridging_rows,
     seed_points,
 )
+from planners.structure.chains import collinear_chains
 from planners.structure.clutter import parallel_rows, plane_continuation
 from planners.structure.crowding import uncrowded_points
 from planners.structure.direction import compact_direction, hull_direction
@@ -202,6 +205,10 @@ CROWDED_REFIT = True
 #: → 0.977 / 0.964, Warren 0.963 / 0.967 → 0.968 / 0.962, frame unchanged;
 #: at 2 cm no row changes
 BRIDGE_ROWS = True
+#: join the members seen as collinear pieces across occlusion shadows
+#: longer than the refit rounds bridge (:mod:`.chains`), once the members
+#: are all found.  MEASURED_CHAINS
+CHAIN_PIECES = True
 #: add the members seen as points scattered along a section-wide tube, on
 #: coarse scans (:mod:`.scattered`).  20 seeds at 10 cm: grillage visible
 #: recall 0.896 → 0.899 (seed 14's inner main girder), the other types and
@@ -490,6 +497,9 @@ def model_structure(
     if len(keep) < len(members):
         labels, members, radii, joints = _renumber(labels, members, radii, keep, spacing)
     labels, members, radii, joints = _add_members(pts, labels, members, radii, joints, spacing, prm)
+    chained = _join_chains(pts, labels, members, radii, spacing, prm) if CHAIN_PIECES else None
+    if chained is not None:
+        labels, members, radii, joints = chained
     extend_to_joints(members, joints)
     graph = member_graph(members, joints, end_tol=float(radii.max()) if len(radii) else 0.0)
     stage("graph", 0.95)
@@ -740,6 +750,37 @@ def _add_members(
         # once, for the members as they end up: the rows do not use joints
         joints = find_joints(members, radii, reach=reach, side_tol=3 * spacing)
     return labels, members, radii, joints
+
+
+def _join_chains(
+    pts: np.ndarray,
+    labels: np.ndarray,
+    members: list[Member],
+    radii: np.ndarray,
+    spacing: float,
+    prm: StructureParams,
+) -> tuple[np.ndarray, list[Member], np.ndarray, list] | None:
+    """Members seen in collinear pieces across occlusion shadows joined
+    into one (:mod:`.chains`): labels, members, radii and joints found
+    again, or ``None`` when no pieces are joined."""
+    chains = collinear_chains(pts, labels, members, radii, prm.merge_angle_deg, prm.max_gap_m)
+    if not chains:
+        return None
+    radii = radii.copy()
+    # the last slot answers label −1
+    into = np.append(np.arange(len(members), dtype=np.int64), -1)
+    for group, axis in chains:
+        first = members[group[0]]
+        into[group] = first.id
+        first.axis = axis
+        first.fragments = sum(members[j].fragments for j in group)
+        radii[first.id] = max(float(radii[j]) for j in group)
+    labels = into[labels]
+    counts = np.bincount(labels[labels >= 0], minlength=len(members))
+    for group, _ in chains:
+        members[group[0]].n_points = int(counts[group[0]])
+    keep = [m for m in members if into[m.id] == m.id]
+    return _renumber(labels, members, radii, keep, spacing)
 
 
 def _bridge_rows(

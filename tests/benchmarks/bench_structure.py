@@ -22,7 +22,9 @@ recall ≥ 95 %, precision ≥ 90 %.
 
 ``--first-pass-sections`` turns the final sections stage off: the same
 members, with the faces and profiles of the first passes (the baseline of
-the profile column).
+the profile column).  ``--no-chains`` leaves members seen as collinear
+pieces across occlusion shadows apart (:mod:`planners.structure.chains`;
+the baseline of those joins).
 
 Scaling (``--scaling``): one frame scan at 5 mm, thinned to 50k, 100k,
 300k and 1M points, each modelled and routed in a fresh process so that
@@ -190,11 +192,19 @@ def main() -> None:
         help="report the faces and profiles of the first passes (the baseline of the "
         "sections stage: pipeline.SECTION_PASS off); members and axes are the same",
     )
+    ap.add_argument(
+        "--no-chains",
+        action="store_true",
+        help="leave the members seen in collinear pieces apart (the baseline of the "
+        "chains: pipeline.CHAIN_PIECES off)",
+    )
     args = ap.parse_args()
-    if args.first_pass_sections:
-        from planners.structure import pipeline
+    from planners.structure import pipeline
 
+    if args.first_pass_sections:
         pipeline.SECTION_PASS = False
+    if args.no_chains:
+        pipeline.CHAIN_PIECES = False
     if not args.no_accuracy:
         accuracy(args.kinds.split(","), args.seeds, [float(s) for s in args.spacings.split(",")])
     if args.scaling:
