@@ -207,7 +207,11 @@ CROWDED_REFIT = True
 BRIDGE_ROWS = True
 #: join the members seen as collinear pieces across occlusion shadows
 #: longer than the refit rounds bridge (:mod:`.chains`), once the members
-#: are all found.  MEASURED_CHAINS
+#: are all found.  20 seeds a type, visible recall / precision: grillage
+#: at 10 cm 0.928 / 0.955 → 0.934 / 0.953 (a 13 m HEB 400 seen as 2.7 m
+#: and 5.9 m pieces 4.2 m apart), at 2 cm 0.976 / 0.960 → 0.978 / 0.960;
+#: Warren, Pratt and the frame at 10 cm and 2 cm unchanged.  Run before
+#: the scattered lines and bridging rows as well, it joined nothing more
 CHAIN_PIECES = True
 #: add the members seen as points scattered along a section-wide tube, on
 #: coarse scans (:mod:`.scattered`).  20 seeds at 10 cm: grillage visible
