@@ -78,6 +78,8 @@ def collinear_chains(
     tan_max = float(np.tan(np.radians(merge_angle_deg)))
     max_gap = CHAIN_GAP_GAPS * max_gap_m
     alive = list(range(n))
+    # a pair of chains that fits no line is not tried again on later passes
+    failed: set[tuple[tuple[int, ...], tuple[int, ...]]] = set()
     changed = True
     while changed:
         changed = False
@@ -109,9 +111,13 @@ def collinear_chains(
             ok &= across <= 2.0 * r + tan_max * np.maximum(gap, 0.0)
             for k in np.flatnonzero(ok)[np.argsort(gap[ok], kind="stable")]:
                 j = int(rest[k])
+                key = (tuple(groups[i]), tuple(groups[j]))
+                if key in failed:
+                    continue
                 group = groups[i] + groups[j]
                 axis = chain_axis(group, [own[g] for g in group], members, radii)
                 if axis is None:
+                    failed.add(key)
                     continue
                 groups[i], axes[i], rad[i] = group, axis, max(rad[i], rad[j])
                 alive.remove(j)
