@@ -16,6 +16,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.spatial import cKDTree
 
+from planners.structure.indices import hit_union
 from planners.structure.model import Face
 
 #: point × member distance elements per chunk
@@ -61,8 +62,8 @@ def assign_points(
         h = max(reach, 1e-3)
         ns = max(2, int(np.ceil((t1[k] - t0[k]) / h)) + 1)
         samples = centres[k] + np.outer(np.linspace(t0[k], t1[k], ns), dirs[k])
-        hits = tree.query_ball_point(samples, reach + 0.5 * h)
-        idx = np.unique(np.concatenate([np.asarray(x, dtype=np.int64) for x in hits]))
+        hits = tree.query_ball_point(samples, reach + 0.5 * h, return_sorted=False)
+        idx = hit_union(hits)
         if len(idx) == 0:
             continue
         d = segment_distances(
@@ -142,8 +143,8 @@ def near_line(
     h = max(radius, 1e-3)
     ns = max(2, int(np.ceil((t_hi - t_lo) / h)) + 1)
     samples = centre + np.outer(np.linspace(t_lo, t_hi, ns), direction)
-    hits = tree.query_ball_point(samples, 2.0 * radius + 0.5 * h)
-    idx = np.unique(np.concatenate([np.asarray(x, dtype=np.int64) for x in hits]))
+    hits = tree.query_ball_point(samples, 2.0 * radius + 0.5 * h, return_sorted=False)
+    idx = hit_union(hits)
     rel = points[idx] - centre
     t = rel @ direction
     return idx, t, np.linalg.norm(rel - np.outer(t, direction), axis=1)

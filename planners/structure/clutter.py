@@ -16,6 +16,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.spatial import cKDTree
 
+from planners.structure.indices import hit_union
 from planners.structure.model import Face
 
 
@@ -29,8 +30,8 @@ def _near(
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """In-plane x, y and height over ``face`` of the points within
     ``reach`` of any of ``centres``, those flagged in ``own`` left out."""
-    found = tree.query_ball_point(centres, reach)
-    idx = np.unique(np.concatenate([np.asarray(f, dtype=np.int64) for f in found]))
+    found = tree.query_ball_point(centres, reach, return_sorted=False)
+    idx = hit_union(found)
     if own is not None and len(idx):
         idx = idx[~own[idx]]
     rel = pts[idx] - face.origin

@@ -47,28 +47,57 @@ def section_frames(dirs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return u, np.cross(dirs, u)
 
 
+#: a bitmap marks the cells when the columns' cell ranges hold at most this
+#: many cells a point (its zeroing then costs less than a sort), else a sort
+BITMAP_CELLS_PER_POINT = 8
+
+
+def _distinct_cells(i: np.ndarray, j: np.ndarray) -> np.ndarray:
+    """(K,) distinct ``(i, j)`` pairs in each column of two (n, K) integer arrays."""
+    i = i - i.min(axis=0)
+    j = j - j.min(axis=0)
+    span = j.max(axis=0) + 1
+    size = (i.max(axis=0) + 1) * span
+    keys = i * span + j
+    total = int(size.sum())
+    if total <= BITMAP_CELLS_PER_POINT * keys.size:
+        start = np.concatenate([[0], np.cumsum(size)[:-1]])
+        mark = np.zeros(total, bool)
+        mark[keys + start] = True
+        return np.add.reduceat(mark, start, dtype=np.int64)
+    keys = np.sort(keys.T, axis=1)
+    return 1 + (np.diff(keys, axis=1) != 0).sum(axis=1)
+
+
+def _cells(
+    rel: np.ndarray, dirs: np.ndarray, cell: float, offsets: tuple[float, ...]
+) -> np.ndarray:
+    """(K,) section cells occupied, summed over grids shifted by ``offsets``
+    cells; each direction's projection is computed once for all grids."""
+    out = np.zeros(len(dirs), dtype=np.int64)
+    for k0 in range(0, len(dirs), 32):  # (MAX_POINTS, 32) keys at a time
+        u, v = section_frames(dirs[k0 : k0 + 32])
+        pu = rel @ u.T / cell
+        pv = rel @ v.T / cell
+        for offset in offsets:
+            i = np.floor(pu + offset).astype(np.int64)
+            j = np.floor(pv + offset).astype(np.int64)
+            out[k0 : k0 + u.shape[0]] += _distinct_cells(i, j)
+    return out
+
+
 def occupied_cells(
     rel: np.ndarray, dirs: np.ndarray, cell: float, offset: float = 0.0
 ) -> np.ndarray:
     """(K,) section cells of size ``cell`` that ``rel`` (points minus a
     centre, at most ``MAX_POINTS``) occupies seen along each of ``dirs`` (K, 3);
     the grid shifted by ``offset`` cells."""
-    out = np.empty(len(dirs), dtype=np.int64)
-    for k0 in range(0, len(dirs), 32):  # (MAX_POINTS, 32) keys at a time
-        u, v = section_frames(dirs[k0 : k0 + 32])
-        i = np.floor(rel @ u.T / cell + offset).astype(np.int64)
-        j = np.floor(rel @ v.T / cell + offset).astype(np.int64)
-        i -= i.min(axis=0)
-        j -= j.min(axis=0)
-        keys = i * (j.max(axis=0) + 1) + j
-        keys.sort(axis=0)
-        out[k0 : k0 + u.shape[0]] = 1 + (np.diff(keys, axis=0) != 0).sum(axis=0)
-    return out
+    return _cells(rel, dirs, cell, (offset,))
 
 
 def _score(rel: np.ndarray, dirs: np.ndarray, cell: float) -> np.ndarray:
     """Cells occupied on two grids half a cell apart: less quantisation noise than one."""
-    return occupied_cells(rel, dirs, cell) + occupied_cells(rel, dirs, cell, 0.5)
+    return _cells(rel, dirs, cell, (0.0, 0.5))
 
 
 def _cone(d: np.ndarray, rings: tuple[float, ...], azimuths: int) -> np.ndarray:

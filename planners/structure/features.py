@@ -82,17 +82,19 @@ def _local_pca(
     n = len(centres)
     tree = cKDTree(centres)
     kk = min(k, n)
-    rows_l, cols_l = [], []
+    per_row, cols_l = [], []
     for a in range(0, n, CHUNK_ROWS):
         q = centres[a : a + CHUNK_ROWS]
-        d, idx = tree.query(q, k=kk, distance_upper_bound=radius)
-        idx = np.asarray(idx).reshape(len(q), kk)
-        ok = np.isfinite(np.asarray(d).reshape(len(q), kk))
-        rows_l.append((np.arange(a, a + len(q))[:, None] + np.zeros((1, kk), np.int64))[ok])
+        _, idx = tree.query(q, k=kk, distance_upper_bound=radius)
+        # a missing neighbour's index is n: sorted, each row's columns come
+        # first and ascending, the CSR layout itself (no COO conversion)
+        idx = np.sort(np.asarray(idx).reshape(len(q), kk), axis=1)
+        ok = idx < n
+        per_row.append(ok.sum(axis=1))
         cols_l.append(idx[ok])
-    rows = np.concatenate(rows_l)
     cols = np.concatenate(cols_l)
-    adj = csr_matrix((np.ones(len(rows)), (rows, cols)), shape=(n, n))
+    indptr = np.concatenate([[0], np.cumsum(np.concatenate(per_row))])
+    adj = csr_matrix((np.ones(len(cols)), cols, indptr), shape=(n, n))
     x = centres - centres.mean(axis=0)
     prods = np.column_stack(
         [x, x[:, 0] * x[:, 0], x[:, 0] * x[:, 1], x[:, 0] * x[:, 2],

@@ -22,6 +22,7 @@ from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
 from planners.structure.features import LineFeatures
+from planners.structure.indices import hit_union, sorted_unique
 
 #: linear voxels each voxel may link to (its nearest ones)
 LINK_K = 8
@@ -349,8 +350,8 @@ def _pairs_ahead(
                 c.centre + np.outer(c.t0 - ts, c.direction),
             ]
         )
-        hits = tree.query_ball_point(ext, step + max(c.radius, 0.05))
-        js = np.unique(own[np.concatenate([np.asarray(h, dtype=np.int64) for h in hits])])
+        hits = tree.query_ball_point(ext, step + max(c.radius, 0.05), return_sorted=False)
+        js = sorted_unique(own[hit_union(hits)])
         js = js[js != i]
         if len(js):
             out.append(np.column_stack([np.full(len(js), i), js]))

@@ -631,19 +631,21 @@ def _assign_and_refit(
             BRIDGE_GAPS * prm.max_gap_m,
         )
         refitted: list[LineCandidate] = []
+        by_label = _points_by_label(labels, len(lines))
         for group in groups:
-            mine = np.isin(labels, group)
-            core = mine & ~shared
+            mine = np.sort(np.concatenate([by_label[g] for g in group]))
+            core = mine[~shared[mine]]
             # the section from the points no other member competes for; the
             # extent from all, so that members reach into their joints
-            if core.sum() < MIN_MEMBER_POINTS:
+            if len(core) < MIN_MEMBER_POINTS:
                 continue
             fit = _refit(pts[core], pts[mine], spacing)
             if fit is None or fit[3] - fit[2] < min_len:
                 continue
             c, d, t0, t1, rad = fit
             if GROW_ENDS:
-                free = mine | (labels < 0)
+                free = unlabelled.copy()
+                free[mine] = True
                 step = GROW_STEP_SPACINGS * spacing
                 t1 += grow_end(pts, tree, free, c, d, t1, 1.0, rad, step, prm.max_gap_m)
                 t0 -= grow_end(pts, tree, free, c, d, t0, -1.0, rad, step, prm.max_gap_m)
@@ -683,6 +685,14 @@ def _assign_and_refit(
         for i, ln in enumerate(lines)
     ]
     return labels, shared, members, np.array([ln.radius for ln in lines])
+
+
+def _points_by_label(labels: np.ndarray, m: int) -> list[np.ndarray]:
+    """The indices of the points labelled 0 … ``m`` − 1, ascending, one
+    array a label (one sort rather than a pass over every point a member)."""
+    order = np.argsort(labels, kind="stable")
+    bounds = np.searchsorted(labels[order], np.arange(m + 1))
+    return [order[bounds[k] : bounds[k + 1]] for k in range(m)]
 
 
 def _refit_uncrowded(

@@ -31,6 +31,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from planners.structure.assign import near_line
+from planners.structure.indices import sorted_unique
 from planners.structure.lines import LineCandidate, fit_line
 
 #: inliers a sparse row needs at least
@@ -104,7 +105,7 @@ def _grow(
                 break
             found.append(idx)
             end = new_end
-    return np.unique(np.concatenate(found))
+    return sorted_unique(np.concatenate(found))
 
 
 def _on_a_plane(

@@ -6,9 +6,11 @@ import numpy as np
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+import planners.structure.direction as direction
 from planners.structure.direction import (
     RINGS_DEG,
     _cone,
+    _distinct_cells,
     compact_direction,
     occupied_cells,
     section_frames,
@@ -67,6 +69,29 @@ def test_occupied_cells_equals_brute_force(seed: int, cell: float) -> None:
         ij = np.floor(np.column_stack([rel @ u, rel @ v]) / cell).astype(np.int64)
         want.append(len(np.unique(ij, axis=0)))
     assert occupied_cells(rel, dirs, cell).tolist() == want
+
+
+@settings(max_examples=40, deadline=None)
+@given(st.integers(0, 10_000), st.integers(1, 40), st.integers(1, 6), st.integers(1, 200))
+def test_distinct_cells_by_bitmap_and_by_sort_equal_brute_force(
+    seed: int, n: int, k: int, spread: int
+) -> None:
+    """Both counting paths (the bitmap for small cell ranges, the sort for
+    large ones) give the brute-force count of each column's distinct pairs."""
+    rng = np.random.default_rng(seed)
+    i = rng.integers(-spread, spread + 1, (n, k))
+    j = rng.integers(-3 * spread, 1, (n, k))
+    want = [
+        len({(int(a), int(b)) for a, b in zip(i[:, c], j[:, c], strict=True)}) for c in range(k)
+    ]
+    assert _distinct_cells(i, j).tolist() == want
+    saved = direction.BITMAP_CELLS_PER_POINT
+    try:
+        for forced in (0, 10**9):  # the sort only, then the bitmap only
+            direction.BITMAP_CELLS_PER_POINT = forced
+            assert _distinct_cells(i, j).tolist() == want
+    finally:
+        direction.BITMAP_CELLS_PER_POINT = saved
 
 
 @settings(max_examples=25, deadline=None)
