@@ -335,3 +335,19 @@ def test_the_default_sample_plans_through_the_api(api) -> None:
     m = p["metrics"]
     assert m["member_count"] >= 5 and m["route_length_ratio"] >= 1.0
     assert m["transitions"] == len(p["result"]["transitions"])
+
+
+def test_a_sample_scan_is_generated_once_per_process_and_read_only() -> None:
+    """Plans of the same sample share one generated scan, which no plan can alter."""
+    from planners.structure.synthetic import SCAN_SAMPLES
+    from server.kinds.ara_inspect import sample_points
+
+    sample_points.cache_clear()
+    first = sample_points("scan_pratt", 1)
+    assert sample_points("scan_pratt", 1) is first
+    assert sample_points.cache_info().hits == 1
+    np.testing.assert_array_equal(first, SCAN_SAMPLES["scan_pratt"](1))
+    assert not first.flags.writeable
+    with pytest.raises(ValueError, match="read-only"):
+        first[0, 0] = 0.0
+    assert sample_points("scan_pratt", 2) is not first
