@@ -152,14 +152,14 @@ def near_line(
     half = 0.5 * (t_hi - t_lo)
     if half <= NEAR_LINE_ONE_BALL * 2.0 * h:
         # a short stretch: one ball round its middle holds the whole tube
-        mid = centre + (t_lo + half) * direction
-        hit = tree.query_ball_point(mid, half + 2.0 * h, return_sorted=False)
-        idx = np.sort(np.asarray(hit, dtype=np.int64))
+        samples = (centre + (t_lo + half) * direction)[None]
+        reach = half + 2.0 * h
     else:
         ns = max(2, int(np.ceil((t_hi - t_lo) / h)) + 1)
         samples = centre + np.outer(np.linspace(t_lo, t_hi, ns), direction)
-        hits = tree.query_ball_point(samples, 2.0 * radius + 0.5 * h, return_sorted=False)
-        idx = hit_union(hits)
+        reach = 2.0 * radius + 0.5 * h
+    hits = tree.query_ball_point(samples, reach, return_sorted=False)  # a list a sample
+    idx = hit_union(hits)
     rel = points[idx] - centre
     t = rel @ direction
     return idx, t, np.linalg.norm(rel - np.outer(t, direction), axis=1)

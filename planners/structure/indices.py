@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import itertools
 from collections.abc import Iterable
+from typing import Any
 
 import numpy as np
 
@@ -26,7 +27,9 @@ def sorted_unique(a: np.ndarray) -> np.ndarray:
     return out[keep]
 
 
-def hit_union(hits: Iterable[Iterable[int]]) -> np.ndarray:
-    """The distinct indices in a ball query's hit lists (sorted or not), ascending, as int64."""
+def hit_union(hits: Iterable[Any]) -> np.ndarray:
+    """The distinct indices in a ball query's hit lists (sorted or not), ascending, as
+    int64; ``hits`` is what ``cKDTree.query_ball_point`` answers for (S, 3) points
+    (an object array of S lists, which scipy's stubs type as ``list[int]``)."""
     flat = np.fromiter(itertools.chain.from_iterable(hits), dtype=np.int64)
     return sorted_unique(flat)
