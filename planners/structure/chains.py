@@ -35,6 +35,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from planners.structure.indices import points_by_label
 from planners.structure.joints import closest_points
 from planners.structure.lines import fit_line
 from planners.structure.model import Member
@@ -68,9 +69,7 @@ def collinear_chains(
     if n < 2:
         return []
     # each member's points once (a sort), not one pass over the cloud a test
-    order = np.argsort(labels, kind="stable")
-    bounds = np.searchsorted(labels[order], np.arange(n + 1))
-    own = [points[order[bounds[i] : bounds[i + 1]]] for i in range(n)]
+    own = [points[ix] for ix in points_by_label(labels, n)]
     groups: list[list[int]] = [[i] for i in range(n)]
     axes = [np.asarray(m.axis, float) for m in members]
     rad = [float(r) for r in radii]

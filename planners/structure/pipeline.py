@@ -52,7 +52,8 @@ from planners.pointcloud.spacing import measure_spacing
 from planners.structure.assign import assign_points, gap_filled, grow_end, relabel_by_faces
 from planners.structure.bridges import (
     BRIDGE_MAX_ATTEMPTS,
-    BRIDGE_MIN_POINTS,
+    BRIDGE_MIN_FREE,
+    BRIDGE_ROW_LENGTHS,
     bridging_rows,
     seed_points,
 )
@@ -70,6 +71,7 @@ from planners.structure.faces import (
     surface_noise,
 )
 from planners.structure.features import line_features
+from planners.structure.indices import points_by_label
 from planners.structure.joints import extend_to_joints, find_joints, member_graph
 from planners.structure.lines import (
     LineCandidate,
@@ -631,7 +633,7 @@ def _assign_and_refit(
             BRIDGE_GAPS * prm.max_gap_m,
         )
         refitted: list[LineCandidate] = []
-        by_label = _points_by_label(labels, len(lines))
+        by_label = points_by_label(labels, len(lines))
         for group in groups:
             mine = np.sort(np.concatenate([by_label[g] for g in group]))
             core = mine[~shared[mine]]
@@ -685,14 +687,6 @@ def _assign_and_refit(
         for i, ln in enumerate(lines)
     ]
     return labels, shared, members, np.array([ln.radius for ln in lines])
-
-
-def _points_by_label(labels: np.ndarray, m: int) -> list[np.ndarray]:
-    """The indices of the points labelled 0 … ``m`` − 1, ascending, one
-    array a label (one sort rather than a pass over every point a member)."""
-    order = np.argsort(labels, kind="stable")
-    bounds = np.searchsorted(labels[order], np.arange(m + 1))
-    return [order[bounds[k] : bounds[k + 1]] for k in range(m)]
 
 
 def _refit_uncrowded(
@@ -811,13 +805,20 @@ def _bridge_rows(
     free = labels < 0
     min_len = float(prm.min_member_length_m or 0.0)
     # the points left free now, walked again: the first walk saw other free
-    # points (before the refits, joins and clutter tests)
+    # points (before the refits, joins and clutter tests).  On a coarse scan
+    # a row need not be a member's length: a member there can be seen as a
+    # handful of points over part of it, it runs between its supports, and
+    # that span is what is held to the shortest member's length.  On a finer
+    # one a member is hundreds of points, and a short row a fragment of
+    # anything (20 seeds at 2 cm: grillage precision 0.960 → 0.946 with
+    # short rows there too, recall the same)
+    short = coarse_scan(spacing, prm.max_section_m)
     rows = walk_rows(
         pts,
         free,
         spacing,
-        min_len,
-        BRIDGE_MIN_POINTS,
+        (BRIDGE_ROW_LENGTHS if short else 1.0) * min_len,
+        BRIDGE_MIN_FREE,
         BRIDGE_MAX_ATTEMPTS,
         seeds=seed_points(pts, free, spacing),
     )
@@ -835,6 +836,14 @@ def _bridge_rows(
         # section expected (20 seeds at 10 cm: grillage visible recall
         # 0.899 → 0.904, the other types and precision the same)
         min_radius=tube_radius(prm.max_section_m),
+        # on a coarse scan, a cross girder seen only by the half near one
+        # girder, the rest in its shadow, reaches the other as far as a
+        # shadow the model bridges along a member.  On a finer one such a
+        # member is found by its line features, and what is left in rows is
+        # not one (20 seeds at 5 mm: a 60-point row of grillage seed 0
+        # reached a girder 2 m away, a false member)
+        gap_reach=prm.max_gap_m if short else 0.0,
+        held=labels,
     )
     # a handful of points: the sections stage calls them ``unknown``
     return [(b.axis, b.points, b.radius) for b in bridges]

@@ -13,7 +13,13 @@ import planners.structure.bridges as bridges
 import planners.structure.pipeline as pipeline
 from planners.inspection import plan_inspection
 from planners.structure import StructureParams, model_structure
-from planners.structure.bridges import BRIDGE_MIN_POINTS, bridging_rows, seed_points
+from planners.structure.bridges import (
+    BRIDGE_MIN_FREE,
+    BRIDGE_MIN_POINTS,
+    BRIDGE_ROW_LENGTHS,
+    bridging_rows,
+    seed_points,
+)
 from planners.structure.joints import closest_points
 from planners.structure.model import Member
 from planners.structure.sparse import walk_rows
@@ -44,15 +50,18 @@ def _bridges(
     members: list[Member],
     radii: np.ndarray | None = None,
     min_radius: float = 0.0,
+    gap_reach: float = 0.0,
 ):
     prm = StructureParams().resolve(SPACING)
     min_len = float(prm.min_member_length_m or 0.0)
     reach = pipeline._joint_reach(SPACING)
     free = np.ones(len(pts), bool)
     seeds = seed_points(pts, free, SPACING)
-    rows = walk_rows(pts, free, SPACING, min_len, BRIDGE_MIN_POINTS, seeds=seeds)
+    rows = walk_rows(pts, free, SPACING, BRIDGE_ROW_LENGTHS * min_len, BRIDGE_MIN_FREE, seeds=seeds)
     radii = np.full(len(members), RADIUS) if radii is None else radii
-    return bridging_rows(pts, free, rows, members, radii, SPACING, min_len, reach, min_radius)
+    return bridging_rows(
+        pts, free, rows, members, radii, SPACING, min_len, reach, min_radius, gap_reach
+    )
 
 
 def _moved(members: list[Member], pts: np.ndarray, rot: Rotation, shift: np.ndarray):
@@ -67,7 +76,7 @@ def _moved(members: list[Member], pts: np.ndarray, rot: Rotation, shift: np.ndar
     gap=st.floats(1.6, 3.0),
     lo=st.floats(0.15, 0.4),
     cover=st.floats(0.45, 0.7),
-    n=st.integers(BRIDGE_MIN_POINTS, 7),
+    n=st.integers(5, 7),
     seed=st.integers(0, 2**16),
 )
 def test_a_row_of_a_few_points_between_two_girders_is_a_member_in_any_frame(
@@ -109,12 +118,62 @@ def test_a_row_meeting_one_member_only_is_not_a_member() -> None:
 
 
 def test_a_row_too_far_short_of_a_member_is_not_a_member() -> None:
-    """A row is carried past its ends by its own length only: a 0.8 m row
-    whose far girder is 0.4 m beyond its end is bridged; with the girder
-    1.5 m beyond it is not."""
+    """A row is carried past its ends by its own length, or by
+    ``gap_reach`` where that is longer: a 0.8 m row whose far girder is
+    0.4 m beyond its end is bridged; with the girder 1.5 m beyond it is not,
+    unless the row is carried 2 m (what the model passes, ``max_gap_m``);
+    2.9 m beyond, it is not bridged either way."""
     row = _row(0.3, 1.1, 6, np.random.default_rng(2))
     assert len(_bridges(row, _girders(1.5))) == 1
     assert _bridges(row, _girders(2.6)) == []
+    assert len(_bridges(row, _girders(2.6), gap_reach=2.0)) == 1
+    assert _bridges(row, _girders(4.0), gap_reach=2.0) == []
+
+
+def test_both_flanges_of_one_cross_girder_make_one_bridge() -> None:
+    """Two rows 0.3 m apart, one above the other (the flanges of a UPN
+    300 cross girder), between two girders: the first is bridged and the
+    second is a piece of that bridge, not a second member.  Each alone is
+    bridged."""
+    rng = np.random.default_rng(8)
+    top = _row(0.3, 1.3, 6, rng)
+    bottom = _row(0.5, 1.5, 6, rng) + [0.0, 0.0, -0.3]
+    assert len(_bridges(top, _girders(2.0))) == 1
+    assert len(_bridges(bottom, _girders(2.0))) == 1
+    out = _bridges(np.vstack([top, bottom]), _girders(2.0))
+    assert len(out) == 1 and set(out[0].ends) == {0, 1}
+
+
+def test_the_model_bridges_four_free_points_whose_fifth_lies_in_their_girder() -> None:
+    """What the model passes (:func:`pipeline._bridge_rows`): four free
+    points over 0.5 m (shorter than the shortest member, 0.65 m at this
+    spacing) beside one girder, the other girder 1.7 m past the row's far
+    end, and a fifth point on the row's line inside the near girder's
+    envelope, labelled to it.  The row is bridged from girder to girder.
+    Without the fifth point, or with it 0.5 m off the line, it is not."""
+    prm = StructureParams().resolve(SPACING)
+    assert float(prm.min_member_length_m or 0.0) > 0.5
+    x = np.linspace(0.3, 0.8, 4)
+    row = np.column_stack([np.full(4, 3.0), x, np.full(4, -0.15)])
+    members = _girders(2.5)
+    radii = np.full(len(members), RADIUS)
+    reach = pipeline._joint_reach(SPACING)
+
+    def bridged(fifth: np.ndarray | None) -> list:
+        pts = row if fifth is None else np.vstack([row, fifth])
+        labels = np.full(len(pts), -1)
+        if fifth is not None:
+            labels[-1] = 0  # inside girder 0's envelope
+        return pipeline._bridge_rows(pts, labels, members, radii, SPACING, prm, reach)
+
+    out = bridged(np.array([3.0, 0.15, -0.15]))
+    assert len(out) == 1
+    axis, points, _ = out[0]
+    assert sorted(points) == [0, 1, 2, 3]
+    assert abs(axis[0, 1] - 0.0) <= RADIUS + SPACING
+    assert abs(axis[1, 1] - 2.5) <= RADIUS + SPACING
+    assert bridged(None) == []
+    assert bridged(np.array([3.5, 0.15, -0.15])) == []
 
 
 def test_a_girder_seen_by_one_flange_still_carries_a_row() -> None:
@@ -233,3 +292,17 @@ def test_grillage_cross_girders_seen_as_five_points_are_found_and_routed(monkeyp
         assert onto and all(not t_.feasible and "no faces" in t_.reason for t_ in onto)
     monkeypatch.setattr(pipeline, "BRIDGE_ROWS", False)
     assert not ({6, 10} & found()[0])
+
+
+def test_grillage_cross_girders_seen_short_of_their_far_girder_are_found() -> None:
+    """Grillage at 10 cm, cross girders that the rules above recover (each
+    missed before them): seed 0's UPN 300s 13 (four free points over 0.58 m,
+    shorter than the shortest member, and a fifth inside its girder) and 15
+    (a 0.7 m row by its near girder, the far one 1.95 m beyond), seed 19's
+    IPE 200 15 (four free points and a fifth inside its girder)."""
+    for seed, wanted in ((0, {13, 15}), (19, {15})):
+        scan = make_scan("grillage", seed, spacing_m=0.1)
+        model = model_structure(scan.points / scan.scale)
+        axes = np.array([m.axis for m in model.members])
+        mm = match_members(scan.true_axes(), scan.true_depths(), axes)
+        assert wanted <= {t for t, _ in mm.pairs}, seed
