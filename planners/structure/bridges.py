@@ -4,8 +4,9 @@ A cross girder far from every scanner, or seen past a main girder, can come
 out of a 10 cm scan as four to seven points along one flange: too few for a
 line feature or a sparse row on its own (:mod:`.sparse` asks for
 ``SPARSE_MIN_POINTS``), where a random row of a handful of points in
-clutter is common.  What tells the two apart is the structure round it: the row's
-line, carried on past both of its ends, meets a member at each, crossing it
+clutter is common.  What tells the two apart is the structure round it:
+the row's line, carried on past both of its ends, meets a member at each,
+crossing it
 — the way a cross girder spans between main girders, or a diagonal between
 chords.  That is a line hypothesis (a RANSAC-style consensus, Fischler &
 Bolles 1981) verified by the members already found rather than by its
@@ -23,7 +24,8 @@ the points still unlabelled once the members are kept (the first walk ran
 before the refits, joins and clutter tests freed or took points), rows of
 ``BRIDGE_MIN_FREE`` points or more and as long as the shortest member (on
 a coarse scan, ``BRIDGE_ROW_LENGTHS`` of that: the member runs between its
-supports, and that span is held to the shortest member's length).  A row becomes a member when:
+supports, and that span is held to the shortest member's length).  A row
+becomes a member when:
 
 * it is not a piece of a member already found, nor of a bridge taken
   before it (the two flanges of one cross girder make two rows): no member
@@ -33,15 +35,16 @@ supports, and that span is held to the shortest member's length).  A row becomes
   length (at least the joints' reach, and at least ``gap_reach``: the
   longest occlusion shadow the model bridges along a member, for a cross
   girder seen only by the half near one of its girders), comes within a
-  member's section radius (at least the largest section's expected, a quarter of
-  ``max_section_m``) plus one spacing of two different members, one
+  member's section radius (at least the largest section's expected, a
+  quarter of ``max_section_m``) plus one spacing of two different members, one
   beyond each end, each crossing it at ``CROSSING_DEG`` or more;
 * it still holds ``BRIDGE_MIN_POINTS`` points no earlier bridge took (or
   ``BRIDGE_MIN_FREE``, with the rest on its line inside the two members
-  it meets, between its ends and their axes), and its free points lie within an RMS distance of ``BRIDGE_MAX_RMS_SPACINGS`` of its
-  line (a row on a flange lies at 0.1–0.25 spacings, a diagonal's
-  scattered section up to 0.5; points strewn evenly over the walk's
-  one-spacing tube at about 0.7).
+  it meets, between its ends and their axes), and its free points lie
+  within an RMS distance of ``BRIDGE_MAX_RMS_SPACINGS`` of its line (a
+  row on a flange lies at 0.1–0.25 spacings, a diagonal's scattered
+  section up to 0.5; points strewn evenly over the walk's one-spacing tube
+  at about 0.7).
 
 The new member's axis runs along the row's line between the two crossings;
 its points are the row's, its section is fitted in the sections stage (a
@@ -73,8 +76,8 @@ from planners.structure.model import Member
 BRIDGE_MIN_POINTS = 5
 BRIDGE_MIN_FREE = 4
 #: on a coarse scan (:func:`.scattered.coarse_scan`), a row is at least
-#: this many of the shortest member's length long (elsewhere, that length).  20
-#: seeds at 10 cm, 1.0 → 0.5: grillage visible recall 0.941 → 0.945 (four
+#: this many of the shortest member's length long (elsewhere, that
+#: length).  20 seeds at 10 cm, 1.0 → 0.5: grillage visible recall 0.941 → 0.945 (four
 #: points over 0.58 m of a 2 m cross girder), precision the same
 BRIDGE_ROW_LENGTHS = 0.5
 #: seeds the walk over the points left free tries at most
@@ -206,9 +209,10 @@ def bridging_rows(
     largest section's radius it expects.
 
     ``gap_reach``: how far past its ends a row's line is carried at least
-    (the model passes ``max_gap_m`` on a coarse scan, else 0).  A UPN 300 cross girder of grillage
-    seed 0 at 10 cm is seen as a 0.7 m row by its near girder, its far
-    girder 1.95 m beyond; carried by its own length only it met one.  20
+    (the model passes ``max_gap_m`` on a coarse scan, else 0).  A UPN 300
+    cross girder of grillage seed 0 at 10 cm is seen as a 0.7 m row by its
+    near girder, its far girder 1.95 m beyond; carried by its own length
+    only it met one.  20
     seeds at 10 cm: grillage visible recall 0.935 → 0.939, precision the
     same once a row along a bridge taken is a piece of it (without that,
     0.954 → 0.950: both flanges of one cross girder were bridged).
