@@ -37,7 +37,7 @@ import numpy as np
 
 from planners.structure.indices import points_by_label
 from planners.structure.joints import closest_points
-from planners.structure.lines import fit_line
+from planners.structure.lines import fit_line, line_coords
 from planners.structure.model import Member
 
 #: pieces at most this many ``max_gap_m`` apart are chained
@@ -155,8 +155,7 @@ def chain_axis(
 
 def _off_line(q: np.ndarray, c: np.ndarray, d: np.ndarray) -> np.ndarray:
     """Distances of the points ``q`` from the line ``c + t·d`` (``d`` a unit vector)."""
-    w = q - c
-    return np.linalg.norm(w - np.outer(w @ d, d), axis=1)
+    return line_coords(q, c, d)[1]
 
 
 def _crossed(

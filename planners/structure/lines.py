@@ -103,6 +103,14 @@ class LineCandidate:
         return self.centre + np.outer([self.t0, self.t1], self.direction)
 
 
+def line_coords(q: np.ndarray, c: np.ndarray, d: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Of the points ``q`` on the line ``c + t·d`` (``d`` a unit vector):
+    each one's parameter ``t`` and distance from the line."""
+    w = q - c
+    t = w @ d
+    return t, np.linalg.norm(w - np.outer(t, d), axis=1)
+
+
 def fit_line(
     pts: np.ndarray, lo_pct: float = 1.0, hi_pct: float = 99.0
 ) -> tuple[np.ndarray, np.ndarray, float, float, float]:

@@ -812,12 +812,12 @@ def _bridge_rows(
     # one a member is hundreds of points, and a short row a fragment of
     # anything (20 seeds at 2 cm: grillage precision 0.960 → 0.946 with
     # short rows there too, recall the same)
-    short = coarse_scan(spacing, prm.max_section_m)
+    coarse = coarse_scan(spacing, prm.max_section_m)
     rows = walk_rows(
         pts,
         free,
         spacing,
-        (BRIDGE_ROW_LENGTHS if short else 1.0) * min_len,
+        (BRIDGE_ROW_LENGTHS if coarse else 1.0) * min_len,
         BRIDGE_MIN_FREE,
         BRIDGE_MAX_ATTEMPTS,
         seeds=seed_points(pts, free, spacing),
@@ -842,7 +842,7 @@ def _bridge_rows(
         # member is found by its line features, and what is left in rows is
         # not one (20 seeds at 5 mm: a 60-point row of grillage seed 0
         # reached a girder 2 m away, a false member)
-        gap_reach=prm.max_gap_m if short else 0.0,
+        gap_reach=prm.max_gap_m if coarse else 0.0,
         held=labels,
     )
     # a handful of points: the sections stage calls them ``unknown``
