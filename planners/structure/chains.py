@@ -158,8 +158,7 @@ def chain_axis(
         spans.append((members[i].axis - c) @ d)
     if _crossed(group, spans, c, d, members, radii):
         return None
-    t = np.concatenate(spans)
-    return np.array([c + t.min() * d, c + t.max() * d])
+    return _spanned(c, d, spans)
 
 
 def through_pieces(group: list[int], own: list[np.ndarray], members: list[Member]) -> np.ndarray:
@@ -175,12 +174,16 @@ def through_pieces(group: list[int], own: list[np.ndarray], members: list[Member
     each piece's weight (its points) and its place along the line."""
     feet = []
     for g, p in zip(group, own, strict=True):
-        a = members[g].axis
-        d = a[1] - a[0]
-        d = d / np.linalg.norm(d)
-        feet.append(a[0] + np.outer((p - a[0]) @ d, d))
+        start, along = members[g].axis[0], members[g].direction
+        feet.append(start + np.outer(line_coords(p, start, along)[0], along))
     c, d, _, _, _ = fit_line(np.vstack(feet))
-    t = np.concatenate([(members[g].axis - c) @ d for g in group])
+    return _spanned(c, d, [(members[g].axis - c) @ d for g in group])
+
+
+def _spanned(c: np.ndarray, d: np.ndarray, spans: list[np.ndarray]) -> np.ndarray:
+    """The (2, 3) segment of the line ``c + t·d`` from the least of the
+    pieces' end parameters ``spans`` to the greatest."""
+    t = np.concatenate(spans)
     return np.array([c + t.min() * d, c + t.max() * d])
 
 
