@@ -287,7 +287,10 @@ class Emulator:
         self._orphan: OrphanTimer | None = None
         self._on_orphaned = on_orphaned
         self.orphaned = False
-        self._rng = random.Random(self.faults.seed)
+        # One stream a direction: which received byte is corrupted then depends
+        # on the received bytes alone, not on how reads and writes interleave,
+        # so a seed corrupts the same bytes of the host's frames every run.
+        self._rng = {d: random.Random(f"{self.faults.seed}/{d}") for d in ("rx", "tx")}
         self._lock = threading.RLock()
         self._cond = threading.Condition(self._lock)
         self._sel = selectors.DefaultSelector()
@@ -615,7 +618,7 @@ class Emulator:
             return  # silenced: the bytes vanish on the "cable"
         f = self.faults
         if f.corrupt_rate and f.corrupt_direction in ("rx", "both"):
-            data = self._corrupt(data)
+            data = self._corrupt(data, "rx")
         errors = port.decoder.errors
         frames = port.decoder.feed(data)
         self.stats["frames_corrupt"] += port.decoder.errors - errors
@@ -786,7 +789,7 @@ class Emulator:
             wire = encode_message(msg, self._tx_seq)
         f = self.faults
         if f.corrupt_rate and f.corrupt_direction in ("tx", "both"):
-            wire = self._corrupt(wire)
+            wire = self._corrupt(wire, "tx")
         self.stats["frames_tx"] += 1
         if f.delay_s and f.delay_direction in ("tx", "both"):
             self._later(now + f.delay_s, functools.partial(self._write, port, wire))
@@ -802,12 +805,13 @@ class Emulator:
     def _later(self, when: float, action: Callable[[float], None]) -> None:
         heapq.heappush(self._delayed, (when, next(self._counter), action))
 
-    def _corrupt(self, data: bytes) -> bytes:
+    def _corrupt(self, data: bytes, direction: str) -> bytes:
         rate = self.faults.corrupt_rate
+        rng = self._rng[direction]
         out = bytearray(data)
         for i in range(len(out)):
-            if self._rng.random() < rate:
-                out[i] = self._rng.randrange(256)
+            if rng.random() < rate:
+                out[i] = rng.randrange(256)
                 self.stats["bytes_corrupted"] += 1
         return bytes(out)
 
