@@ -23,6 +23,10 @@ from scipy.spatial import cKDTree
 
 #: rows of a neighbour query at a time (× k × 3 floats per chunk)
 CHUNK_ROWS = 32_768
+#: threads of the stages' batch KD-tree queries (scipy's ``workers``): each
+#: query point is answered on its own, so the answers are the same for any
+#: count; two is what this project's 2-core target machines have
+QUERY_WORKERS = 2
 
 
 @dataclass
@@ -85,7 +89,7 @@ def _local_pca(
     per_row, cols_l = [], []
     for a in range(0, n, CHUNK_ROWS):
         q = centres[a : a + CHUNK_ROWS]
-        _, idx = tree.query(q, k=kk, distance_upper_bound=radius)
+        _, idx = tree.query(q, k=kk, distance_upper_bound=radius, workers=QUERY_WORKERS)
         # a missing neighbour's index is n: sorted, each row's columns come
         # first and ascending, the CSR layout itself (no COO conversion)
         idx = np.sort(np.asarray(idx).reshape(len(q), kk), axis=1)

@@ -21,7 +21,7 @@ from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
-from planners.structure.features import LineFeatures
+from planners.structure.features import QUERY_WORKERS, LineFeatures
 from planners.structure.indices import hit_union, sorted_unique
 
 #: linear voxels each voxel may link to (its nearest ones)
@@ -150,7 +150,7 @@ def grow_regions(
     # of the voxel's scale) keeps links local
     sub = grid.centres[ids]
     kk = min(LINK_K + 1, len(ids))
-    dist, nb = cKDTree(sub).query(sub, k=kk)
+    dist, nb = cKDTree(sub).query(sub, k=kk, workers=QUERY_WORKERS)
     dist = np.asarray(dist).reshape(len(ids), kk)
     nb = np.asarray(nb).reshape(len(ids), kk)
     base = np.maximum(0.25 * feat.radius[ids], 1.8 * grid.size)

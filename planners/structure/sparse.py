@@ -31,6 +31,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from planners.structure.assign import near_line
+from planners.structure.features import QUERY_WORKERS
 from planners.structure.indices import sorted_unique
 from planners.structure.lines import LineCandidate, fit_line
 
@@ -149,7 +150,7 @@ def _linear(
     k = min(SPARSE_K + 1, len(data))
     if len(pts) == 0:
         return np.zeros(0, np.int64), np.zeros((0, 3))
-    dist, nb = tree.query(pts, k=k, distance_upper_bound=side)
+    dist, nb = tree.query(pts, k=k, distance_upper_bound=side, workers=QUERY_WORKERS)
     dist = np.asarray(dist).reshape(len(pts), k)
     nb = np.asarray(nb).reshape(len(pts), k)
     ok = np.isfinite(dist)
@@ -223,7 +224,9 @@ def walk_rows(
     order = np.flatnonzero(score)
     # isolated rows first: a point of a row has few free points round it
     # besides its row's, a point of a ring on the ground the next rings too
-    ball = np.asarray(tree.query_ball_point(pts[order], side, return_length=True))
+    ball = np.asarray(
+        tree.query_ball_point(pts[order], side, return_length=True, workers=QUERY_WORKERS)
+    )
     priority = score[order] / np.maximum(ball, 1)
     order = order[np.lexsort((order, -score[order], -priority))]
     alive = np.ones(len(pts), bool)
