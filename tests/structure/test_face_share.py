@@ -12,9 +12,9 @@ from hypothesis import strategies as st
 from scipy.spatial.transform import Rotation
 
 from planners.structure import model_structure
-from planners.structure.faces import ransac_lines
+from planners.structure.faces import cross_section, ransac_lines
 from planners.structure.model import Member
-from planners.structure.pipeline import FACE_FRACTION_MIN, _planar_share
+from planners.structure.pipeline import FACE_FRACTION_MIN, _min_face_inliers, _planar_share
 from planners.structure.synthetic import make_scan, match_members
 
 SPACING = 0.005
@@ -62,11 +62,11 @@ def _placed(local: np.ndarray, rot: Rotation, offset: np.ndarray) -> tuple[np.nd
 
 
 def _share_of_lines(pts: np.ndarray, m: Member, k: int) -> float:
-    from planners.structure.faces import cross_section
-
     cs = cross_section(pts, m.axis[0], m.direction)
     on = np.zeros(len(pts), bool)
-    for _, _, inl in ransac_lines(cs.uv, TOL, max(12, len(pts) // 20), k, np.random.default_rng(0)):
+    for _, _, inl in ransac_lines(
+        cs.uv, TOL, _min_face_inliers(len(pts)), k, np.random.default_rng(0)
+    ):
         on |= inl
     return float(on.mean())
 
