@@ -35,7 +35,7 @@ INTEGRATION_PATHS = (
     "tests/switching/test_api_switch.py",
     "tests/navigation/test_kind_ara_navigate.py",
     "tests/inspection/test_kind_ara_inspect.py",
-    "tests/test_docker.py",
+    "tests/docker/",
 )
 _ROOT = Path(__file__).resolve().parents[1]
 

@@ -1,4 +1,4 @@
-"""What can be validated of the Docker set-up without a Docker daemon."""
+"""What can be validated of the Docker set-up without starting a container."""
 
 from __future__ import annotations
 
@@ -11,7 +11,7 @@ from pathlib import Path
 
 import pytest
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 
 
 def _tool(name: str) -> str:
@@ -60,8 +60,23 @@ def test_dockerfile_installs_like_the_readme() -> None:
     assert "/api/v1/health" in dockerfile
 
 
+def test_no_password_is_written_in_the_compose_file() -> None:
+    """The database password comes from the operator's docker/.env, never a default."""
+    import yaml
+
+    compose = yaml.safe_load((ROOT / "docker" / "compose.yml").read_text())
+    services = compose["services"]
+    assert services["postgres"]["environment"]["POSTGRES_PASSWORD"] == "${POSTGRES_PASSWORD:-}"
+    for name, svc in services.items():
+        url = (svc.get("environment") or {}).get("STEELPATH_DATABASE_URL")
+        if url:
+            assert url.startswith("postgresql://steelpath:${POSTGRES_PASSWORD:-}@"), name
+    ignored = (ROOT / ".dockerignore").read_text().split()
+    assert "docker/.env" in ignored and "docker/.env" in (ROOT / ".gitignore").read_text()
+
+
 def test_scaled_profile_validates() -> None:
-    """The scaled set-up (issue #17 §4): PostgreSQL, a Dask scheduler and two workers,
+    """The scaled set-up: PostgreSQL, a Dask scheduler and two workers,
     two API servers on one shared volume behind a reverse proxy."""
     import yaml
 
