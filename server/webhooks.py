@@ -19,11 +19,22 @@ Each POST carries the JSON body ``{"id", "event", "at", "data"}`` and:
   (:func:`verify`) and refuses old timestamps, so a captured delivery cannot
   be replayed later.
 
-A 2xx answer delivers it; anything else (an error status, a refused or
-timed-out connection) is retried after ``backoff_s · 2^(attempt-1)``
-(capped at ``max_backoff_s``) until ``max_attempts`` attempts, then the
-delivery is ``failed``.  Every attempt's status or error is stored and listed
-(``GET /api/v1/webhooks/{id}/deliveries``).
+Before every attempt the webhook's host is resolved again and checked
+(:func:`server.netpolicy.check_url`: public addresses only, unless the
+webhook has ``allow_private_network``), since DNS may have changed since it
+was registered; the POST then goes to the address that was checked (the URL's
+host rewritten to it, the original ``Host`` header and TLS server name kept),
+not to a fresh resolution, and redirects are not followed.
+
+A 2xx answer delivers it; anything else is retried after
+``backoff_s · 2^(attempt-1)`` (capped at ``max_backoff_s``) until
+``max_attempts`` attempts, then the delivery is ``failed``.  Every attempt's
+outcome is stored and listed (``GET /api/v1/webhooks/{id}/deliveries``): an
+answer as ``HTTP <status>`` (a redirect too), and every failure to get one —
+refused or timed-out connection, DNS or TLS failure, an address the policy
+refuses — as the one word ``unreachable``, so the list cannot tell a closed
+port from a filtered one or a refused address (no port scanner); the server's
+log has the reason.
 """
 
 from __future__ import annotations
@@ -33,6 +44,7 @@ import hmac
 import json
 import logging
 import queue
+import socket
 import threading
 import time
 from datetime import UTC, datetime
@@ -40,12 +52,16 @@ from typing import Any
 
 import httpx
 
-from server.store.webhooks import Delivery, WebhookStore
+from server.netpolicy import Address, Resolver, UnsafeWebhookUrl, check_url
+from server.store.webhooks import Delivery, Webhook, WebhookStore
 
 log = logging.getLogger(__name__)
 
 #: Execution states that are sent, as ``execution.<state>``.
 _EXECUTION_STATES = ("completed", "faulted", "interrupted")
+
+#: The stored error of every attempt that got no HTTP answer.
+UNREACHABLE = "unreachable"
 
 
 def sign(secret: str, timestamp: int, body: bytes) -> str:
@@ -85,8 +101,12 @@ class WebhookDispatcher:
         max_backoff_s: float = 300.0,
         max_attempts: int = 8,
         timeout_s: float = 5.0,
+        resolve: Resolver = socket.getaddrinfo,
     ) -> None:
         self.store = store
+        #: How webhook hosts are resolved, at registration (the router uses it)
+        #: and before each attempt; tests put a stand-in here.
+        self.resolve = resolve
         self.backoff_s = backoff_s
         self.max_backoff_s = max_backoff_s
         self.max_attempts = max_attempts
@@ -190,12 +210,15 @@ class WebhookDispatcher:
         status: int | None = None
         error: str | None = None
         try:
-            r = client.post(hook.url, content=body, headers=headers)
-            status = r.status_code
+            ips = check_url(
+                hook.url, allow_private=hook.allow_private_network, resolve=self.resolve
+            )
+            status = self._post(client, hook, ips, body, headers)
             if not 200 <= status < 300:
                 error = f"HTTP {status}"
-        except httpx.HTTPError as exc:
-            error = f"{type(exc).__name__}: {exc}"[:300]
+        except (UnsafeWebhookUrl, httpx.HTTPError, httpx.InvalidURL) as exc:
+            log.warning("webhook %s delivery %s: %s: %s", hook.id, d.id, type(exc).__name__, exc)
+            error = UNREACHABLE
         ok = error is None
         attempt = d.attempts + 1
         retry_at = None
@@ -207,3 +230,38 @@ class WebhookDispatcher:
                 "webhook %s delivery %s (%s) attempt %d: %s", hook.id, d.id, d.event, attempt, error
             )
         return self.store.record_attempt(d.id, ok=ok, status=status, error=error, retry_at=retry_at)
+
+    def _post(
+        self,
+        client: httpx.Client,
+        hook: Webhook,
+        ips: list[Address],
+        body: bytes,
+        headers: dict[str, str],
+    ) -> int:
+        """POST to the first of ``ips`` (checked) that connects; its status.
+
+        The URL's host is replaced by the address, so nothing resolves the name
+        again; ``Host`` and the TLS server name (which the certificate is
+        checked against) stay the name's.  The answer's body is never read.
+        """
+        url = httpx.URL(hook.url)
+        pinned_headers = {**headers, "Host": url.netloc.decode("ascii")}
+        extensions = {"sni_hostname": url.raw_host.decode("ascii")} if url.scheme == "https" else {}
+        for i, ip in enumerate(ips):
+            request = client.build_request(
+                "POST",
+                url.copy_with(host=str(ip)),
+                content=body,
+                headers=pinned_headers,
+                extensions=extensions,
+            )
+            try:
+                response = client.send(request, stream=True, follow_redirects=False)
+            except httpx.ConnectError:
+                if i == len(ips) - 1:
+                    raise
+                continue  # another address of the same name may answer
+            response.close()
+            return response.status_code
+        raise httpx.ConnectError("no address to connect to")  # check_url returns at least one

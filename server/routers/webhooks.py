@@ -1,25 +1,35 @@
 """``/api/v1/webhooks`` (admin): receivers of signed event deliveries (issue #16 §5).
 
-How deliveries are signed, retried and listed: :mod:`server.webhooks`.
+How deliveries are signed, retried and listed: :mod:`server.webhooks`.  Where
+they may go: :mod:`server.netpolicy` (public addresses only, unless the
+webhook's ``allow_private_network``), checked here at registration and again
+before every delivery.
 """
 
 from __future__ import annotations
 
+import socket
+from collections.abc import Sequence
 from typing import Annotated, Any, Literal, get_args
 from urllib.parse import urlsplit
 
-from fastapi import APIRouter, Depends, Query, Response
+from fastapi import APIRouter, Depends, HTTPException, Query, Request, Response
 from pydantic import BaseModel, ConfigDict, Field, field_validator
 
 from server.auth import Admin
+from server.netpolicy import SCHEMES, Address, UnsafeWebhookUrl, check_url, kind
 from server.routers.responses import errors
 from server.services import Services, get_services
 from server.store.webhooks import WEBHOOK_EVENTS, WebhookStore
 
 router = APIRouter(prefix="/webhooks", tags=["webhooks"])
 
-#: http(s)://host[:port][/path…] — in the schema, so clients see the rule.
-_URL = r"^https?://[A-Za-z0-9](?:[A-Za-z0-9.-]*[A-Za-z0-9])?(?::[0-9]{1,5})?(?:[/?#]\S*)?$"
+#: http(s)://host[:port][/path…], the host a name, an IPv4 or a bracketed IPv6
+#: address — in the schema, so clients see the rule.
+_URL = (
+    r"^https?://(?:[A-Za-z0-9](?:[A-Za-z0-9.-]*[A-Za-z0-9])?|\[[0-9A-Fa-f:.]+\])"
+    r"(?::[0-9]{1,5})?(?:[/?#]\S*)?$"
+)
 EventName = Literal[
     "execution.completed", "execution.faulted", "execution.interrupted", "estop", "finding.created"
 ]
@@ -42,6 +52,12 @@ class WebhookRequest(BaseModel):
         min_length=1,
         description=f"events to receive, of: {', '.join(WEBHOOK_EVENTS)} (default: all)",
     )
+    allow_private_network: bool = Field(
+        False,
+        description="also deliver to loopback, private (RFC 1918, fc00::/7) and shared "
+        "(100.64.0.0/10) addresses, for a lab receiver on the LAN; never to link-local, "
+        "multicast, unspecified or reserved ones, nor to this server itself",
+    )
 
     @field_validator("url")
     @classmethod
@@ -61,12 +77,56 @@ def _hooks(services: Services) -> WebhookStore:
     return WebhookStore(services.store.db)
 
 
+_SELF = "webhook URL points at this SteelPath server itself; it may not POST to its own API"
+
+
+def _is_this_server(url: str, ips: Sequence[Address], request: Request) -> bool:
+    """Whether ``url`` leads back to this server: the host and port this
+    request came in on, the address and port it arrived at, or a loopback
+    address on that port (a port on loopback belongs to one process)."""
+    hook = urlsplit(url)
+    port = hook.port or SCHEMES[hook.scheme]
+    own = {(request.url.hostname, request.url.port or SCHEMES.get(request.url.scheme, 80))}
+    server = request.scope.get("server")
+    own_port = None
+    if server and server[1] is not None:
+        own_port = int(server[1])
+        own.add((str(server[0]), own_port))
+    if (hook.hostname, port) in own:
+        return True
+    return any(
+        (str(ip), port) in own or (port == own_port and kind(ip) == "loopback") for ip in ips
+    )
+
+
 @router.post("", status_code=201, responses=errors(401, 403, 422))
-def create_webhook(req: WebhookRequest, services: Svc, who: Admin) -> dict[str, Any]:
+def create_webhook(
+    req: WebhookRequest, request: Request, services: Svc, who: Admin
+) -> dict[str, Any]:
     """Register a receiver.  The answer holds its signing ``secret``, shown
     only here: deliveries carry ``X-SteelPath-Signature: sha256=HMAC(secret,
-    "{X-SteelPath-Timestamp}.{body}")``."""
-    hook = _hooks(services).add(req.url, list(req.events), who.actor)
+    "{X-SteelPath-Timestamp}.{body}")``.
+
+    Its host must resolve, and only to public addresses; with
+    ``allow_private_network`` also to loopback, private and shared ones (a
+    lab receiver), never to link-local (a cloud's metadata service),
+    multicast, unspecified or reserved ones, nor to this server itself.
+    Otherwise 422, ``detail`` saying why.  Checked again before each delivery.
+    """
+    # The dispatcher's resolver: one way of resolving names for both checks
+    # (and the one tests replace).
+    resolve = getattr(services.webhooks, "resolve", socket.getaddrinfo)
+    try:
+        if _is_this_server(req.url, [], request):  # by name: it may not resolve from here
+            raise UnsafeWebhookUrl(_SELF)
+        ips = check_url(req.url, allow_private=req.allow_private_network, resolve=resolve)
+        if _is_this_server(req.url, ips, request):
+            raise UnsafeWebhookUrl(_SELF)
+    except UnsafeWebhookUrl as exc:
+        raise HTTPException(422, str(exc)) from exc
+    hook = _hooks(services).add(
+        req.url, list(req.events), who.actor, allow_private_network=req.allow_private_network
+    )
     return {**hook.public(), "secret": hook.secret}
 
 

@@ -246,6 +246,11 @@ MIGRATIONS: list[str] = [
         reason TEXT NOT NULL
     );
     """,
+    # 12: webhooks an admin lets deliver to loopback and private networks (lab
+    # receivers on the LAN; server/netpolicy.py); 0 = public addresses only
+    """
+    ALTER TABLE webhooks ADD COLUMN allow_private_network INTEGER NOT NULL DEFAULT 0;
+    """,
 ]
 
 SCHEMA_VERSION = len(MIGRATIONS)

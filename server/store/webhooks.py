@@ -41,6 +41,8 @@ class Webhook:
     created_at: str
     removed_at: str | None
     removed_by: str | None
+    #: May deliver to loopback, private and shared addresses (server.netpolicy).
+    allow_private_network: bool = False
 
     @classmethod
     def from_row(cls, r: RowLike) -> Webhook:
@@ -53,6 +55,7 @@ class Webhook:
             r["created_at"],
             r["removed_at"],
             r["removed_by"],
+            bool(r["allow_private_network"]),
         )
 
     def public(self) -> dict[str, Any]:
@@ -61,6 +64,7 @@ class Webhook:
             "id": self.id,
             "url": self.url,
             "events": self.events,
+            "allow_private_network": self.allow_private_network,
             "created_by": self.created_by,
             "created_at": self.created_at,
             "removed_at": self.removed_at,
@@ -120,19 +124,38 @@ class WebhookStore:
         self.db = db
 
     # ---------------------------------------------------------------- webhooks
-    def add(self, url: str, events: Sequence[str], actor: str) -> Webhook:
+    def add(
+        self,
+        url: str,
+        events: Sequence[str],
+        actor: str,
+        *,
+        allow_private_network: bool = False,
+    ) -> Webhook:
         wid = f"wh_{secrets.token_hex(6)}"
         secret = f"whsec_{secrets.token_urlsafe(24)}"
+        reason = f"{url} for {', '.join(events)}"
+        if allow_private_network:
+            reason += " (private network allowed)"
         with self.db.transaction() as conn:
             conn.execute(
-                "INSERT INTO webhooks (id, url, events, secret, created_by, created_at) "
-                "VALUES (?,?,?,?,?,?)",
-                (wid, url, json.dumps(list(events)), secret, actor, utcnow()),
+                "INSERT INTO webhooks (id, url, events, secret, created_by, created_at, "
+                "allow_private_network) VALUES (?,?,?,?,?,?,?)",
+                # an int, not a bool: the column is an integer on PostgreSQL too
+                (
+                    wid,
+                    url,
+                    json.dumps(list(events)),
+                    secret,
+                    actor,
+                    utcnow(),
+                    int(allow_private_network),
+                ),
             )
             conn.execute(
                 "INSERT INTO audit_events (ts, actor, entity, entity_id, action, reason) "
                 "VALUES (?,?,?,?,?,?)",
-                (utcnow(), actor, "webhook", wid, "create", f"{url} for {', '.join(events)}"),
+                (utcnow(), actor, "webhook", wid, "create", reason),
             )
         return self.get(wid)
 

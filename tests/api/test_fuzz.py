@@ -25,8 +25,9 @@ checked against the registry and the kind's own model (published by
 ``GET /kinds``, not in this operation's schema), an uploaded file against the
 cloud formats, a finding's place against its plan's structure model (the
 member, face and cluster ids and the face's plane), a photo against the image
-formats by its content; a schema-valid but wrong body there is a documented
-400/415/422.
+formats by its content, a webhook's URL against the address policy (its host
+must resolve, and to public addresses: server/netpolicy.py); a schema-valid
+but wrong body there is a documented 400/415/422.
 """
 
 from __future__ import annotations
@@ -95,6 +96,7 @@ BEYOND_SCHEMA = {
     ("POST", "/api/v1/findings"),
     ("PATCH", "/api/v1/findings/{finding_id}"),
     ("POST", "/api/v1/findings/{finding_id}/photos"),
+    ("POST", "/api/v1/webhooks"),  # the URL's host is resolved and checked
     # a schema-valid upload is any file; only a zip made by an export imports
     ("POST", "/api/v1/imports"),
 }
