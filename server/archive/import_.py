@@ -3,9 +3,12 @@
 **All or nothing.**  The zip is checked before anything is unpacked — its
 size against the service's upload limit, its entry count and total
 uncompressed size (zip bombs), every name (no absolute paths, no ``..``,
-only the archive's layout) — then each file is unpacked under a temporary
-directory beside the data, counted as it streams (a lying size header stops
-it) and compared with the SHA-256 its manifest lists.  The rows then go in
+only the archive's layout), every entry's size against the one its manifest
+lists — then every entry is inflated and hashed without being written
+(stopping at the first byte past its declared size; a SHA-256 can only be
+compared at the end of its entry, and a gigabyte of zeros under a wrong hash
+must not reach the disk first), and only then unpacked under a temporary
+directory beside the data, counted and hashed again.  The rows then go in
 one SQLite transaction; the files are moved into place inside it, before the
 commit, and removed again if anything fails, so a refused or failed import
 leaves neither a row nor a file behind.  Ids are kept; an id already present
@@ -151,29 +154,64 @@ def _read_limited(zf: zipfile.ZipFile, info: zipfile.ZipInfo, limit: int) -> byt
     return bytes(out)
 
 
-def _unpack(
-    zf: zipfile.ZipFile, info: zipfile.ZipInfo, target: Path, expect: dict[str, Any]
+def _check_listed(entries: dict[str, zipfile.ZipInfo], listed: list[dict[str, Any]]) -> None:
+    """The manifest's files against the zip's entries, before any entry is read:
+    the same names, and no entry larger than its manifest declares (422).  A
+    smaller one is read (it is small) and fails its SHA-256 at its end."""
+    names = {f["name"] for f in listed}
+    extra = sorted(set(entries) - names - {MANIFEST})
+    if extra:
+        raise _bad(f"{extra[0]} is in the archive but not in its manifest")
+    missing = sorted(names - set(entries))
+    if missing:
+        raise _bad(f"{missing[0]} is listed in the manifest but not in the archive")
+    for f in listed:
+        zipped = entries[f["name"]].file_size
+        if zipped > f["size"]:
+            raise _bad(
+                f"{f['name']} unpacks to {zipped} bytes, more than the {f['size']} its "
+                "manifest declares"
+            )
+
+
+def _stream(
+    zf: zipfile.ZipFile, info: zipfile.ZipInfo, expect: dict[str, Any], sink: IO[bytes] | None
 ) -> None:
-    """Stream one entry to ``target``, counting and hashing; 413/422 on a mismatch."""
+    """Inflate one entry in chunks into ``sink`` (None: only check it), counting
+    and hashing as it goes; 422 naming the entry at the first byte past the size
+    its manifest declares, or when its size or SHA-256 differs at its end."""
+    name, declared = info.filename, int(expect["size"])
     h = hashlib.sha256()
     size = 0
     try:
-        with zf.open(info) as src, open(target, "wb") as dst:
-            while chunk := src.read(_CHUNK):
+        with zf.open(info) as src:
+            # One byte past the declared size is enough to know it lies.
+            while chunk := src.read(min(_CHUNK, declared - size + 1)):
                 size += len(chunk)
-                if size > info.file_size or size > expect["size"]:
-                    raise ArchiveError(
-                        413, f"{info.filename} unpacks to more than its declared size"
-                    )
+                if size > declared:
+                    raise _bad(f"{name} unpacks to more than the {declared} bytes declared for it")
                 h.update(chunk)
-                dst.write(chunk)
-    except (zipfile.BadZipFile, zlib.error, EOFError) as exc:
-        raise ArchiveError(400, f"{info.filename} cannot be unpacked: {exc}") from None
-    if size != expect["size"] or h.hexdigest() != expect["sha256"]:
+                if sink is not None:
+                    sink.write(chunk)
+    except (zipfile.BadZipFile, zlib.error, EOFError):
+        # zlib's and zipfile's own words say nothing more to the person importing.
+        raise ArchiveError(
+            400, f"{name} cannot be unpacked: its compressed data is damaged"
+        ) from None
+    if size != declared or h.hexdigest() != expect["sha256"]:
+        sizes = f"; {size} bytes, the manifest lists {declared}" if size != declared else ""
         raise _bad(
-            f"sha256 mismatch for {info.filename}: the file is not the one exported "
-            "(changed or damaged since)"
+            f"sha256 mismatch for {name}: the file is not the one exported "
+            f"(changed or damaged since{sizes})"
         )
+
+
+def _unpack(
+    zf: zipfile.ZipFile, info: zipfile.ZipInfo, target: Path, expect: dict[str, Any]
+) -> None:
+    """Stream one entry to ``target``, counting and hashing (see :func:`_stream`)."""
+    with open(target, "wb") as dst:
+        _stream(zf, info, expect, dst)
 
 
 def _load_json(path: Path, name: str) -> Any:
@@ -202,13 +240,8 @@ class _Importer:
     def unpack(
         self, zf: zipfile.ZipFile, entries: dict[str, zipfile.ZipInfo], listed: list[dict[str, Any]]
     ) -> None:
-        names = {f["name"] for f in listed}
-        extra = sorted(set(entries) - names - {MANIFEST})
-        if extra:
-            raise _bad(f"{extra[0]} is in the archive but not in its manifest")
-        missing = sorted(names - set(entries))
-        if missing:
-            raise _bad(f"{missing[0]} is listed in the manifest but not in the archive")
+        """Write every listed entry under ``tmp`` (checked by :func:`_check_listed`
+        and :func:`_stream` before: this pass counts and hashes again)."""
         for i, f in enumerate(listed):
             target = self.tmp / f".tmp-{i}"
             _unpack(zf, entries[f["name"]], target, f)
@@ -222,8 +255,9 @@ class _Importer:
     def _check_npy(self, name: str) -> None:
         try:
             np.load(self.files[name], mmap_mode="r", allow_pickle=False)
-        except (ValueError, OSError, EOFError) as exc:
-            raise _bad(f"{name} is not a readable .npy array: {exc}") from None
+        except (ValueError, OSError, EOFError):
+            # numpy's words may hold the temporary file's path: not for the response.
+            raise _bad(f"{name} is not a readable .npy array") from None
 
     def build(
         self, manifest: dict[str, Any]
@@ -504,6 +538,11 @@ def import_archive(
             raise ArchiveError(
                 409, f"plan {manifest['plan_id']} already exists here; an import never overwrites"
             )
+        _check_listed(entries, manifest["files"])
+        # Every entry checked before one is written: nothing of a refused
+        # archive touches the disk.  Costs a second inflate of a good one.
+        for f in manifest["files"]:
+            _stream(zf, entries[f["name"]], f, None)
         uploads = store.data_dir / "uploads"
         ensure_private_dir(uploads)
         tmp = uploads / f"import-{secrets.token_hex(6)}"

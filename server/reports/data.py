@@ -19,7 +19,14 @@ from typing import Any
 from server.maintenance import maintenance_view
 from server.services import Services
 from server.store import Store
-from server.store.findings import CONDITION_STATES, Finding, FindingStore, Photo
+from server.store.findings import (
+    CONDITION_STATES,
+    PHOTO_MAX_PIXELS,
+    Finding,
+    FindingStore,
+    Photo,
+    open_photo,
+)
 from server.store.records import AuditEvent, ExecutionRecord, PlanRecord
 
 #: Longest side of a photo's thumbnail in the report (px).
@@ -30,6 +37,18 @@ PHOTO_RAW_MAX_BYTES = 2 * 1024 * 1024
 AUDIT_LIMIT = 10_000
 #: Most findings and executions listed.
 ROW_LIMIT = 10_000
+
+
+class PhotoTooLarge(ValueError):
+    """A photo declares more than :data:`PHOTO_MAX_PIXELS`: it is not decoded."""
+
+    def __init__(self, width: int, height: int) -> None:
+        super().__init__(
+            f"{width} × {height} px ({width * height} pixels): more than the "
+            f"{PHOTO_MAX_PIXELS} a report decodes, not shown"
+        )
+        self.width = width
+        self.height = height
 
 
 @dataclass(frozen=True)
@@ -210,7 +229,12 @@ def _photo(fstore: FindingStore, finding_id: str, p: Photo) -> PhotoData:
         raw = path.read_bytes()
     except OSError as exc:
         return made(None, f"photo file unreadable ({exc.strerror})")
-    thumb = thumbnail(raw)
+    try:
+        thumb = thumbnail(raw)
+    except PhotoTooLarge as exc:
+        # Stored before uploads were limited (or imported): embedding its
+        # bytes would only move the decoding to the viewer or the PDF printer.
+        return made(None, str(exc))
     if thumb is not None:
         return made(_data_uri("image/png", thumb))
     if len(raw) <= PHOTO_RAW_MAX_BYTES:
@@ -220,21 +244,35 @@ def _photo(fstore: FindingStore, finding_id: str, p: Photo) -> PhotoData:
 
 def thumbnail(raw: bytes, size: int = THUMB_PX) -> bytes | None:
     """A PNG at most ``size`` px on its longest side (Pillow), or None when
-    Pillow is missing or cannot read the image."""
-    try:
-        from PIL import Image
-    except ImportError:  # pragma: no cover - Pillow comes with matplotlib
-        return None
-    try:
-        with Image.open(io.BytesIO(raw)) as im:
-            im.load()
-            im.thumbnail((size, size))
-            out = im.convert("RGBA" if "A" in im.getbands() else "RGB")
-            buf = io.BytesIO()
-            out.save(buf, format="PNG", optimize=False)
-            return buf.getvalue()
-    except Exception:  # any unreadable image: fall back to its bytes
-        return None
+    Pillow is missing or cannot read the image.
+
+    Raises :class:`PhotoTooLarge`, having read only the header, when the image
+    declares more than :data:`PHOTO_MAX_PIXELS`.  A JPEG is decoded at the
+    smallest of 1/2, 1/4, 1/8 scale still twice ``size`` (``draft``); other
+    formats are decoded once at full size and reduced.  The image is closed
+    before this returns, so a report holds one decoded photo at a time.
+    """
+    with io.BytesIO(raw) as fp:
+        try:
+            im = open_photo(fp)
+        except ImportError:  # pragma: no cover - Pillow comes with matplotlib
+            return None
+        if im is None:
+            return None
+        with im:
+            width, height = im.size
+            if width * height > PHOTO_MAX_PIXELS:
+                raise PhotoTooLarge(width, height)
+            try:
+                # reducing_gap: draft() for a JPEG, then reduce() by whole
+                # factors before the final resampling.
+                im.thumbnail((size, size), reducing_gap=2.0)
+                with im.convert("RGBA" if "A" in im.getbands() else "RGB") as out:
+                    buf = io.BytesIO()
+                    out.save(buf, format="PNG", optimize=False)
+                    return buf.getvalue()
+            except Exception:  # a damaged or truncated image: fall back to its bytes
+                return None
 
 
 def _data_uri(ctype: str, data: bytes) -> str:

@@ -11,6 +11,7 @@ published as the webhook event ``finding.created``.
 
 from __future__ import annotations
 
+import io
 from typing import Annotated, Any, Literal
 
 import numpy as np
@@ -29,7 +30,13 @@ from server.routers.plans import submit_plan
 from server.routers.responses import errors
 from server.services import Services, get_services
 from server.store import NotFoundError
-from server.store.findings import EDITABLE, Finding, FindingStore
+from server.store.findings import (
+    EDITABLE,
+    PHOTO_MAX_PIXELS,
+    Finding,
+    FindingStore,
+    open_photo,
+)
 from server.store.maintenance import MaintenanceStore
 
 router = APIRouter(prefix="/findings", tags=["findings"])
@@ -313,7 +320,9 @@ def _image_type(head: bytes) -> str | None:
     return None
 
 
-@router.post("/{finding_id}/photos", status_code=201, responses=errors(401, 403, 404, 413, 415))
+@router.post(
+    "/{finding_id}/photos", status_code=201, responses=errors(401, 403, 404, 413, 415, 422)
+)
 async def add_photo(
     finding_id: str,
     services: Svc,
@@ -321,7 +330,8 @@ async def add_photo(
     file: Annotated[UploadFile, File(description="a JPEG, PNG or WebP photo")],
     caption: Annotated[str, Form(max_length=200)] = "",
 ) -> dict[str, Any]:
-    """Attach a photo (JPEG, PNG or WebP by its content, at most 10 MiB)."""
+    """Attach a photo (JPEG, PNG or WebP by its content, at most 10 MiB and
+    40 megapixels)."""
     store = _store(services)
     store.get(finding_id)  # 404 when unknown
     data = await file.read(PHOTO_MAX_BYTES + 1)
@@ -332,8 +342,27 @@ async def add_photo(
         raise HTTPException(
             415, detail="not a JPEG, PNG or WebP image (checked by its content, not its name)"
         )
+    _check_pixels(data)
     name = caption or (file.filename or "photo")
     return store.add_photo(finding_id, data, name[:200], ctype, who.actor).public()
+
+
+def _check_pixels(data: bytes) -> None:
+    """422 unless Pillow identifies ``data`` and it declares at most
+    :data:`PHOTO_MAX_PIXELS`; only the header is read, nothing is decoded (a
+    small file may declare a picture of gigabytes)."""
+    with io.BytesIO(data) as fp:
+        im = open_photo(fp)
+        if im is None:
+            raise _bad("file", "not a readable JPEG, PNG or WebP image (its header is damaged)")
+        with im:
+            width, height = im.size
+    if width * height > PHOTO_MAX_PIXELS:
+        raise _bad(
+            "file",
+            f"{width} × {height} px is {width * height} pixels: more than the "
+            f"{PHOTO_MAX_PIXELS} pixels a photo may have",
+        )
 
 
 @router.get("/{finding_id}/photos/{photo_id}", responses=errors(401, 404))

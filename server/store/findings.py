@@ -15,10 +15,13 @@ import json
 import secrets
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import IO, TYPE_CHECKING, Any
 
 from server.store.database import RowLike, StoreDatabase, ensure_private_dir, utcnow
 from server.store.store import NotFoundError
+
+if TYPE_CHECKING:
+    from PIL.ImageFile import ImageFile
 
 FINDING_TYPES: tuple[str, ...] = (
     "corrosion",
@@ -31,6 +34,42 @@ FINDING_TYPES: tuple[str, ...] = (
 )
 #: AASHTO-style condition states.
 CONDITION_STATES: dict[int, str] = {1: "good", 2: "fair", 3: "poor", 4: "severe"}
+#: Most pixels (width × height) a photo may declare.  A report decodes every
+#: photo to make its thumbnail, at 4 bytes a pixel: 40 MP (160 MB) is above
+#: any inspection camera's frame, while a 657 KB solid-colour PNG can declare
+#: 13000 × 13000 (169 MP, 1.3 GB once decoded).
+PHOTO_MAX_PIXELS = 40_000_000
+
+
+def open_photo(fp: IO[bytes]) -> ImageFile | None:
+    """The JPEG, PNG or WebP image in ``fp`` with only its header read (no pixel
+    decoded: check ``size`` before anything loads it), or None when Pillow
+    cannot identify it as one of the three.
+
+    The format's Pillow plugin is called directly rather than through
+    ``Image.open``, which warns (89 MP) or raises (179 MP) against a
+    process-wide limit before the caller can compare the declared size with
+    :data:`PHOTO_MAX_PIXELS` and say by how much it is over.
+    """
+    from PIL.JpegImagePlugin import JpegImageFile
+    from PIL.PngImagePlugin import PngImageFile
+    from PIL.WebPImagePlugin import WebPImageFile
+
+    head = fp.read(16)
+    fp.seek(0)
+    plugin: type[ImageFile]
+    if head.startswith(b"\xff\xd8\xff"):
+        plugin = JpegImageFile
+    elif head.startswith(b"\x89PNG\r\n\x1a\n"):
+        plugin = PngImageFile
+    elif head[:4] == b"RIFF" and head[8:12] == b"WEBP":
+        plugin = WebPImageFile
+    else:
+        return None
+    try:
+        return plugin(fp)
+    except Exception:  # a broken header raises whatever its parser hit
+        return None
 
 
 @dataclass(frozen=True)

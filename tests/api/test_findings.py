@@ -5,17 +5,27 @@ content; a serious new finding reaches a webhook."""
 
 from __future__ import annotations
 
+import io
 import json
 import time
 
 import numpy as np
 import pytest
+from PIL import Image
 
 from tests.api.test_webhooks import receiver, register
 from tests.support.waiting import wait_for
 
-PNG = b"\x89PNG\r\n\x1a\n" + b"\x00" * 64
-JPEG = b"\xff\xd8\xff\xe0" + b"\x00" * 64
+
+def _image(fmt: str) -> bytes:
+    """A real 4 × 3 image: an upload must be one Pillow can read."""
+    buf = io.BytesIO()
+    Image.new("RGB", (4, 3), (180, 90, 40)).save(buf, format=fmt)
+    return buf.getvalue()
+
+
+PNG = _image("PNG")
+JPEG = _image("JPEG")
 
 
 @pytest.fixture
