@@ -40,6 +40,7 @@ import numpy as np
 from threadpoolctl import threadpool_limits
 
 from planners.errors import CancelledError, InvalidInputError
+from server.diskspace import describe, is_disk_full
 from server.events import EventBus
 from server.lifecycle import IllegalTransitionError, PlanState
 from server.lifetime import die_with_parent
@@ -312,6 +313,10 @@ class JobRunner:
         self._spawner: _Spawner | None = None
         #: Called with the plan id whenever a job ends (scene redraw, etc.).
         self.on_finished: list[Any] = []
+        #: Plans whose result could not be stored for a full disk: re-queued by the
+        #: sweeper once ``has_room()`` (the app's disk gauge) says space is back.
+        self._disk_waiting: dict[str, str] = {}
+        self.has_room: Any = lambda: True
 
     # ---------------------------------------------------------------- control
     def start(self) -> None:
@@ -430,6 +435,35 @@ class JobRunner:
                 self.adopt_orphans()
             except Exception:  # a store hiccup must not end the sweeping
                 log.exception("adopting the plans of stopped servers failed")
+            self.retry_disk_waiting()
+
+    def disk_waiting(self) -> list[str]:
+        with self._lock:
+            return sorted(self._disk_waiting)
+
+    def retry_disk_waiting(self) -> list[str]:
+        """Plan again, once there is room, each plan whose result a full disk refused."""
+        with self._lock:
+            waiting = dict(self._disk_waiting)
+        if not waiting or not self.has_room():
+            return []
+        done = []
+        for plan_id, why in waiting.items():
+            try:
+                self._requeue(plan_id, f"planned again: its result was refused ({why})")
+            except (IllegalTransitionError, NotFoundError):
+                pass  # cancelled or deleted meanwhile: nothing to plan
+            except Exception as exc:  # still no room for the record: next sweep
+                log.info("plan %s still waits for disk space: %s", plan_id, describe(exc))
+                continue
+            else:
+                self.submit(plan_id)
+            with self._lock:
+                self._disk_waiting.pop(plan_id, None)
+            done.append(plan_id)
+        if done:
+            log.warning("re-queued %d plan(s) after the disk had room again: %s", len(done), done)
+        return done
 
     # ------------------------------------------------------------------- jobs
     def submit(self, plan_id: str) -> None:
@@ -581,6 +615,19 @@ class JobRunner:
                     return
                 except IllegalTransitionError as ill:
                     log.info("plan %s finished but is now %s", plan_id, ill.state)
+                    return
+                except Exception as store_exc:
+                    if not is_disk_full(store_exc):
+                        raise
+                    # Not lost and not stuck: it says why it waits, and the
+                    # sweeper plans it again when there is room.
+                    log.error("plan %s: result refused by a full disk; re-queued later", plan_id)
+                    with self._lock:
+                        self._disk_waiting[plan_id] = "disk full"
+                    with contextlib.suppress(Exception):
+                        self.store.set_progress(
+                            plan_id, 0.0, "waiting for disk space: the result could not be stored"
+                        )
                     return
                 self.events.publish("plan", _event_body(rec))
             elif isinstance(exc, CancelledError):

@@ -43,6 +43,14 @@ class Settings(BaseSettings):
         "leaves it off",
     )
     max_upload_mb: float = Field(256.0, gt=0, description="largest accepted cloud upload (MiB)")
+    disk_reserve_mb: float = Field(
+        32.0,
+        ge=0,
+        le=1_000_000,
+        description="free space on the data directory's file system kept for the audit "
+        "log and the E-stop: a write request that would leave less answers 507 before it "
+        "starts (the E-stop, clear-estop and deletions are never refused for space)",
+    )
     token_file: Path | None = Field(
         None,
         description="where the first-start admin token is also written (mode 0600); "
@@ -146,6 +154,10 @@ class Settings(BaseSettings):
     @property
     def max_upload_bytes(self) -> int:
         return int(self.max_upload_mb * 1024 * 1024)
+
+    @property
+    def disk_reserve_bytes(self) -> int:
+        return int(self.disk_reserve_mb * 1024 * 1024)
 
     @property
     def db_path(self) -> Path:

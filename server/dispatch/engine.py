@@ -44,6 +44,7 @@ from robots.adapters.streamer import ExecState, Outcome, Streamer, StreamFault
 from robots.protocol.commands import CommandError
 from robots.protocol.messages import LINK_FAULTS, FaultFlag, State
 from robots.protocol.program import Program
+from server.diskspace import describe
 from server.lifecycle import ExecutionState, IllegalTransitionError, PlanState
 from server.settings import Settings
 from server.store import ExecutionRecord, NotFoundError, Store
@@ -392,6 +393,17 @@ class DispatchEngine:
         """Clear the E-stop latch; waits (bounded) until the robot itself reports it cleared,
         so the answer says what the robot says, not only what the host sent."""
         r = self._robot(name)
+        # Nothing moves unrecorded: the record is written before the latch is
+        # cleared, and a store that refuses it leaves the robot E-stopped.
+        try:
+            self.store.audit(actor, "robot", name, "clear-estop")
+        except Exception as exc:
+            log.exception("clear-estop of %s not recorded; the latch stays", name)
+            raise DispatchError(
+                f"{name} stays E-stopped: the clear-estop could not be recorded "
+                f"({describe(exc)}); free space on the server and try again",
+                409,
+            ) from None
         r.link.clear_estop()
         if r.link.state in CONNECTED_STATES:
             r.link.wait_for(
@@ -401,7 +413,6 @@ class DispatchEngine:
                 ),
                 wait_s,
             )
-        self.store.audit(actor, "robot", name, "clear-estop")
         self.events.publish("robot", {"name": name, "estop_latched": False})
         return self.robot_status(name)
 

@@ -32,6 +32,24 @@ async def health(services: Annotated[Services, Depends(get_services)]) -> dict[s
         "kind_errors": import_errors(),
         "scene": {"running": bool(scene and scene.running), "path": "/scene/"},
         "jobs": {"mode": services.jobs.mode, "running": services.jobs.running_count()},
+        "disk": _disk(services),
+    }
+
+
+def _disk(services: Services) -> dict[str, Any]:
+    """The data volume: ``ok``, ``low`` (under 512 MiB above the reserve) or ``full``
+    (at the reserve: writes answer 507), and safety records not yet written."""
+    gauge = services.disk
+    backlog = services.audit_backlog
+    pending = backlog.pending() if backlog is not None else 0
+    if gauge is None:
+        return {"state": "ok", "free_mb": None, "audit_pending": pending}
+    reading = gauge.read()
+    return {
+        "state": reading.state,
+        "free_mb": round(reading.free_bytes / 2**20, 1),
+        "reserve_mb": round(gauge.reserve_bytes / 2**20, 1),
+        "audit_pending": pending,
     }
 
 

@@ -9,6 +9,7 @@ from fastapi.concurrency import run_in_threadpool
 from pydantic import BaseModel, Field, field_validator
 
 from server.auth import Admin, Operator, Principal, Viewer, token_from_request
+from server.diskspace import describe
 from server.dispatch import DispatchError
 from server.linkservice import LinkServiceClient
 from server.ownership.peers import FORWARDED_HEADER
@@ -209,13 +210,26 @@ def takeover(
 def clear_estop(
     name: str, services: Svc, who: Operator, request: Request, response: Response
 ) -> dict[str, Any]:
-    if services.peers is not None and services.peers.store.take_estops([name]):
+    """Clear the robot's E-stop latch (and one held for it): recorded first, so a
+    store that cannot record it (a full disk) leaves the robot stopped (409)."""
+    if services.peers is not None and name in services.peers.store.held_estops():
         # An E-stop held for the robot's next driver is cleared with it.
-        services.store.audit(who.actor, "robot", name, "clear-held-estop")
+        try:
+            services.store.audit(who.actor, "robot", name, "clear-held-estop")
+        except Exception as exc:
+            raise HTTPException(
+                409,
+                detail=f"{name} stays E-stopped: the clear-estop could not be recorded "
+                f"({describe(exc)}); free space on the server and try again",
+            ) from None
+        services.peers.store.take_estops([name])
     fwd = _forward(services, request, response, name)
     if fwd is not None:
         return fwd
-    return engine(services).clear_estop(name, who.actor)
+    try:
+        return engine(services).clear_estop(name, who.actor)
+    except DispatchError as exc:
+        raise _refuse(exc) from None
 
 
 @router.post("/plans/{plan_id}/dispatch", status_code=201)

@@ -11,6 +11,7 @@ from fastapi import APIRouter, Depends, HTTPException, Query, Request, status
 from pydantic import BaseModel, Field
 
 from server.auth import Principal, Viewer, authenticate, token_from_request
+from server.diskspace import describe
 from server.ownership.peers import FORWARDED_HEADER
 from server.routers.responses import AUTH
 from server.services import Services, get_services
@@ -90,10 +91,13 @@ def trigger_estop(
             log.exception("could not hold the E-stop for the unreached robots")
             errors.append(f"holding the E-stop for {', '.join(unreached)}: {exc}")
     why = f"{reason} (forwarded by server {forwarded_by})" if forwarded_by else reason
-    services.store.audit(actor, "robot", target, "estop", why)
+    # The robots are stopped whatever the store does: the event goes out first,
+    # then the record, kept in memory and written later if the store refuses it.
     services.events.publish("estop", {"robot": target, "reason": reason, "by": actor})
+    audit = record_safety(services, actor, "robot", target, "estop", why)
     return {
         "robot": target,
+        "audit": audit,
         "handlers": reached,
         "errors": errors,
         "server": me,
@@ -103,6 +107,21 @@ def trigger_estop(
         "held": held,
         "servers": forwarded,
     }
+
+
+def record_safety(
+    services: Services, actor: str, entity: str, entity_id: str, action: str, reason: str
+) -> str:
+    """Audit a safety action already taken: "recorded", or why not and that it is kept."""
+    backlog = services.audit_backlog
+    if backlog is None:
+        try:
+            services.store.audit(actor, entity, entity_id, action, reason)
+        except Exception as exc:
+            log.exception("the %s record could not be written", action)
+            return f"failed: {describe(exc)}"
+        return "recorded"
+    return str(backlog.record(actor, entity, entity_id, action, reason))
 
 
 #: E-stop requests never queue behind other requests for a worker thread: they

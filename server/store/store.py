@@ -155,17 +155,28 @@ class Store:
         from_state: str | None = None,
         to_state: str | None = None,
         reason: str = "",
+        ts: str | None = None,
     ) -> None:
         conn.execute(
             "INSERT INTO audit_events (ts, actor, entity, entity_id, action, from_state, "
             "to_state, reason) VALUES (?,?,?,?,?,?,?,?)",
-            (utcnow(), actor, entity, entity_id, action, from_state, to_state, reason),
+            (ts or utcnow(), actor, entity, entity_id, action, from_state, to_state, reason),
         )
 
-    def audit(self, actor: str, entity: str, entity_id: str, action: str, reason: str = "") -> None:
-        """Record an event that is not a state transition (E-stop, token use…)."""
+    def audit(
+        self,
+        actor: str,
+        entity: str,
+        entity_id: str,
+        action: str,
+        reason: str = "",
+        *,
+        ts: str | None = None,
+    ) -> None:
+        """Record an event that is not a state transition (E-stop, token use…);
+        ``ts``: when it happened, if earlier than now (a record written late)."""
         with self.db.transaction() as conn:
-            self._audit(conn, actor, entity, entity_id, action, reason=reason)
+            self._audit(conn, actor, entity, entity_id, action, reason=reason, ts=ts)
 
     def list_audit(
         self, entity: str | None = None, entity_id: str | None = None, limit: int = 200
