@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import gc
 import logging
+import sqlite3
 import sys
 from collections.abc import AsyncIterator
 from contextlib import asynccontextmanager
@@ -13,13 +14,21 @@ from typing import Any
 import fastapi_offline
 from fastapi import FastAPI, Request
 from fastapi.openapi.docs import get_swagger_ui_html
-from fastapi.responses import FileResponse, HTMLResponse, JSONResponse, RedirectResponse
+from fastapi.responses import (
+    FileResponse,
+    HTMLResponse,
+    JSONResponse,
+    RedirectResponse,
+)
 from fastapi.staticfiles import StaticFiles
 from starlette.types import ASGIApp, Message, Receive, Scope, Send
 
 from planners.errors import PlannerError
-from server import __version__
-from server.auth import bootstrap_admin
+from server import __version__, log_redaction
+from server.audit_backlog import AuditBacklog
+from server.auth import CsrfGuard, bootstrap_admin
+from server.disk_guard import DiskReserve, disk_full_handler
+from server.diskspace import DiskGauge
 from server.events import EventBus
 from server.jobs import make_job_runner
 from server.kinds import registry
@@ -41,10 +50,11 @@ from server.routers import (
 )
 from server.routers.responses import conform_openapi
 from server.scene import proxy
+from server.security_headers import SecurityHeaders
 from server.services import Services
 from server.settings import Settings, get_settings
 from server.store import NotFoundError, Store
-from server.store.cleanup import cleanup_leftovers
+from server.store.cleanup import clean_at_start
 
 log = logging.getLogger(__name__)
 
@@ -144,12 +154,16 @@ def create_app(settings: Settings | None = None, *, start_scene: bool | None = N
     """Build the app; services start in its lifespan (``TestClient`` as a context manager)."""
     settings = settings or get_settings()
     run_scene = settings.scene_port != 0 if start_scene is None else start_scene
+    log_redaction.install()  # no token in uvicorn's or httpx's request lines
+    disk = DiskGauge(settings.data, settings.disk_reserve_bytes)
 
     @asynccontextmanager
     async def lifespan(app: FastAPI) -> AsyncIterator[None]:
         _check_robot_names(settings)  # before anything starts
         store = Store(settings.data, database_url=settings.database_url)
-        cleanup_leftovers(store)  # crash leftovers (issue #12 §6), before jobs/uploads run
+        # Crash leftovers (issue #12 §6), before jobs/uploads run; the lock held
+        # from here on tells a server starting beside this one what not to touch.
+        run_locks = clean_at_start(store)
         bus = EventBus()
         # --- PostgreSQL store (issue #17 §1): relay this bus's events to and from
         # every other server sharing the database (LISTEN/NOTIFY, server/events_pg.py).
@@ -167,6 +181,9 @@ def create_app(settings: Settings | None = None, *, start_scene: bool | None = N
         server_id = new_server_id()
         jobs = make_job_runner(store, bus, settings, server_id)
         services = Services(settings=settings, store=store, events=bus, jobs=jobs)
+        services.disk = disk
+        services.audit_backlog = AuditBacklog(store)
+        jobs.has_room = lambda: disk.room_for(0)
         from server.store.webhooks import WebhookStore
         from server.webhooks import WebhookDispatcher
 
@@ -273,7 +290,9 @@ def create_app(settings: Settings | None = None, *, start_scene: bool | None = N
             services.outcomes.stop()
             if pg_events is not None:  # PostgreSQL event relay (issue #17 §1)
                 pg_events.stop()
+            services.audit_backlog.stop()
             store.close()
+            run_locks.release()
 
     app = FastAPI(
         title="SteelPath",
@@ -284,6 +303,18 @@ def create_app(settings: Settings | None = None, *, start_scene: bool | None = N
         openapi_url="/openapi.json",
     )
     app.add_middleware(BodySizeLimit, limit_bytes=lambda: settings.max_upload_bytes)
+    # Outermost of the two: a full disk refuses a write before its body is read.
+    app.add_middleware(DiskReserve, gauge=disk)
+    # Cookie-authenticated writes need this origin and the CSRF token (server.auth).
+    app.add_middleware(CsrfGuard)
+    # Outermost: every response, refusals by the middlewares above included.
+    app.add_middleware(SecurityHeaders)
+    app.state.disk = disk
+
+    # A write that failed for space (SQLite, a file) is a 507 with a message, not a
+    # bare 500; any other such error is re-raised to the 500 handler as before.
+    app.add_exception_handler(sqlite3.OperationalError, disk_full_handler)
+    app.add_exception_handler(OSError, disk_full_handler)
 
     @app.exception_handler(NotFoundError)
     async def _not_found(_: Request, exc: NotFoundError) -> JSONResponse:

@@ -13,12 +13,25 @@ It compares the expiry with the clock and the store's in-process revocation
 counter every ``poll_s`` (0.25 s), and re-reads the token row on a change of
 that counter or every ``recheck_s`` (0.75 s, so a revocation made
 by another process such as ``steelpath token revoke`` closes it within 1 s too).
+
+The cookie is an ambient credential: a browser sends it with a request any
+page makes, including a page on another port of the same host (which is
+*same-site*, so ``SameSite=Strict`` lets it through).  :class:`CsrfGuard`
+therefore refuses an unsafe request (POST, PUT, PATCH, DELETE) authenticated
+by the cookie unless it comes from this server's own origin *and* carries the
+double-submit token: the ``steelpath_csrf`` cookie's value (random, readable
+by the console's script) in an ``X-CSRF-Token`` header.  A request with an
+``Authorization: Bearer`` header carries no ambient credential and is not
+checked, so API clients (and their E-stop) are unaffected.
 """
 
 from __future__ import annotations
 
 import asyncio
 import hashlib
+import hmac
+import json
+import logging
 import os
 import re
 import secrets
@@ -28,16 +41,24 @@ from dataclasses import dataclass
 from datetime import UTC, datetime, timedelta
 from pathlib import Path
 from typing import Annotated
+from urllib.parse import urlsplit
 
 import anyio
-from fastapi import Depends, HTTPException, Request, status
+from fastapi import Depends, HTTPException, Request, Response, status
+from starlette.requests import cookie_parser
+from starlette.types import ASGIApp, Message, Receive, Scope, Send
 
 from server.services import Services, get_services
 from server.store import Store
 
+log = logging.getLogger(__name__)
+
 ROLES: dict[str, int] = {"viewer": 0, "operator": 1, "admin": 2}
 COOKIE = "steelpath_token"
 TOKEN_PREFIX = "sp_"
+#: The double-submit CSRF cookie (not HttpOnly: the console's script reads it).
+CSRF_COOKIE = "steelpath_csrf"
+CSRF_HEADER = "X-CSRF-Token"
 
 
 def hash_token(token: str) -> str:
@@ -338,3 +359,193 @@ def require(role: str):
 Viewer = Annotated[Principal, Depends(require("viewer"))]
 Operator = Annotated[Principal, Depends(require("operator"))]
 Admin = Annotated[Principal, Depends(require("admin"))]
+
+
+# ------------------------------------------------------------------------ CSRF
+#: Methods that change state; a cookie-authenticated one must pass :class:`CsrfGuard`.
+UNSAFE_METHODS = frozenset({"POST", "PUT", "PATCH", "DELETE"})
+#: Signing in authenticates with the token in its body, not with the cookie
+#: (which a browser may still hold from an expired session): not checked.
+SIGN_IN = ("POST", "/api/v1/session")
+_DEFAULT_PORTS = {"http": 80, "https": 443}
+_OriginKey = tuple[str, str, int]
+
+
+def new_csrf_token() -> str:
+    return secrets.token_urlsafe(32)
+
+
+def csrf_set_cookie(value: str, *, secure: bool) -> str:
+    """A ``Set-Cookie`` header value for the CSRF cookie: SameSite=Strict, not HttpOnly."""
+    return f"{CSRF_COOKIE}={value}; Path=/; SameSite=Strict" + ("; Secure" if secure else "")
+
+
+def set_csrf_cookie(response: Response, *, secure: bool) -> None:
+    """Give the browser a fresh CSRF cookie (at sign-in, beside the token cookie)."""
+    response.set_cookie(
+        CSRF_COOKIE, new_csrf_token(), httponly=False, samesite="strict", secure=secure, path="/"
+    )
+
+
+def _is_bearer(authorization: str) -> bool:
+    """Whether :func:`token_from_request` takes the token from this header (not the cookie)."""
+    scheme, _, value = authorization.partition(" ")
+    return scheme.lower() == "bearer" and bool(value.strip())
+
+
+def _origin_key(scheme: str, netloc: str) -> _OriginKey | None:
+    """``(scheme, host, port)`` with the scheme's default port filled in, or ``None``."""
+    if scheme not in _DEFAULT_PORTS or not netloc:
+        return None
+    try:
+        parts = urlsplit(f"//{netloc}")
+        host, port = parts.hostname, parts.port
+    except ValueError:
+        return None
+    if not host:
+        return None
+    return scheme, host.lower(), port or _DEFAULT_PORTS[scheme]
+
+
+def _own_origins(scope: Scope, headers: dict[str, str]) -> tuple[set[_OriginKey], str]:
+    """This server's origin(s) as the browser sees it, and one of them as text.
+
+    The host (and port) is the request's ``Host``.  The scheme is the
+    connection's, or ``X-Forwarded-Proto``'s where a proxy ends TLS in front of
+    the server: a page cannot set that header on a cross-origin request
+    without a CORS preflight, which this server never grants.
+    """
+    host = headers.get("host", "")
+    schemes = [str(scope.get("scheme", "http"))]
+    forwarded = headers.get("x-forwarded-proto", "").split(",")[0].strip().lower()
+    if forwarded in _DEFAULT_PORTS and forwarded not in schemes:
+        schemes.append(forwarded)
+    keys = {k for k in (_origin_key(s, host) for s in schemes) if k is not None}
+    return keys, f"{schemes[-1]}://{host}"
+
+
+def csrf_refusal(scope: Scope, headers: dict[str, str], cookies: dict[str, str]) -> str | None:
+    """Why a cookie-authenticated write is refused, or ``None`` when it passes.
+
+    ``headers`` are lower-case names; ``cookies`` the request's cookies.
+    """
+    origin = headers.get("origin")
+    own, own_text = _own_origins(scope, headers)
+    hint = "API clients: send 'Authorization: Bearer <token>' instead of the session cookie"
+    if origin is not None and origin != "null":
+        try:
+            parts = urlsplit(origin)
+            key = _origin_key(parts.scheme, parts.netloc)
+        except ValueError:
+            key = None
+        if key is None or key not in own:
+            return (
+                f"CSRF origin check failed: Origin {origin!r} is not this server's origin "
+                f"{own_text!r}; a write with the session cookie must come from the console ({hint})"
+            )
+    else:
+        # A browser sends "Origin: null" on a same-origin POST from a page whose
+        # Referrer-Policy is no-referrer (Fetch standard); Sec-Fetch-Site, which
+        # no page can set, still says where the request came from.
+        site = headers.get("sec-fetch-site")
+        if site != "same-origin":
+            why = "Origin is null" if origin == "null" else "no Origin header"
+            return (
+                f"CSRF origin check failed: {why} and Sec-Fetch-Site is {site!r}, "
+                f"not 'same-origin' ({hint})"
+            )
+    expected = cookies.get(CSRF_COOKIE, "")
+    sent = headers.get(CSRF_HEADER.lower(), "")
+    if not expected or not sent or not hmac.compare_digest(sent.encode(), expected.encode()):
+        if not expected:
+            what = "the steelpath_csrf cookie is missing"
+        elif not sent:
+            what = f"the {CSRF_HEADER} header is missing"
+        else:
+            what = f"the {CSRF_HEADER} header does not match the steelpath_csrf cookie"
+        return (
+            f"CSRF token check failed: {what}; send the "
+            "steelpath_csrf cookie's value in it (the console does: reload it), or send "
+            "'Authorization: Bearer <token>' instead of the session cookie"
+        )
+    return None
+
+
+class CsrfGuard:
+    """ASGI middleware: cookie-authenticated writes need this origin and the CSRF token.
+
+    Refused with 403 and a JSON ``detail`` naming the failed check.  Requests
+    with a bearer token, every GET/HEAD/OPTIONS, and signing in (``POST
+    /api/v1/session``, authenticated by the token in its body) pass untouched.
+    A safe request for the console page, or one carrying the session cookie,
+    that lacks the CSRF cookie gets one (``Set-Cookie``), so a console signed
+    in before the cookie existed, or one whose cookie was cleared, has it
+    again at its next read.  Pure ASGI, not ``BaseHTTPMiddleware``: the E-stop
+    request passes through it and must not wait for a task hop.
+    """
+
+    def __init__(self, app: ASGIApp) -> None:
+        self.app = app
+
+    async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:
+        if scope["type"] != "http":
+            await self.app(scope, receive, send)
+            return
+        headers: dict[str, str] = {}
+        for raw_name, raw_value in scope.get("headers") or []:
+            name, value = raw_name.decode("latin-1").lower(), raw_value.decode("latin-1")
+            if name == "cookie" and name in headers:  # HTTP/2 sends one header per cookie
+                headers[name] += "; " + value
+            else:
+                headers.setdefault(name, value)
+        cookies = cookie_parser(headers.get("cookie", ""))
+        if scope["method"] in UNSAFE_METHODS:
+            if (
+                cookies.get(COOKIE)
+                and not _is_bearer(headers.get("authorization", ""))
+                and (scope["method"], scope["path"]) != SIGN_IN
+            ):
+                refusal = csrf_refusal(scope, headers, cookies)
+                if refusal is not None:
+                    log.warning(
+                        "refused a cookie-authenticated %s %s (Origin %r): %s",
+                        scope["method"],
+                        scope["path"],
+                        headers.get("origin"),
+                        refusal.split(":")[0],
+                    )
+                    await _send_json(send, 403, {"detail": refusal})
+                    return
+            await self.app(scope, receive, send)
+            return
+        if CSRF_COOKIE in cookies or (scope["path"] != "/" and COOKIE not in cookies):
+            await self.app(scope, receive, send)
+            return
+        own, _ = _own_origins(scope, headers)
+        secure = any(key[0] == "https" for key in own) or scope.get("scheme") == "https"
+        cookie = csrf_set_cookie(new_csrf_token(), secure=secure).encode("latin-1")
+
+        async def send_with_cookie(message: Message) -> None:
+            if message["type"] == "http.response.start":
+                message = {
+                    **message,
+                    "headers": [*message.get("headers", []), (b"set-cookie", cookie)],
+                }
+            await send(message)
+
+        await self.app(scope, receive, send_with_cookie)
+
+
+async def _send_json(send: Send, status_code: int, body: dict[str, str]) -> None:
+    data = json.dumps(body).encode()
+    await send(
+        {
+            "type": "http.response.start",
+            "status": status_code,
+            "headers": [
+                (b"content-type", b"application/json"),
+                (b"content-length", str(len(data)).encode()),
+            ],
+        }
+    )
+    await send({"type": "http.response.body", "body": data})

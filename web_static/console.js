@@ -5,13 +5,46 @@ const API = "/api/v1";
 const $ = (sel) => document.querySelector(sel);
 const state = { kinds: {}, plans: new Map(), selected: null, revising: null, me: null, events: null, clouds: [] };
 
+// Writes carry the double-submit CSRF token: the steelpath_csrf cookie's value,
+// echoed in X-CSRF-Token (the server refuses a cookie-authenticated write
+// without it, or from another origin).
+const WRITES = new Set(["POST", "PUT", "PATCH", "DELETE"]);
+
+function csrfCookie() {
+  const c = document.cookie.split("; ").find((s) => s.startsWith("steelpath_csrf="));
+  return c ? decodeURIComponent(c.slice("steelpath_csrf=".length)) : "";
+}
+
+async function csrfToken() {
+  let token = csrfCookie();
+  if (!token) {
+    // Cleared or never set: any read gets the server to set it again.
+    await fetch(API + "/health", { credentials: "same-origin" }).catch(() => {});
+    token = csrfCookie();
+  }
+  return token;
+}
+
+// fetch() for the console: same-origin credentials and, on a write, the CSRF
+// header.  referrerPolicy "same-origin" keeps the Origin header on our own
+// writes, which the page's Referrer-Policy (no-referrer) would blank to "null".
+async function apiFetch(url, opts = {}) {
+  const method = (opts.method || "GET").toUpperCase();
+  const o = { credentials: "same-origin", ...opts, headers: { ...(opts.headers || {}) } };
+  if (WRITES.has(method)) {
+    o.headers["X-CSRF-Token"] = await csrfToken();
+    o.referrerPolicy = "same-origin";
+  }
+  return fetch(url, o);
+}
+
 async function api(method, path, body, isForm) {
-  const opts = { method, credentials: "same-origin", headers: {} };
+  const opts = { method, headers: {} };
   if (body !== undefined) {
     if (isForm) opts.body = body;
     else { opts.headers["Content-Type"] = "application/json"; opts.body = JSON.stringify(body); }
   }
-  const r = await fetch(API + path, opts);
+  const r = await apiFetch(API + path, opts);
   if (r.status === 401) { showLogin(); throw new Error("not signed in"); }
   const text = await r.text();
   let data = null;
@@ -31,6 +64,8 @@ function el(tag, attrs = {}, ...children) {
   const e = document.createElement(tag);
   for (const [k, v] of Object.entries(attrs)) {
     if (k === "class") e.className = v; else if (k.startsWith("on")) e.addEventListener(k.slice(2), v);
+    // CSSOM, not a style attribute: the Content-Security-Policy allows no inline styles.
+    else if (k === "style") e.style.cssText = v;
     else e.setAttribute(k, v);
   }
   for (const c of children) e.append(c instanceof Node ? c : document.createTextNode(String(c)));
@@ -50,8 +85,8 @@ $("#login-form").addEventListener("submit", async (ev) => {
   ev.preventDefault();
   $("#login-error").textContent = "";
   try {
-    const r = await fetch(API + "/session", {
-      method: "POST", credentials: "same-origin",
+    const r = await apiFetch(API + "/session", {
+      method: "POST",
       headers: { "Content-Type": "application/json" },
       body: JSON.stringify({ token: $("#login-token").value.trim() }),
     });
@@ -63,7 +98,7 @@ $("#login-form").addEventListener("submit", async (ev) => {
 });
 
 $("#logout").addEventListener("click", async () => {
-  await fetch(API + "/session", { method: "DELETE", credentials: "same-origin" });
+  await apiFetch(API + "/session", { method: "DELETE" });
   location.reload();
 });
 

@@ -14,12 +14,14 @@ from pydantic import BaseModel, Field
 
 from server.auth import (
     COOKIE,
+    CSRF_COOKIE,
     MAX_LIFETIME_S,
     Admin,
     TokenRefused,
     Viewer,
     create_token,
     resolve,
+    set_csrf_cookie,
 )
 from server.services import Services, get_services
 
@@ -69,7 +71,10 @@ class SessionRequest(BaseModel):
 def login(
     req: SessionRequest, request: Request, services: Svc, response: Response
 ) -> dict[str, Any]:
-    """Exchange a token for an HttpOnly session cookie (console, scene, events)."""
+    """Exchange a token for an HttpOnly session cookie (console, scene, events).
+
+    A fresh ``steelpath_csrf`` cookie comes with it: the console echoes it in
+    ``X-CSRF-Token`` on every write (``server.auth.CsrfGuard``)."""
     try:
         principal = resolve(services.store, req.token)
     except TokenRefused as exc:
@@ -82,6 +87,7 @@ def login(
         secure=request.url.scheme == "https",
         path="/",
     )
+    set_csrf_cookie(response, secure=request.url.scheme == "https")
     return {"name": principal.name, "role": principal.role}
 
 
@@ -93,5 +99,6 @@ def whoami(who: Viewer) -> dict[str, Any]:
 @router.delete("/session", status_code=204)
 def logout(response: Response) -> Response:
     response.delete_cookie(COOKIE, path="/")
+    response.delete_cookie(CSRF_COOKIE, path="/")
     response.status_code = 204
     return response

@@ -1,14 +1,30 @@
-"""Leftovers after a crash (issue #12 §6): temp files and unreferenced arrays go, referenced stay."""
+"""Leftovers after a crash (issue #12 §6): temporaries and unreferenced files go,
+referenced data stays, and a server starting beside a running one leaves its
+writes in progress alone."""
 
 from __future__ import annotations
 
+import contextlib
+import io
 import logging
+import os
+import tempfile
+import threading
+import time
+from collections.abc import Iterator
 from pathlib import Path
+from typing import Any
 
+import httpx
 import numpy as np
+import pytest
+from PIL import Image
 
 from server.store import Store
-from server.store.cleanup import cleanup_leftovers
+from server.store.cleanup import LOCK_NAME, STALE_S, RunLock, cleanup_leftovers
+from tests.conftest import Api
+from tests.support.serve import ServeProcess
+from tests.support.waiting import wait_for
 
 
 def _plant(data: Path) -> dict[str, Path]:
@@ -61,3 +77,224 @@ def test_app_start_cleans_the_data_directory(make_api, tmp_path) -> None:
     planted = _plant(data)
     make_api(data=data)
     assert not any(p.exists() for p in planted.values())
+
+
+# ------------------------------------------------- every kind of temporary (issue: crash leftovers)
+def _image() -> bytes:
+    buf = io.BytesIO()
+    Image.new("RGB", (4, 3), (180, 90, 40)).save(buf, format="PNG")
+    return buf.getvalue()
+
+
+def _write(path: Path, size: int = 1024) -> Path:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_bytes(os.urandom(size))
+    return path
+
+
+def _plant_every_kind(data: Path, temp: Path, tag: str) -> dict[str, Path]:
+    """One leftover of each kind the server writes, named with ``tag``: what a
+    crash in the middle of each write leaves (names as the server makes them)."""
+    hexes = tag.encode().hex().ljust(12, "0")[:12]
+    imp_empty = data / "uploads" / f"import-{hexes}"
+    imp_empty.mkdir(parents=True)  # the archive's unpacking had not begun
+    imp_half = data / "uploads" / f"import-{hexes[::-1]}"
+    _write(imp_half / ".tmp-0")
+    _write(imp_half / ".tmp-1", 4096)
+    bag = temp / f"steelpath-bag-{tag}"
+    _write(bag / "ex_1" / "ex_1_0.db3")
+    return {
+        "photo_part": _write(data / "photos" / f"ph_{hexes}.part", 2 * 1024 * 1024),
+        "orphan_photo": _write(data / "photos" / f"ph_{hexes[::-1]}"),
+        "import_empty": imp_empty,
+        "import_half": imp_half,
+        "array_tmp": _write(data / "arrays" / "clouds" / f".tmp-{tag}.npy"),
+        "spool": _write(data / "uploads" / f".tmp-upload-{tag}.part"),
+        "secret_tmp": _write(data / "robots" / f".ara.key.{len(tag)}4242.tmp", 65),
+        "export": _write(temp / f"steelpath-export-{tag}.zip"),
+        "bag": bag,
+        "e57": _write(temp / f".tmp-e57-{tag}.e57"),
+    }
+
+
+def _age(paths: dict[str, Path], seconds: float) -> None:
+    """Make ``paths`` (and what directories hold) look last changed ``seconds`` ago."""
+    then = time.time() - seconds
+    for p in paths.values():
+        for q in [p, *(p.rglob("*") if p.is_dir() else [])]:
+            os.utime(q, (then, then))
+
+
+def _real_data(api: Api) -> dict[str, Any]:
+    """A cloud, a planned plan with arrays, a finding with a photo: what must survive."""
+    cloud = api.post("/api/v1/clouds", json={"sample": "demo_plane"}).json()
+    plan = api.wait(api.submit("ara.inspect", {"sample_seed": 2})["id"], timeout=120)
+    assert plan["state"] == "planned" and plan["arrays"], plan.get("error")
+    member = plan["result"]["members"][0]
+    finding = api.post(
+        "/api/v1/findings",
+        json={
+            "plan_id": plan["id"],
+            "member_id": member["id"],
+            "point_m": list(np.asarray(member["faces"][0]["outline"]).mean(axis=0)),
+            "type": "corrosion",
+            "condition_state": 2,
+        },
+    ).json()
+    png = _image()
+    photo = api.post(
+        f"/api/v1/findings/{finding['id']}/photos", files={"file": ("a.png", png, "image/png")}
+    ).json()
+    store = api.services.store
+    files = [store.arrays.path(store.get_cloud(cloud["id"]).array_file)]
+    files += [store.arrays.path(rel) for rel in store.get_plan(plan["id"]).arrays.values()]
+    files += [store.data_dir / "photos" / photo["id"], store.data_dir / "robots" / "ara.key"]
+    return {
+        "cloud": cloud,
+        "plan": plan,
+        "photo": photo,
+        "png": png,
+        "bytes": {p: p.read_bytes() for p in files},
+    }
+
+
+def _check_real_data(api: Api, real: dict[str, Any]) -> None:
+    assert {p: p.read_bytes() for p in real["bytes"]} == real["bytes"]
+    assert api.get(f"/api/v1/clouds/{real['cloud']['id']}/points.npy", "viewer").status_code == 200
+    plan = real["plan"]
+    for name in plan["arrays"]:
+        r = api.get(f"/api/v1/plans/{plan['id']}/arrays/{name}", "viewer")
+        assert r.status_code == 200, name
+    got = api.get(real["photo"]["url"], "viewer")
+    assert got.status_code == 200 and got.content == real["png"]
+
+
+@pytest.fixture
+def system_temp(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Path:
+    """A system temporary directory of this test's own (the server's ``tempfile``)."""
+    temp = tmp_path / "systmp"
+    temp.mkdir()
+    monkeypatch.setattr(tempfile, "tempdir", str(temp))
+    return temp
+
+
+def test_a_restart_removes_every_kind_of_temporary(
+    make_api: Any, tmp_path: Path, system_temp: Path, caplog: pytest.LogCaptureFixture
+) -> None:
+    data = tmp_path / "var"
+    first = make_api(data=data)
+    real = _real_data(first)
+    first.client.__exit__(None, None, None)
+    planted = _plant_every_kind(data, system_temp, "crash")
+    unrelated = [
+        _write(system_temp / "other-program.zip"),
+        _write(data / "uploads" / "notes.txt"),
+        _write(data / "photos" / "README"),
+    ]
+    with caplog.at_level(logging.WARNING, logger="server.store.cleanup"):
+        second = make_api(data=data)
+    left = {k: p for k, p in planted.items() if p.exists()}
+    assert not left, left
+    for p in planted.values():
+        assert p.name in caplog.text
+    assert all(p.exists() for p in unrelated)
+    _check_real_data(second, real)
+
+
+def test_beside_a_running_server_only_stale_leftovers_go(
+    make_api: Any, tmp_path: Path, system_temp: Path
+) -> None:
+    """A second server sharing the data directory must not delete what the
+    first is writing: fresh temporaries stay, ones untouched for longer than
+    STALE_S go; once the first has stopped, a start removes the rest."""
+    data = tmp_path / "var"
+    first = make_api(data=data)
+    writing = _plant_every_kind(data, system_temp, "inflight")
+    stale = _plant_every_kind(data, system_temp, "stale")
+    _age(stale, STALE_S + 60)
+    second = make_api(data=data)
+    assert all(p.exists() for p in writing.values())
+    left = {k: p for k, p in stale.items() if p.exists()}
+    assert not left, left
+    second.client.__exit__(None, None, None)
+    first.client.__exit__(None, None, None)
+    make_api(data=data)  # alone now
+    left = {k: p for k, p in writing.items() if p.exists()}
+    assert not left, left
+
+
+def test_the_lock_says_whether_another_server_runs(tmp_path: Path) -> None:
+    path = tmp_path / LOCK_NAME
+    a = RunLock.take(path)
+    assert a.alone
+    a.share()
+    b = RunLock.take(path)
+    assert not b.alone  # a still runs
+    a.release()
+    b.release()
+    c = RunLock.take(path)
+    assert c.alone  # a killed process holds nothing: the kernel dropped its lock
+    c.release()
+
+
+def test_kill_9_during_an_upload_then_restart(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A real ``steelpath serve`` killed (SIGKILL) while it spools an upload, with
+    a photo, an import and an export half-written beside it: the next start
+    removes them all and keeps what was stored."""
+    temp = tmp_path / "systmp"
+    temp.mkdir()
+    monkeypatch.setenv("TMPDIR", str(temp))  # the servers' tempfile.gettempdir()
+    data = tmp_path / "var"
+    data.mkdir()
+    a = ServeProcess(data, "a")
+    try:
+        _kill_during_an_upload(a, data, temp)
+    finally:
+        a.stop()
+
+
+def _kill_during_an_upload(a: ServeProcess, data: Path, temp: Path) -> None:
+    cloud = a.post("/clouds", {"sample": "demo_plane"}, status=201)
+    started = threading.Event()
+    stop = threading.Event()
+
+    def body() -> Iterator[bytes]:
+        yield b"--b\r\nContent-Disposition: form-data; name=file; filename=big.xyz\r\n\r\n"
+        while not stop.is_set():
+            yield b"0.0 0.0 0.0\n" * 20000
+            started.set()
+            time.sleep(0.05)
+
+    def upload() -> None:
+        with contextlib.suppress(httpx.HTTPError):
+            a.http.post(
+                "/clouds",
+                content=body(),
+                headers={"Content-Type": "multipart/form-data; boundary=b"},
+            )
+
+    uploader = threading.Thread(target=upload, daemon=True)
+    uploader.start()
+    spools = wait_for(
+        lambda: [p for p in (data / "uploads").glob(".tmp-upload-*.part") if p.stat().st_size],
+        60,
+        "the upload's first chunk in its spool file",
+    )
+    assert started.is_set()
+    # The other writes, caught in the middle by the same crash.
+    planted = _plant_every_kind(data, temp, "killed")
+    a.kill9()
+    stop.set()
+    uploader.join(10)
+    assert all(p.exists() for p in spools) and spools[0].stat().st_size > 0
+    b = ServeProcess(data, "b", token=a.token)
+    try:
+        left = [p for p in [*spools, *planted.values()] if p.exists()]
+        assert not left, (left, b.tail())
+        got = b.http.get(f"/clouds/{cloud['id']}/points.npy")
+        assert got.status_code == 200
+        assert np.load(io.BytesIO(got.content)).shape == (5000, 3)
+    finally:
+        b.stop()

@@ -56,6 +56,28 @@ CHROMIUM_ARGS = [
 ]
 
 
+class CspBypassingBrowser:
+    """The browser, whose new pages and contexts bypass the pages' CSP unless asked
+    not to: Playwright's ``wait_for_function`` evaluates its predicate with
+    ``eval()`` in the page, which the console's Content-Security-Policy (no
+    ``'unsafe-eval'``) forbids.  tests/browser/test_console_security.py checks the
+    policy itself, with ``bypass_csp=False``."""
+
+    def __init__(self, browser) -> None:
+        self._browser = browser
+
+    def new_page(self, **kw):
+        kw.setdefault("bypass_csp", True)
+        return self._browser.new_page(**kw)
+
+    def new_context(self, **kw):
+        kw.setdefault("bypass_csp", True)
+        return self._browser.new_context(**kw)
+
+    def __getattr__(self, name: str):
+        return getattr(self._browser, name)
+
+
 @pytest.fixture(scope="module")
 def browser():
     if not Path(CHROMIUM).exists():
@@ -66,7 +88,7 @@ def browser():
 
     with sync_playwright() as pw:
         b = pw.chromium.launch(executable_path=CHROMIUM, headless=True, args=CHROMIUM_ARGS)
-        yield b
+        yield CspBypassingBrowser(b)
         b.close()
 
 
