@@ -30,7 +30,9 @@ class Services:
     outcomes: Any = None  # server.maintenance.OutcomeRecorder
     foxglove: Any = None  # server.foxglove_live.FoxgloveLive (STEELPATH_FOXGLOVE_PORT)
     peers: Any = None  # server.ownership.peers.Peers: the other servers sharing the store
-    audit_backlog: Any = None  # server.audit_backlog.AuditBacklog: safety records kept until written
+    audit_backlog: Any = (
+        None  # server.audit_backlog.AuditBacklog: safety records kept until written
+    )
     disk: Any = None  # server.diskspace.DiskGauge: free space on the data directory
 
 
