@@ -1040,6 +1040,20 @@ function applyRole() {
   $("#readonly").hidden = false;
 }
 
+// The data volume as /health reports it: nothing when fine, a warning when low,
+// and when full that writes are refused and which safety records wait.
+function showDisk(disk) {
+  const box = $("#disk");
+  if (!disk || disk.state === "ok") { box.hidden = true; return; }
+  const free = disk.free_mb == null ? "" : ` (${disk.free_mb} MiB free)`;
+  const waiting = disk.audit_pending ? `; ${disk.audit_pending} audit record(s) waiting to be written` : "";
+  box.textContent = disk.state === "full"
+    ? `Disk full${free}: new plans and uploads are refused${waiting}`
+    : `Disk space low${free}${waiting}`;
+  box.classList.toggle("disk-full", disk.state === "full");
+  box.hidden = false;
+}
+
 // ------------------------------------------------------------------- start
 async function start() {
   const me = await api("GET", "/session");
@@ -1048,6 +1062,10 @@ async function start() {
   $("#logout").hidden = false;
   applyRole();
   const health = await fetch(API + "/health").then((r) => r.json());
+  showDisk(health.disk);
+  setInterval(() => {
+    fetch(API + "/health").then((r) => r.json()).then((h) => showDisk(h.disk)).catch(() => {});
+  }, 15000);
   await Promise.all([loadKinds(), loadSamples(), loadClouds(), loadPlans(), loadAudit(), loadRobots(), loadProposals(), loadMeasurement()]);
   openEvents();
   if (health.scene.running && me.role !== "viewer") $("#scene").src = "/scene/";
