@@ -13,6 +13,8 @@ from typing import Any
 
 import fastapi_offline
 from fastapi import FastAPI, Request
+from fastapi.exception_handlers import request_validation_exception_handler
+from fastapi.exceptions import RequestValidationError
 from fastapi.openapi.docs import get_swagger_ui_html
 from fastapi.responses import (
     FileResponse,
@@ -48,6 +50,7 @@ from server.routers import (
     tokens,
     webhooks,
 )
+from server.routers.plans import json_safe
 from server.routers.responses import conform_openapi
 from server.scene import proxy
 from server.security_headers import SecurityHeaders
@@ -315,6 +318,14 @@ def create_app(settings: Settings | None = None, *, start_scene: bool | None = N
     # bare 500; any other such error is re-raised to the 500 handler as before.
     app.add_exception_handler(sqlite3.OperationalError, disk_full_handler)
     app.add_exception_handler(OSError, disk_full_handler)
+
+    @app.exception_handler(RequestValidationError)
+    async def _invalid(request: Request, exc: RequestValidationError) -> JSONResponse:
+        # NaN or Infinity in a body (Python's json parses them) is echoed in the
+        # error's input, which strict JSON cannot send: spelled as strings, every
+        # route answers its 422 instead of a 500.
+        safe = RequestValidationError(json_safe(exc.errors()), body=json_safe(exc.body))
+        return await request_validation_exception_handler(request, safe)
 
     @app.exception_handler(NotFoundError)
     async def _not_found(_: Request, exc: NotFoundError) -> JSONResponse:

@@ -13,7 +13,7 @@ import os
 import sys
 import time
 from pathlib import Path
-from typing import Any
+from typing import Any, NoReturn
 
 DEFAULT_URL = "http://127.0.0.1:8000"
 
@@ -182,15 +182,37 @@ def _print_plan(plan: dict[str, Any]) -> None:
         print(f"  allowed actions: {', '.join(plan['allowed_actions'])}")
 
 
+def _usage_error(message: str) -> NoReturn:
+    """One line on stderr and exit status 2 (bad input, as argparse does)."""
+    print(f"error: {message}", file=sys.stderr)
+    raise SystemExit(2)
+
+
+def _refuse_constant(name: str) -> Any:
+    raise ValueError(f"{name} is not a number JSON allows")
+
+
+def _read_params(source: str) -> Any:
+    """The params JSON in file ``source`` ('-': stdin); empty text is ``{}``.
+
+    A file that cannot be read, or text that is not strict JSON (Python's
+    json would read ``NaN`` and ``Infinity``, which the request could then not
+    carry), exits 2 with one line naming the file."""
+    try:
+        text = sys.stdin.read() if source == "-" else Path(source).read_text(encoding="utf-8")
+    except OSError as exc:
+        _usage_error(f"cannot read params file {source}: {exc.strerror or exc}")
+    except UnicodeDecodeError:
+        _usage_error(f"params file {source} is not UTF-8 text")
+    try:
+        return json.loads(text, parse_constant=_refuse_constant) if text.strip() else {}
+    except ValueError as exc:  # a JSONDecodeError, or a constant refused above
+        _usage_error(f"{source} is not valid JSON: {exc}")
+
+
 def cmd_plan(args: argparse.Namespace) -> int:
     if args.plan_cmd == "submit":
-        params: dict[str, Any] = {}
-        if args.params:
-            text = sys.stdin.read() if args.params == "-" else Path(args.params).read_text()
-            try:
-                params = json.loads(text) if text.strip() else {}
-            except json.JSONDecodeError as exc:
-                raise SystemExit(f"error: {args.params} is not valid JSON: {exc}") from None
+        params = _read_params(args.params) if args.params else {}
         plan = _request(args, "POST", "/plans", json={"kind": args.kind, "params": params})
         print(f"submitted plan {plan['id']} ({args.kind})", file=sys.stderr)
         if args.no_wait:

@@ -40,7 +40,7 @@ from typing import Any, Protocol
 import numpy as np
 
 from server.lifetime import die_with_parent
-from server.survey_io import read_e57, read_las, survey_of_npy
+from server.survey_io import SurveyReadError, read_e57, read_las, survey_of_npy
 
 FORMATS = ("ply", "pcd", "xyz", "csv", "txt", "npy", "las", "laz", "e57")
 
@@ -51,6 +51,13 @@ HEADER_BYTES = 1 << 20
 #: Size of the ``.npy`` header :func:`parse_to_npy` writes (fixed, so it can be
 #: written last, once the number of points is known).
 NPY_HEADER_BYTES = 128
+#: Fewest finite points an uploaded cloud may hold: fewer than any plan kind
+#: can use, so such a cloud is refused (422) rather than stored for every plan
+#: on it to fail.  The least demanding use is ``ara.inspect``'s structure
+#: model, which needs 10 points (``planners.inspection.inspect_plan.crop``);
+#: a ``blast`` surface needs a plane of 100, ``ara.switch`` one of 150 and
+#: ``ara.navigate`` one of 200.
+MIN_CLOUD_POINTS = 10
 
 
 class CloudFormatError(ValueError):
@@ -196,6 +203,8 @@ def _finite_blocks(src: Source, filename: str) -> Iterator[tuple[np.ndarray, int
             yield block, bad
     except CloudFormatError:
         raise
+    except SurveyReadError as exc:  # its message is written for people already
+        raise CloudFormatError(str(exc)) from exc
     except Exception as exc:  # any parser failure becomes a readable 400
         raise CloudFormatError(f"could not parse {fmt.upper()} data: {exc}") from exc
     if kept == 0:
@@ -568,7 +577,8 @@ def parse_upload(raw: Path, content_type: str, out: Path) -> dict[str, Any]:
     """Parse a spooled multipart upload into ``out``; the JSON-able outcome.
 
     ``{"ok": true, "n_points", "dropped", "bounds", "survey", "filename", "name"}`` or
-    ``{"ok": false, "status": 400|422, "detail": "..."}``.
+    ``{"ok": false, "status": 400|422, "detail": "..."}``, with ``"log"``: a
+    reader library's full report for the server's log, when it had one.
     """
     m = re.search(r'boundary="?([^";]+)"?', content_type)
     if m is None:
@@ -607,9 +617,22 @@ def parse_upload(raw: Path, content_type: str, out: Path) -> dict[str, Any]:
         src = FileSource(fd, file.start, file.end)
         try:
             res = parse_to_npy(src, filename, out)
+            if res.n_points < MIN_CLOUD_POINTS:
+                out.unlink(missing_ok=True)
+                return {
+                    "ok": False,
+                    "status": 422,
+                    "detail": f"{filename or 'upload'}: {res.n_points} point(s) with finite "
+                    f"x, y, z; a cloud needs at least {MIN_CLOUD_POINTS} points, fewer than "
+                    "any plan kind can use",
+                }
             survey = survey_of_npy(out, detect_format(src.read_at(0, 8192), filename), units)
         except CloudFormatError as exc:
-            return {"ok": False, "status": 400, "detail": f"{filename or 'upload'}: {exc}"}
+            refused = {"ok": False, "status": 400, "detail": f"{filename or 'upload'}: {exc}"}
+            debug = getattr(exc.__cause__, "debug", "")
+            if debug:
+                refused["log"] = debug
+            return refused
     finally:
         os.close(fd)
     return {

@@ -12,14 +12,18 @@ the PLY/PCD/XYZ readers beside them:
   first (chunk by chunk); every scan is then read :data:`CHUNK_POINTS` at a
   time with its own buffers, invalid points dropped, spherical coordinates
   converted and the scan's pose (rotation, translation) applied, so several
-  scanner stations land in one frame.
+  scanner stations land in one frame.  A file libE57 cannot read is refused
+  with its one-line reason (:class:`SurveyReadError`); libE57's full report,
+  which names the temporary file and its own source files, is only logged.
 """
 
 from __future__ import annotations
 
 import contextlib
 import io
+import logging
 import os
+import re
 import tempfile
 from collections.abc import Iterator
 from typing import Any, Protocol
@@ -33,10 +37,37 @@ from planners.pointcloud.spacing import MM_SPACING_FROM as MM_SPACING_FROM
 from planners.pointcloud.spacing import decide_units as decide_units
 from planners.pointcloud.spacing import measure_spacing
 
+log = logging.getLogger(__name__)
+
 #: Points per block (three float64 columns: 24 MB).
 CHUNK_POINTS = 1 << 20
 #: Bytes copied per step when an E57 byte range goes to a temporary file.
 _COPY_BYTES = 8 << 20
+
+
+class SurveyReadError(ValueError):
+    """A survey file that cannot be read.  The message is for the uploader
+    (no server path, no library debug text); ``debug`` is the library's full
+    report, for the server's log."""
+
+    def __init__(self, message: str, debug: str = "") -> None:
+        super().__init__(message)
+        self.debug = debug
+
+
+def _e57_unreadable(exc: Exception, tmp: str) -> SurveyReadError:
+    """``exc`` from libE57 as a :class:`SurveyReadError` (logged in full here).
+
+    libE57's message starts with a one-line reason ("checksum mismatch, file
+    is corrupted (ErrorBadChecksum)") and goes on with debug text holding the
+    temporary file's path and libE57's build paths: only the reason is kept,
+    without its error code and without any path."""
+    full = str(exc).strip()
+    log.warning("unreadable E57 upload (%s): %s", type(exc).__name__, full)
+    first = full.splitlines()[0] if full else ""
+    first = re.sub(r"\s*\(Error\w+\)\s*$", "", first.replace(tmp, "the file"))
+    reason = " ".join(w for w in first.split() if "/" not in w and "\\" not in w)[:200]
+    return SurveyReadError(f"not a readable E57 file: {reason or type(exc).__name__}", debug=full)
 
 
 class _Source(Protocol):
@@ -94,10 +125,15 @@ def read_e57(src: _Source) -> Iterator[np.ndarray]:
         with os.fdopen(fd, "wb") as fh:
             for off in range(0, src.size, _COPY_BYTES):
                 fh.write(src.read_at(off, _COPY_BYTES))
-        e57 = pye57.E57(tmp)
+        try:
+            e57 = pye57.E57(tmp)
+        except Exception as exc:  # libE57 refuses the file: why, for people
+            raise _e57_unreadable(exc, tmp) from exc
         try:
             for index in range(e57.scan_count):
                 yield from _e57_scan(e57, index)
+        except Exception as exc:  # a scan libE57 (or _e57_scan) cannot read
+            raise _e57_unreadable(exc, tmp) from exc
         finally:
             e57.close()
     finally:

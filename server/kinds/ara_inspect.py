@@ -29,9 +29,18 @@ from planners.inspection.inspect_plan import plan_inspection_result, validate_cr
 from planners.inspection.params import InspectionParams
 from planners.structure.params import StructureParams
 from planners.structure.synthetic import SCAN_SAMPLES
-from server.kinds.base import JobContext, KindOutput, PlanKind, StrictParams
+from server.kinds.base import (
+    SPAN_M,
+    Coordinate,
+    JobContext,
+    KindOutput,
+    PlanKind,
+    Seed,
+    StrictParams,
+    VertexId,
+)
 
-Box = tuple[tuple[float, float, float], tuple[float, float, float]]
+Box = tuple[tuple[Coordinate, Coordinate, Coordinate], tuple[Coordinate, Coordinate, Coordinate]]
 
 
 class AraInspectParams(StrictParams):
@@ -48,9 +57,8 @@ class AraInspectParams(StrictParams):
         # the list of names in validate() (a 422 naming the samples).
         json_schema_extra={"enum": list(SCAN_SAMPLES)},
     )
-    sample_seed: int = Field(
+    sample_seed: Seed = Field(
         2,
-        ge=0,
         description="generator seed of the sample scan (2: the Warren truss's web members are "
         "UPN 200 channels, whose webs take the ARA's foot, so the default plan passes its "
         "checks; seed 0's L 80 angles are narrower than the foot and its plan is rejected)",
@@ -67,17 +75,15 @@ class AraInspectParams(StrictParams):
         "survey record, so 'auto' leaves it); 'mm' scales by 0.001 (for a millimetre cloud the "
         "upload read as metres); 'm' leaves the numbers",
     )
-    start: int | None = Field(
-        None, ge=0, description="start vertex id of the member graph (None: a far free end)"
+    start: VertexId | None = Field(
+        None, description="start vertex id of the member graph (None: a far free end)"
     )
-    end: int | None = Field(
+    end: VertexId | None = Field(
         None,
-        ge=0,
         description="end vertex id of the member graph (None: the free end farthest away)",
     )
-    close_member: int | None = Field(
+    close_member: VertexId | None = Field(
         None,
-        ge=0,
         description="close inspection: drive from start to this member and along it "
         "(None: the whole structure)",
     )
@@ -102,14 +108,21 @@ class AraInspectParams(StrictParams):
         "within this angle",
     )
     jump_cost_m: float = Field(
-        0.5, ge=0, description="what one inch-worm jump is worth in metres when choosing the route"
+        0.5,
+        ge=0,
+        le=SPAN_M,
+        description="what one inch-worm jump is worth in metres when choosing the route",
     )
     max_section_m: float | None = Field(
-        None, gt=0, description="largest member section depth expected (None: the model's 1.2 m)"
+        None,
+        gt=0,
+        le=10.0,  # the deepest plate and box girders are a few metres
+        description="largest member section depth expected (None: the model's 1.2 m)",
     )
     max_gap_m: float | None = Field(
         None,
         gt=0,
+        le=100.0,  # longer than any member an occlusion could hide
         description="collinear fragments across an occlusion gap up to this are one member "
         "(None: the model's 2.0 m)",
     )

@@ -28,7 +28,16 @@ from planners.navigation import NavigationParams
 from planners.navigation.footprint_checks import Footprint, alg6_spacing_m, poses_on_steel, to_plane
 from planners.navigation.navigate_plan import plan_navigation_result
 from planners.navigation.synthetic import SAMPLES, SHAPES
-from server.kinds.base import JobContext, KindOutput, PlanKind, PlanView, StrictParams
+from server.kinds.base import (
+    Coordinate,
+    JobContext,
+    KindOutput,
+    PlanKind,
+    PlanView,
+    Seed,
+    StrictParams,
+    VertexId,
+)
 
 
 class AraNavigateParams(StrictParams):
@@ -37,7 +46,10 @@ class AraNavigateParams(StrictParams):
     cloud_id: str | None = Field(
         None, description="id of a stored cloud (POST /clouds); metres, any frame"
     )
-    crop_box_m: tuple[tuple[float, float, float], tuple[float, float, float]] | None = Field(
+    crop_box_m: (
+        tuple[tuple[Coordinate, Coordinate, Coordinate], tuple[Coordinate, Coordinate, Coordinate]]
+        | None
+    ) = Field(
         None,
         description="region of interest ((xmin, ymin, zmin), (xmax, ymax, zmax)) in the "
         "cloud's frame; None: the whole cloud",
@@ -55,10 +67,10 @@ class AraNavigateParams(StrictParams):
         # the list of names in validate() (a 422 naming the samples).
         json_schema_extra={"enum": list(SHAPES)},
     )
-    sample_seed: int = Field(0, ge=0, description="generator seed of the sample structure")
-    start: int | None = Field(None, ge=0, description="start vertex id (None: a leaf at one end)")
-    end: int | None = Field(
-        None, ge=0, description="end vertex id (None: the leaf farthest from the other)"
+    sample_seed: Seed = Field(0, description="generator seed of the sample structure")
+    start: VertexId | None = Field(None, description="start vertex id (None: a leaf at one end)")
+    end: VertexId | None = Field(
+        None, description="end vertex id (None: the leaf farthest from the other)"
     )
     segmentation: Literal["default", "thesis"] = Field(
         "default",
@@ -83,17 +95,21 @@ class AraNavigateParams(StrictParams):
         description="points that must stay on steel: the driving foot's wheel contact patch "
         "or the whole mobile-mode body ([mobile_footprint])",
     )
+    # A footprint on a steel member: the ARA's mobile body is 0.68 m long.
     footprint_length_m: float | None = Field(
-        None, gt=0, description="robot footprint length (None: from `footprint`)"
+        None, gt=0, le=2.0, description="robot footprint length (None: from `footprint`)"
     )
     footprint_width_m: float | None = Field(
-        None, gt=0, description="robot footprint width (None: ARA [mobile_footprint])"
+        None, gt=0, le=2.0, description="robot footprint width (None: ARA [mobile_footprint])"
     )
     footprint_center_x_m: float | None = Field(
-        None, description="footprint centre ahead of the base frame (None: ARA [mobile_footprint])"
+        None,
+        ge=-2.0,
+        le=2.0,
+        description="footprint centre ahead of the base frame (None: ARA [mobile_footprint])",
     )
     voxel_m: float = Field(0.01, gt=0, le=0.1, description="voxel grid edge of the down-sampling")
-    seed: int = Field(0, ge=0, description="seed of RANSAC and the RRT samples")
+    seed: Seed = Field(0, description="seed of RANSAC and the RRT samples")
 
 
 def validate(p: AraNavigateParams) -> None:

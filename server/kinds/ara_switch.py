@@ -11,7 +11,7 @@ clearance along the path.  Defaults plan Fig. 5.4 (two perpendicular slabs).
 
 from __future__ import annotations
 
-from typing import Any
+from typing import Annotated, Any
 
 import numpy as np
 from pydantic import Field
@@ -21,9 +21,13 @@ from planners.switching import SwitchingParams
 from planners.switching.jump import JumpParams
 from planners.switching.scenes import SCENES, make_scene
 from planners.switching.switch_result import plan_switch_result
-from server.kinds.base import JobContext, KindOutput, PlanKind, PlanView, StrictParams
+from server.kinds.base import JobContext, KindOutput, PlanKind, PlanView, Seed, StrictParams
 
 SAMPLE_PREFIX = "switch_"
+
+#: An entry of the camera→base transform: rotation entries lie in [-1, 1], and
+#: a camera on the robot sits well within 10 m of its base.
+TransformEntry = Annotated[float, Field(ge=-10.0, le=10.0)]
 
 
 class AraSwitchParams(StrictParams):
@@ -39,24 +43,29 @@ class AraSwitchParams(StrictParams):
         # the list of names in validate() (a 422 naming the samples).
         json_schema_extra={"enum": list(SCENES)},
     )
-    sample_seed: int = Field(0, ge=0, description="noise seed of the synthetic scan")
-    camera_to_base: list[list[float]] | None = Field(
+    sample_seed: Seed = Field(0, description="noise seed of the synthetic scan")
+    camera_to_base: list[list[TransformEntry]] | None = Field(
         None, description="4×4 camera→base transform (None: the ARA's, from its URDF)"
     )
+    # The depth camera sees a few metres: a standing surface is within 10 m.
     base_height_m: float = Field(
-        0.0, description="height of the standing surface in the base frame"
+        0.0, ge=-10.0, le=10.0, description="height of the standing surface in the base frame"
     )
-    height_tolerance_m: float = Field(0.005, gt=0, description="Eq. 3.4 'equal' tolerance")
+    height_tolerance_m: float = Field(0.005, gt=0, le=0.5, description="Eq. 3.4 'equal' tolerance")
     distance_tolerance: float = Field(0.02, gt=0, lt=1, description="Alg. 2 t (relative)")
     n_closest: int = Field(5, ge=1, le=50, description="Alg. 2 n (rectangles tried)")
     m_neighbours: int = Field(3, ge=1, le=20, description="Alg. 2 m")
     sliding_factor_m: float = Field(0.01, gt=0, le=0.2, description="NCBE slice width αs")
     voxel_m: float = Field(0.01, gt=0, le=0.1, description="voxel grid edge")
-    reach_m: float = Field(0.5, gt=0, description="max foothold distance from the base origin")
+    reach_m: float = Field(
+        0.5, gt=0, le=10.0, description="max foothold distance from the base origin"
+    )
     plan_jump: bool = Field(True, description="plan the inch-worm jump when the mode is inchworm")
-    clearance_margin_m: float = Field(0.01, ge=0, description="required clearance along the jump")
+    clearance_margin_m: float = Field(
+        0.01, ge=0, le=1.0, description="required clearance along the jump"
+    )
     attempts: int = Field(4, ge=1, le=20, description="RRT-Connect restarts per phase")
-    seed: int = Field(0, ge=0, description="seed of RANSAC and the RRT samples")
+    seed: Seed = Field(0, description="seed of RANSAC and the RRT samples")
 
 
 def validate(p: AraSwitchParams) -> None:

@@ -13,34 +13,115 @@ from __future__ import annotations
 import copy
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
-from typing import Any, Protocol
+from typing import Annotated, Any, Protocol
 
 import numpy as np
-from pydantic import BaseModel, ConfigDict, Field, ValidationError
+from pydantic import BaseModel, ConfigDict, Field, GetCoreSchemaHandler, ValidationError
+from pydantic_core import CoreSchema, core_schema
 
 import planners.result as planners_result
 from server.planview import PlanView
 
 __all__ = [
+    "ID_MAX",
+    "SEED_MAX",
+    "SPAN_M",
+    "WORLD_M",
     "Check",
     "CloudRef",
+    "Coordinate",
     "JobContext",
     "KindOutput",
+    "Offset",
     "PlanKind",
     "PlanView",
+    "Seed",
     "StrictParams",
+    "VertexId",
     "check_ge",
     "check_le",
     "drop_unknown_keys",
 ]
 
+# Bounds of params numbers.  Every number of every kind's params has a lower
+# and an upper bound in its schema: generous for real structures, small
+# enough that a typo (``1e308``) is refused at submission instead of planned.
+
+#: A coordinate in a cloud's (or the world) frame, metres: stored clouds keep
+#: their survey frame, whose UTM or national-grid northings reach 10 000 km.
+WORLD_M = 1.0e7
+#: A length, or a position relative to a structure, on one structure (metres):
+#: a bridge is under 2 km.
+SPAN_M = 2000.0
+#: Largest seed: numpy's legacy generator and the RANSAC seeds are 32-bit.
+SEED_MAX = 2**32 - 1
+#: Largest vertex or member id of a structure's graph (ids are numbered from
+#: 0; a bridge model has thousands at most).
+ID_MAX = 10**6
+
+Coordinate = Annotated[float, Field(ge=-WORLD_M, le=WORLD_M)]
+Offset = Annotated[float, Field(ge=-SPAN_M, le=SPAN_M)]
+Seed = Annotated[int, Field(ge=0, le=SEED_MAX)]
+VertexId = Annotated[int, Field(ge=0, le=ID_MAX)]
+
+
+def _refuse_bool(value: Any) -> Any:
+    """``value``, unless it is a boolean (``bool`` is an ``int`` to Python)."""
+    if isinstance(value, bool):
+        raise ValueError("a boolean is not a number")
+    return value
+
+
+def _strict_numbers(node: Any) -> None:
+    """Make every int and float of a core schema strict, in place.
+
+    Lax mode reads ``true`` as 1, ``"7"`` as 7 and ``2.0`` as the int 2;
+    strict floats still take ints.  An int ``Literal`` (strict or not) takes
+    ``true`` for 1, so it is wrapped in a check refusing booleans.
+    """
+    if isinstance(node, list):
+        for item in node:
+            _strict_numbers(item)
+        return
+    if not isinstance(node, dict):
+        return
+    kind = node.get("type")
+    if kind in ("int", "float"):
+        node["strict"] = True
+    elif kind == "function-before" and node.get("function", {}).get("function") is _refuse_bool:
+        return  # wrapped already (a nested model's schema is shared with its parent's)
+    elif kind == "literal":
+        expected = node.get("expected", [])
+        if any(
+            isinstance(v, int | float) and not isinstance(v, bool) for v in expected
+        ) and not any(isinstance(v, bool) for v in expected):
+            inner = dict(node)
+            node.clear()
+            node.update(core_schema.no_info_before_validator_function(_refuse_bool, inner))
+        return
+    for key, value in node.items():
+        # defaults and metadata hold values, not schemas
+        if key not in ("default", "metadata", "serialization", "expected"):
+            _strict_numbers(value)
+
 
 class StrictParams(BaseModel):
     """Base of every kind's params model (and its nested parts): unknown keys
     are refused with a 422 naming them, so a misspelt key (``strat`` for
-    ``start``) cannot silently plan the defaults."""
+    ``start``) cannot silently plan the defaults; NaN and infinities are
+    refused (JSON as Python reads it allows them), and numbers are strict: a
+    boolean or a numeric string is not a number, an int field takes no
+    float."""
 
-    model_config = ConfigDict(extra="forbid")
+    model_config = ConfigDict(extra="forbid", allow_inf_nan=False)
+
+    @classmethod
+    def __get_pydantic_core_schema__(
+        cls, source: type[BaseModel], handler: GetCoreSchemaHandler
+    ) -> CoreSchema:
+        schema = handler(source)
+        _strict_numbers(schema)
+        return schema
 
 
 def drop_unknown_keys(

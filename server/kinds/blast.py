@@ -12,7 +12,7 @@ Surface 1 on the roof of the I-beam channel with 0.04 m discs (§4.2.1,
 
 from __future__ import annotations
 
-from typing import Any, Literal
+from typing import Annotated, Any, Literal
 
 import numpy as np
 from pydantic import Field, field_validator
@@ -20,30 +20,47 @@ from pydantic import Field, field_validator
 from planners.blasting import Box, Surface, scenes
 from planners.blasting.base_placement import BaseLimits
 from planners.blasting.blast_plan import BlastLimits, BlastOptions, PlanePick, plan_blast_result
-from planners.blasting.nozzle import check_stream_length
+from planners.blasting.nozzle import STREAM_MAX_MM, STREAM_MIN_MM, check_stream_length
 from planners.blasting.sample_clouds import under_deck_cloud
 from planners.errors import InvalidInputError, NoPlaneError
-from server.kinds.base import JobContext, KindOutput, PlanKind, PlanView, StrictParams
+from server.kinds.base import (
+    Coordinate,
+    JobContext,
+    KindOutput,
+    Offset,
+    PlanKind,
+    PlanView,
+    Seed,
+    StrictParams,
+)
 
 ROBOT = "denso_vm6083"
+
+#: A stream length (mm).  Its 100–500 mm window is checked by
+#: ``BlastParams._window``, whose message gives the seed's reason; the schema
+#: states it.
+StreamMm = Annotated[
+    float, Field(json_schema_extra={"minimum": STREAM_MIN_MM, "maximum": STREAM_MAX_MM})
+]
 
 
 class PolygonSurface(StrictParams):
     """A planar surface: outline in the plane frame (DESIGN §5)."""
 
-    origin_m: list[float] = Field(
+    origin_m: list[Coordinate] = Field(
         ..., min_length=3, max_length=3, description="plane origin [x, y, z] (m)"
     )
-    normal: list[float] = Field(
+    # directions of any length: bounded like coordinates
+    normal: list[Coordinate] = Field(
         ..., min_length=3, max_length=3, description="plane normal (any length)"
     )
-    boundary_m: list[list[float]] = Field(
+    boundary_m: list[list[Offset]] = Field(
         ..., min_length=3, description="outline [[u, v], ...] in the plane frame (m)"
     )
-    holes_m: list[list[list[float]]] = Field(
+    holes_m: list[list[list[Offset]]] = Field(
         default_factory=list, description="holes, same frame (m)"
     )
-    x_axis: list[float] | None = Field(
+    x_axis: list[Coordinate] | None = Field(
         None, min_length=3, max_length=3, description="plane x axis (None: world x projected)"
     )
 
@@ -58,10 +75,10 @@ class PolygonSurface(StrictParams):
 class BoxObstacle(StrictParams):
     """An axis-aligned box obstacle (world frame, m)."""
 
-    lo_m: list[float] = Field(
+    lo_m: list[Coordinate] = Field(
         ..., min_length=3, max_length=3, description="min corner [x, y, z] (m)"
     )
-    hi_m: list[float] = Field(
+    hi_m: list[Coordinate] = Field(
         ..., min_length=3, max_length=3, description="max corner [x, y, z] (m)"
     )
     name: str = Field("", description="label shown in the scene")
@@ -77,13 +94,13 @@ def _channel() -> list[BoxObstacle]:
 class BaseSearch(StrictParams):
     """Search the robot base (issue #16 §2) in a region instead of ``robot_base_m``."""
 
-    lo_m: list[float] | None = Field(
+    lo_m: list[Coordinate] | None = Field(
         None,
         min_length=3,
         max_length=3,
         description="region min corner (m); None: around the surface",
     )
-    hi_m: list[float] | None = Field(
+    hi_m: list[Coordinate] | None = Field(
         None,
         min_length=3,
         max_length=3,
@@ -106,20 +123,24 @@ class BlastParams(StrictParams):
     )
     polygon: PolygonSurface | None = Field(None, description="surface as a polygon on a plane")
     cloud_id: str | None = Field(None, description="id of a stored cloud (world frame, m)")
-    plane_index: int = Field(0, ge=0, description="plane of the cloud to blast (0 = largest)")
-    plane_threshold_m: float = Field(0.01, gt=0, description="RANSAC inlier distance (m)")
+    # Sequential RANSAC finds at most 10 planes; a larger index is told so by the planner.
+    plane_index: int = Field(
+        0, ge=0, le=99, description="plane of the cloud to blast (0 = largest)"
+    )
+    plane_threshold_m: float = Field(0.01, gt=0, le=1.0, description="RANSAC inlier distance (m)")
     nozzle: Literal["small", "medium", "large"] = Field(
         "medium", description="Boride T159 size (Table 3.1)"
     )
-    stream_length_mm: float = Field(
+    stream_length_mm: StreamMm = Field(
         300.0, description="nozzle-to-surface stream length, 100–500 mm"
     )
     disc_radius_m: float | None = Field(
         scenes.DISC_RADIUS_M,
         gt=0,
+        le=0.5,
         description="disc radius (m); None: Eq. 3.1 (seed §4.2.1 uses 0.04)",
     )
-    fill_stream_mm: float | None = Field(
+    fill_stream_mm: StreamMm | None = Field(
         100.0, description="stream length of the small fill discs (mm); None: no small discs"
     )
     editing: Literal["improved", "seed"] = Field(
@@ -142,14 +163,18 @@ class BlastParams(StrictParams):
     base_search: BaseSearch | None = Field(
         None, description="search the base in a region (then robot_base_m is not used)"
     )
-    robot_base_m: list[float] = Field(
+    robot_base_m: list[Coordinate] = Field(
         [v / 1000.0 for v in scenes.ROBOT_BASE_MM], min_length=3, max_length=3,
         description="robot base position [x, y, z] (m), seed (500, 375, 370) mm",
     )  # fmt: skip
-    seed: int = Field(0, ge=0, description="random seed (GA)")
+    seed: Seed = Field(0, description="random seed (GA)")
     coverage_min_pct: float = Field(99.0, ge=0, le=100, description="check: coverage (%)")
-    overspray_max_pct: float = Field(0.5, ge=0, description="check: overspray (% of the surface)")
-    ik_residual_max_mm: float = Field(0.1, gt=0, description="check: IK position residual (mm)")
+    overspray_max_pct: float = Field(
+        0.5, ge=0, le=100, description="check: overspray (% of the surface)"
+    )
+    ik_residual_max_mm: float = Field(
+        0.1, gt=0, le=100.0, description="check: IK position residual (mm)"
+    )
 
     @field_validator("stream_length_mm", "fill_stream_mm")
     @classmethod

@@ -20,7 +20,7 @@ from pydantic import Field
 from planners.cmbot import SEED_CLIMB_GOAL_X, SEED_CLIMB_START_X, GaitParams
 from planners.cmbot.climb_plan import plan_climb_result
 from planners.cmbot.gait import chain_limits, plan_footholds
-from server.kinds.base import JobContext, KindOutput, PlanKind, PlanView, StrictParams
+from server.kinds.base import JobContext, KindOutput, Offset, PlanKind, PlanView, StrictParams
 from server.kinds.cmbot_params import ROBOT, GuardrailSpec
 
 
@@ -28,10 +28,10 @@ class CmbotClimbParams(StrictParams):
     """Walk of CMBOT along the guardrail: positions of the rear sole (metres)."""
 
     guardrail: GuardrailSpec = Field(default_factory=GuardrailSpec, description="the guardrail")
-    start_rear_x_m: float = Field(
+    start_rear_x_m: Offset = Field(
         SEED_CLIMB_START_X, description="rear sole at the start (contracted stance)"
     )
-    goal_rear_x_m: float = Field(SEED_CLIMB_GOAL_X, description="rear sole at the goal")
+    goal_rear_x_m: Offset = Field(SEED_CLIMB_GOAL_X, description="rear sole at the goal")
     step_m: float = Field(0.24, gt=0, le=1.0, description="longest swing S (seed §4: 240 mm)")
     lift_m: float = Field(0.05, ge=0, le=0.3, description="swing height H (seed §4: 50 mm)")
     side_m: float = Field(0.0, ge=-0.1, le=0.1, description="sideways swing D (seed §4: 0)")

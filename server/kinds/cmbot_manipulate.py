@@ -14,7 +14,7 @@ the whole motion passes (the seed's remedy).  See docs/cmbot.md.
 
 from __future__ import annotations
 
-from typing import Any, Literal
+from typing import Annotated, Any, Literal
 
 import numpy as np
 from pydantic import Field
@@ -22,18 +22,23 @@ from pydantic import Field
 from planners.cmbot import SEED_WORK_REAR_X, AvoidanceParams, ExperimentParams, Section4Trajectory
 from planners.cmbot.manipulate_plan import plan_manipulation_result
 from planners.errors import InvalidInputError
-from server.kinds.base import JobContext, KindOutput, PlanKind, PlanView, StrictParams
+from server.kinds.base import JobContext, KindOutput, Offset, PlanKind, PlanView, StrictParams
 from server.kinds.cmbot_params import ROBOT, GuardrailSpec
+
+#: A tool position in frame (6), mm: the arm reaches about a metre; 10 m is generous.
+ToolMm = Annotated[float, Field(ge=-10_000.0, le=10_000.0)]
+#: A tool angle, degrees: one turn either way.
+ToolDeg = Annotated[float, Field(ge=-360.0, le=360.0)]
 
 
 class CmbotManipulateParams(StrictParams):
     """Work stance, trajectory reading, avoidance and gate limits of one arm motion."""
 
     guardrail: GuardrailSpec = Field(default_factory=GuardrailSpec, description="the guardrail")
-    rear_foot_x_m: float = Field(
+    rear_foot_x_m: Offset = Field(
         SEED_WORK_REAR_X, description="rear sole of the work stance, metres"
     )
-    start_mm_deg: tuple[float, float, float, float, float, float] = Field(
+    start_mm_deg: tuple[ToolMm, ToolMm, ToolMm, ToolDeg, ToolDeg, ToolDeg] = Field(
         (0.0, 820.0, -2790.0, 0.0, 0.0, -90.0),
         description="tool start pose in frame (6): x, y, z in mm, roll, pitch, yaw in deg (seed §4)",
     )
@@ -47,7 +52,7 @@ class CmbotManipulateParams(StrictParams):
     d_s_m: float = Field(0.15, gt=0, le=1.0, description="Eq. 15 safety threshold d_s")
     v_max_m_s: float = Field(0.3, gt=0, le=2.0, description="Eq. 15 maximum escape speed")
     min_clearance_m: float = Field(
-        0.05, ge=0, description="check: clearance the gate requires (< d_s, docs/cmbot.md)"
+        0.05, ge=0, le=1.0, description="check: clearance the gate requires (< d_s, docs/cmbot.md)"
     )
     payload_kg: float = Field(2.0, ge=0, le=10.0, description="tool mass at Q for the torque check")
     dt_s: float = Field(0.01, gt=0.001, le=0.05, description="control step of the tracking loop")

@@ -10,7 +10,7 @@ import numpy as np
 from pydantic import Field, model_validator
 
 from planners.cmbot.guardrail import SEED_POSTS, SEED_SEGMENTS, Guardrail, GuardrailParams
-from server.kinds.base import StrictParams
+from server.kinds.base import Offset, StrictParams
 
 ROBOT = "cmbot"
 
@@ -18,11 +18,12 @@ ROBOT = "cmbot"
 class GuardrailSpec(StrictParams):
     """The guardrail along which CMBOT works (defaults: the sample scene)."""
 
-    segments_m: list[tuple[float, float]] = Field(
+    # positions along the bar, metres: a guardrail is as long as its bridge
+    segments_m: list[tuple[Offset, Offset]] = Field(
         default_factory=lambda: list(SEED_SEGMENTS),
         description="continuous top-bar segments [x_start, x_end] in metres, increasing",
     )
-    posts_m: list[float] = Field(
+    posts_m: list[Offset] = Field(
         default_factory=lambda: list(SEED_POSTS), description="post centres along the bar, metres"
     )
     rail_height_m: float = Field(

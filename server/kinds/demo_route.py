@@ -20,7 +20,11 @@ from planners.postman.shortest_route import (
     plan_demo_route,
     unit_grid_edges,
 )
-from server.kinds.base import JobContext, KindOutput, PlanKind, PlanView, StrictParams
+from server.kinds.base import Coordinate, JobContext, KindOutput, PlanKind, PlanView, StrictParams
+
+#: Longest route limit, metres: a route over every member of a bridge under
+#: 2 km, members driven more than once, stays well inside 100 km.
+MAX_ROUTE_M = 100_000.0
 
 
 def _default_nodes() -> dict[str, list[float]]:
@@ -35,7 +39,7 @@ def _default_edges() -> list[tuple[str, str]]:
 class DemoRouteParams(StrictParams):
     """Graph, endpoints and limits of a demo route."""
 
-    nodes: dict[str, list[float]] = Field(
+    nodes: dict[str, list[Coordinate]] = Field(
         default_factory=_default_nodes, description="vertex id → [x, y, z] position in metres"
     )
     edges: list[tuple[str, str]] = Field(
@@ -43,7 +47,9 @@ class DemoRouteParams(StrictParams):
     )
     start: str = Field("a0", description="start vertex id")
     end: str = Field("c2", description="end vertex id")
-    max_length_m: float = Field(10.0, gt=0, description="longest acceptable route (check)")
+    max_length_m: float = Field(
+        10.0, gt=0, le=MAX_ROUTE_M, description="longest acceptable route (check)"
+    )
     step_delay_s: float = Field(
         0.0,
         ge=0,

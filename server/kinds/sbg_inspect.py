@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import fields
-from typing import Any, Literal
+from typing import Annotated, Any, Literal
 
 import numpy as np
 from pydantic import Field, create_model
@@ -27,49 +27,62 @@ from planners.sbg import (
 )
 from planners.sbg.inspection_report import plan_inspection_result
 from planners.sbg.robot import ClimberParams
-from server.kinds.base import JobContext, KindOutput, PlanKind, PlanView, StrictParams
+from server.kinds.base import JobContext, KindOutput, PlanKind, PlanView, Seed, StrictParams
 
 DEG = math.pi / 180.0
 _DEFAULT_GIRDER = sample_girders()["seed_lab"]
 
 
 class GirderParams(StrictParams):
-    """Girder bay geometry (metres); defaults: the 3-lane ``seed_lab`` mock-up."""
+    """Girder bay geometry (metres); defaults: the 3-lane ``seed_lab`` mock-up.
+
+    Upper bounds are generous for real orthotropic decks: crossbeams a few
+    metres apart, U-ribs about 0.3 m wide at 0.6 m, plates tens of mm."""
 
     length_m: float = Field(
-        _DEFAULT_GIRDER.length_m, gt=0, description="clear length between the crossbeam faces"
+        _DEFAULT_GIRDER.length_m,
+        gt=0,
+        le=100.0,
+        description="clear length between the crossbeam faces",
     )
     n_ribs: int = Field(
         _DEFAULT_GIRDER.n_ribs, ge=2, le=40, description="U-ribs; lanes = n_ribs − 1"
     )
     rib_spacing_m: float = Field(
-        _DEFAULT_GIRDER.rib_spacing_m, gt=0, description="rib centre-to-centre spacing"
+        _DEFAULT_GIRDER.rib_spacing_m, gt=0, le=5.0, description="rib centre-to-centre spacing"
     )
     rib_top_width_m: float = Field(
-        _DEFAULT_GIRDER.rib_top_width_m, gt=0, description="rib width at the deck"
+        _DEFAULT_GIRDER.rib_top_width_m, gt=0, le=2.0, description="rib width at the deck"
     )
     rib_bottom_width_m: float = Field(
-        _DEFAULT_GIRDER.rib_bottom_width_m, gt=0, description="rib width at its bottom"
+        _DEFAULT_GIRDER.rib_bottom_width_m, gt=0, le=2.0, description="rib width at its bottom"
     )
     rib_depth_m: float = Field(
-        _DEFAULT_GIRDER.rib_depth_m, gt=0, description="rib depth below the deck"
+        _DEFAULT_GIRDER.rib_depth_m, gt=0, le=2.0, description="rib depth below the deck"
     )
     deck_thickness_m: float = Field(
-        _DEFAULT_GIRDER.deck_thickness_m, gt=0, description="roof deck plate"
+        _DEFAULT_GIRDER.deck_thickness_m, gt=0, le=0.2, description="roof deck plate"
     )
     crossbeam_depth_m: float = Field(
-        _DEFAULT_GIRDER.crossbeam_depth_m, gt=0, description="crossbeam height drawn below the deck"
+        _DEFAULT_GIRDER.crossbeam_depth_m,
+        gt=0,
+        le=5.0,
+        description="crossbeam height drawn below the deck",
     )
     crossbeam_thickness_m: float = Field(
-        _DEFAULT_GIRDER.crossbeam_thickness_m, gt=0, description="crossbeam plate"
+        _DEFAULT_GIRDER.crossbeam_thickness_m, gt=0, le=0.2, description="crossbeam plate"
     )
     cutout_clearance_m: float = Field(
         _DEFAULT_GIRDER.cutout_clearance_m,
         ge=0,
+        le=0.5,
         description="gap around a rib in the crossbeam cut-out",
     )
     edge_width_m: float = Field(
-        _DEFAULT_GIRDER.edge_width_m, ge=0, description="deck drawn beyond the outer rib centres"
+        _DEFAULT_GIRDER.edge_width_m,
+        ge=0,
+        le=5.0,
+        description="deck drawn beyond the outer rib centres",
     )
 
     def build(self) -> Girder:
@@ -78,20 +91,23 @@ class GirderParams(StrictParams):
 
 class RobotOverrides(StrictParams):
     """Changes to the climber's parameters (robots/sbg_climber/params.toml);
-    ``null`` keeps the file's value."""
+    ``null`` keeps the file's value.  Upper bounds: a climber that fits a
+    U-rib lane (the file's is 230 mm long, 20 mm/s)."""
 
-    wheel_radius_mm: float | None = Field(None, gt=0, description="R (Eq. 1–2)")
+    wheel_radius_mm: float | None = Field(None, gt=0, le=500.0, description="R (Eq. 1–2)")
     track_mm: float | None = Field(
-        None, gt=0, description="B, wheel centre to wheel centre (Eq. 9, 11)"
+        None, gt=0, le=2000.0, description="B, wheel centre to wheel centre (Eq. 9, 11)"
     )
-    max_speed_mm_s: float | None = Field(None, gt=0, description="wheel speed cap (Eq. 4: 20 mm/s)")
+    max_speed_mm_s: float | None = Field(
+        None, gt=0, le=1000.0, description="wheel speed cap (Eq. 4: 20 mm/s)"
+    )
     turn_speed_mm_s: float | None = Field(
-        None, gt=0, description="wheel speed of in-place turns (Eq. 9)"
+        None, gt=0, le=1000.0, description="wheel speed of in-place turns (Eq. 9)"
     )
-    arm_length_mm: float | None = Field(None, gt=0, description="larm (Eq. 1)")
-    arm_l0_mm: float | None = Field(None, gt=0, description="l0 (Eq. 1–2)")
-    arm_dg_mm: float | None = Field(None, gt=0, description="dg (Eq. 1–2)")
-    lift_time_s: float | None = Field(None, gt=0, description="minimum-jerk lift stroke")
+    arm_length_mm: float | None = Field(None, gt=0, le=2000.0, description="larm (Eq. 1)")
+    arm_l0_mm: float | None = Field(None, gt=0, le=2000.0, description="l0 (Eq. 1–2)")
+    arm_dg_mm: float | None = Field(None, gt=0, le=2000.0, description="dg (Eq. 1–2)")
+    lift_time_s: float | None = Field(None, gt=0, le=60.0, description="minimum-jerk lift stroke")
     camera_hfov_deg: float | None = Field(
         None, gt=0, lt=180, description="camera horizontal field of view"
     )
@@ -157,12 +173,43 @@ _NOISE_HELP = {
     "init_d_sigma_mm": "initial offset from the first lane's centreline",
     "init_delta_sigma_deg": "initial yaw deviation",
 }
+#: Upper bound of each noise term: far beyond any sensor or plant the model
+#: stands for (fractions at most 1, mm errors at most 100 mm in a 300 mm
+#: lane, angles at most 90°, gyro terms at most 10 °/s); a field of
+#: NoiseModel missing here fails the kind's import, so none goes unbounded.
+_NOISE_MAX = {
+    "range_sigma_mm": 100.0,
+    "wall_waviness_mm": 100.0,
+    "wall_wavelength_m": 100.0,
+    "wheel_gain_sigma": 1.0,
+    "wheel_speed_sigma": 1.0,
+    "encoder_scale_sigma": 1.0,
+    "encoder_differential_sigma": 1.0,
+    "encoder_resolution_mm": 100.0,
+    "turn_slip_mean": 1.0,
+    "turn_slip_sigma": 1.0,
+    "turn_slip_jitter": 1.0,
+    "turn_centre_sigma_mm": 100.0,
+    "gyro_bias_dps": 10.0,
+    "gyro_bias_walk_dps_rts": 10.0,
+    "gyro_arw_deg_rts": 10.0,
+    "gyro_scale_sigma": 1.0,
+    "corner_lateral_sigma_mm": 100.0,
+    "corner_yaw_sigma_deg": 90.0,
+    "init_d_sigma_mm": 100.0,
+    "init_delta_sigma_deg": 90.0,
+}
 _NOISE_DEFAULT = NoiseModel()
 # (type, FieldInfo) per field; typed Any as create_model's **field_definitions are
 _NOISE_FIELDS: dict[str, Any] = {
     f.name: (
         float,
-        Field(getattr(_NOISE_DEFAULT, f.name), ge=0, description=_NOISE_HELP.get(f.name, f.name)),
+        Field(
+            getattr(_NOISE_DEFAULT, f.name),
+            ge=0,
+            le=_NOISE_MAX[f.name],
+            description=_NOISE_HELP.get(f.name, f.name),
+        ),
     )
     for f in fields(NoiseModel)
 }
@@ -181,7 +228,10 @@ class SbgInspectParams(StrictParams):
     robot: RobotOverrides = Field(
         default_factory=RobotOverrides, description="changes to the climber's parameters"
     )
-    start_lane: int = Field(0, ge=0, description="lane the inspection starts in (0 = lowest Y)")
+    # at most 40 ribs (GirderParams.n_ribs): lanes 0–38
+    start_lane: int = Field(
+        0, ge=0, le=38, description="lane the inspection starts in (0 = lowest Y)"
+    )
     direction: Literal[1, -1] = Field(
         1, description="+1 sweeps toward higher lane numbers first, −1 lower"
     )
@@ -193,7 +243,9 @@ class SbgInspectParams(StrictParams):
         True,
         description="cap a correction's yaw so the welds stay in view (false + null max_yaw_deg: the seed's law as printed)",
     )
-    camera_safety_mm: float = Field(5.0, ge=0, description="weld margin the camera yaw cap keeps")
+    camera_safety_mm: float = Field(
+        5.0, ge=0, le=1000.0, description="weld margin the camera yaw cap keeps"
+    )
     max_yaw_deg: float | None = Field(
         None, gt=0, lt=90, description="fixed yaw cap of a correction (null: none)"
     )
@@ -205,27 +257,27 @@ class SbgInspectParams(StrictParams):
         "smooth", description="corner wheel/arm profile"
     )
     noise: NoiseParams = Field(default_factory=NoiseParams, description="noise model")
-    seed: int = Field(0, ge=0, description="random seed of the simulation")
-    sweep_lx_mm: list[float] = Field(
+    seed: Seed = Field(0, description="random seed of the simulation")
+    sweep_lx_mm: list[Annotated[float, Field(ge=0, le=2000)]] = Field(
         default_factory=lambda: [0.0, 10.0, 20.0, 40.0, 80.0],
         max_length=12,
         description="preview distances (mm) of the Lx sweep shown in the console (empty: no sweep)",
     )
     sweep_seeds: int = Field(2, ge=1, le=8, description="seeds per Lx in the sweep")
     final_d_limit_mm: float = Field(
-        0.33, gt=0, description="check: final |d| at a lane end (seed §4.2)"
+        0.33, gt=0, le=1000.0, description="check: final |d| at a lane end (seed §4.2)"
     )
     final_delta_limit_deg: float = Field(
-        0.06, gt=0, description="check: final |δ| at a lane end (seed §4.2)"
+        0.06, gt=0, le=90.0, description="check: final |δ| at a lane end (seed §4.2)"
     )
     uturn_yaw_limit_deg: float = Field(
-        1.5, gt=0, description="check: |yaw| on reaching the roof after a U-turn"
+        1.5, gt=0, le=180.0, description="check: |yaw| on reaching the roof after a U-turn"
     )
     camera_margin_limit_mm: float = Field(
-        0.0, description="check: weld margin inside the camera view"
+        0.0, ge=-1000.0, le=1000.0, description="check: weld margin inside the camera view"
     )
     pitch_accel_limit_deg_s2: float = Field(
-        20.0, gt=0, description="check: pitch acceleration while crossing"
+        20.0, gt=0, le=10_000.0, description="check: pitch acceleration while crossing"
     )
 
 

@@ -166,6 +166,8 @@ async def _store_upload(request: Request, services: Services, actor: str, ctype:
         raw.unlink(missing_ok=True)
     if not outcome.get("ok"):
         out.unlink(missing_ok=True)
+        if outcome.get("log"):  # the reader's full report: for us, not the uploader
+            log.warning("upload refused (%s): %s", outcome.get("detail"), outcome["log"])
         raise HTTPException(int(outcome.get("status", 400)), detail=str(outcome.get("detail")))
     filename = outcome.get("filename") or ""
     log.info(

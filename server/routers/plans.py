@@ -4,10 +4,14 @@ from __future__ import annotations
 
 import io
 import logging
+import math
+from collections.abc import Callable, Coroutine
 from typing import Annotated, Any
 
 import numpy as np
-from fastapi import APIRouter, Depends, HTTPException, Query, Response, status
+from fastapi import APIRouter, Depends, HTTPException, Query, Request, Response, status
+from fastapi.exceptions import RequestValidationError
+from fastapi.routing import APIRoute
 from pydantic import BaseModel, Field, ValidationError
 
 from planners.errors import PlannerError
@@ -23,7 +27,48 @@ from server.store.maintenance import MaintenanceStore
 
 log = logging.getLogger(__name__)
 
-router = APIRouter(prefix="/plans", tags=["plans"], responses=AUTH)
+
+def _json_number_name(value: float) -> str:
+    """How JSON-with-extensions (and Python's json) spells a non-finite number."""
+    return "NaN" if math.isnan(value) else ("Infinity" if value > 0 else "-Infinity")
+
+
+def json_safe(value: Any) -> Any:
+    """``value`` with every NaN and infinity replaced by its name as a string:
+    strict JSON, which every response is, has no such numbers."""
+    if isinstance(value, float) and not math.isfinite(value):
+        return _json_number_name(value)
+    if isinstance(value, dict):
+        return {k: json_safe(v) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return [json_safe(v) for v in value]
+    return value
+
+
+class JsonSafeErrorsRoute(APIRoute):
+    """A route whose request-validation errors can always be sent.
+
+    Python's json (so starlette) parses ``NaN`` and ``Infinity``; a body field
+    refusing one reports it in the error's ``input``, which FastAPI's 422
+    handler then fails to encode (strict JSON), answering 500.  Here such
+    values are spelled as strings first, so the client gets its 422.
+    """
+
+    def get_route_handler(self) -> Callable[[Request], Coroutine[Any, Any, Response]]:
+        handler = super().get_route_handler()
+
+        async def route(request: Request) -> Response:
+            try:
+                return await handler(request)
+            except RequestValidationError as exc:
+                raise RequestValidationError(
+                    json_safe(exc.errors()), body=json_safe(exc.body), endpoint_ctx=exc.endpoint_ctx
+                ) from None
+
+        return route
+
+
+router = APIRouter(prefix="/plans", tags=["plans"], responses=AUTH, route_class=JsonSafeErrorsRoute)
 
 Svc = Annotated[Services, Depends(get_services)]
 
@@ -44,8 +89,38 @@ class ApproveRequest(BaseModel):
     comment: str = Field("", max_length=2000, description="why it is safe to run")
 
 
+def non_finite_errors(params: dict[str, Any]) -> list[dict[str, Any]]:
+    """A validation error (pydantic's form, ``loc`` the path in ``params``)
+    for each NaN or infinity anywhere in ``params``, nested lists included.
+
+    Checked before any model sees the params, for every kind alike: a model's
+    own error would carry the value itself, which no JSON response can hold.
+    Walked with a stack, not recursion, whatever the nesting depth."""
+    found: list[dict[str, Any]] = []
+    stack: list[tuple[tuple[str | int, ...], Any]] = [((), params)]
+    while stack:
+        loc, value = stack.pop()
+        if isinstance(value, float) and not math.isfinite(value):
+            found.append(
+                {
+                    "type": "finite_number",
+                    "loc": list(loc),
+                    "msg": "Input should be a finite number",
+                    "input": _json_number_name(value),
+                }
+            )
+        elif isinstance(value, dict):
+            stack.extend(((*loc, k), v) for k, v in reversed(value.items()))
+        elif isinstance(value, list | tuple):
+            stack.extend(((*loc, i), v) for i, v in reversed(list(enumerate(value))))
+    return found
+
+
 def validate_params(services: Services, kind: PlanKind, params: dict[str, Any]) -> dict[str, Any]:
     """Validate ``params`` for ``kind``; 422 with a message naming what is wrong."""
+    bad = non_finite_errors(params)
+    if bad:
+        raise HTTPException(422, detail=bad)
     try:
         model = kind.params_model.model_validate(params)
     except ValidationError as exc:

@@ -34,10 +34,11 @@ import httpx
 import websockets
 from fastapi import APIRouter, Depends, HTTPException, Query, Request, Response, WebSocket
 from fastapi.responses import RedirectResponse
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
+from pydantic import BaseModel, ConfigDict, Field, StrictFloat, ValidationError, model_validator
 
 from server.auth import Operator, TokenRefused, Viewer, resolve
 from server.routers.findings import FindingType
+from server.routers.plans import JsonSafeErrorsRoute
 from server.routers.responses import errors
 from server.scene.proposals import STATES, ProposalBook, ProposalDecidedError
 from server.scene.wsguard import TICKET_HEADER
@@ -50,7 +51,8 @@ log = logging.getLogger(__name__)
 Svc = Annotated[Services, Depends(get_services)]
 
 proxy_router = APIRouter(include_in_schema=False)
-api_router = APIRouter(prefix="/scene", tags=["scene"])
+# JsonSafeErrorsRoute: a body holding NaN gets its 422, not a 500
+api_router = APIRouter(prefix="/scene", tags=["scene"], route_class=JsonSafeErrorsRoute)
 
 SCENE_ROLE = "operator"  # the scene can propose plans, so viewing it needs operator
 
@@ -338,7 +340,10 @@ def dismiss_proposal(proposal_id: str, services: Svc, who: Operator) -> dict[str
 class FrameRequest(BaseModel):
     model_config = ConfigDict(extra="forbid", allow_inf_nan=False)
 
-    point_m: tuple[float, float, float] | None = Field(None, description="look here (world, m)")
+    # StrictFloat takes 0 and 1.5 but not ``false``: a boolean is not a coordinate
+    point_m: tuple[StrictFloat, StrictFloat, StrictFloat] | None = Field(
+        None, description="look here (world, m)"
+    )
     finding_id: str | None = Field(None, description="look at this finding's place")
 
     @model_validator(mode="after")

@@ -8,16 +8,17 @@ import numpy as np
 
 
 def test_upload_xyz_with_nonfinite_rows(api) -> None:
-    data = b"# scan\n0 0 0\n1 0 0\nnan 1 1\n0 1 0.5\n"
+    # ten finite rows: a cloud needs MIN_CLOUD_POINTS (10)
+    data = b"# scan\n0 0 0\n1 0 0\nnan 1 1\n0 1 0.5\n" + b"0.5 0.5 0.25\n" * 7
     r = api.post("/api/v1/clouds", files={"file": ("scan.xyz", data)})
     assert r.status_code == 201, r.text
     body = r.json()
-    assert body["n_points"] == 3 and body["dropped_nonfinite"] == 1
+    assert body["n_points"] == 10 and body["dropped_nonfinite"] == 1
     assert body["bounds"] == {"min": [0.0, 0.0, 0.0], "max": [1.0, 1.0, 0.5]}
     got = api.get(f"/api/v1/clouds/{body['id']}", "viewer").json()
     assert got["name"] == "scan.xyz"
     raw = api.get(f"/api/v1/clouds/{body['id']}/points.npy", "viewer").content
-    assert np.load(io.BytesIO(raw)).shape == (3, 3)
+    assert np.load(io.BytesIO(raw)).shape == (10, 3)
 
 
 def test_upload_npy_and_list(api) -> None:
@@ -60,7 +61,7 @@ def test_oversize_upload_413(make_api) -> None:
     big = b"1 2 3\n" * 5000
     r = api.post("/api/v1/clouds", files={"file": ("big.xyz", big)})
     assert r.status_code == 413 and "upload limit" in r.json()["detail"]
-    small = api.post("/api/v1/clouds", files={"file": ("ok.xyz", b"1 2 3\n")})
+    small = api.post("/api/v1/clouds", files={"file": ("ok.xyz", b"1 2 3\n" * 10)})
     assert small.status_code == 201
 
 
@@ -110,7 +111,7 @@ def test_upload_leaves_no_spool_or_array_files(make_api, tmp_path) -> None:
     data_dir = api.services.store.data_dir
     assert _upload_files(api, "big.xyz", b"1 2 3\n" * 5000).status_code == 413
     assert _upload_files(api, "bad.ply", b"ply\nformat ascii 1.0\n").status_code == 400
-    ok = _upload_files(api, "ok.xyz", b"1 2 3\n4 5 6\n")
+    ok = _upload_files(api, "ok.xyz", b"1 2 3\n4 5 6\n" * 5)
     assert ok.status_code == 201
     files = sorted(p.relative_to(data_dir).as_posix() for p in data_dir.rglob("*") if p.is_file())
     arrays = [f for f in files if f.startswith(("arrays/", "uploads/"))]
@@ -151,7 +152,7 @@ def test_health_is_served_while_an_upload_parses(api, tmp_path, monkeypatch) -> 
     result: dict = {}
 
     def upload() -> None:
-        result["r"] = _upload_files(api, "held.xyz", b"0 0 0\n1 1 1\n")
+        result["r"] = _upload_files(api, "held.xyz", b"0 0 0\n1 1 1\n" * 5)
 
     t = threading.Thread(target=upload)
     t.start()
@@ -170,4 +171,4 @@ def test_health_is_served_while_an_upload_parses(api, tmp_path, monkeypatch) -> 
         gate.touch()
         t.join(60)
     assert not t.is_alive()
-    assert result["r"].status_code == 201 and result["r"].json()["n_points"] == 2
+    assert result["r"].status_code == 201 and result["r"].json()["n_points"] == 10
