@@ -27,6 +27,7 @@ from starlette.types import ASGIApp, Message, Receive, Scope, Send
 
 from planners.errors import PlannerError
 from server import __version__, log_redaction
+from server.asgi_response import send_json
 from server.audit_backlog import AuditBacklog
 from server.auth import CsrfGuard, bootstrap_admin
 from server.disk_guard import DiskReserve, disk_full_handler
@@ -107,21 +108,8 @@ class BodySizeLimit:
 
     @staticmethod
     async def _reject(send: Send, limit: int) -> None:
-        body = (
-            '{"detail":"request body exceeds the upload limit of '
-            f'{limit} bytes (STEELPATH_MAX_UPLOAD_MB)"}}'
-        ).encode()
-        await send(
-            {
-                "type": "http.response.start",
-                "status": 413,
-                "headers": [
-                    (b"content-type", b"application/json"),
-                    (b"content-length", str(len(body)).encode()),
-                ],
-            }
-        )
-        await send({"type": "http.response.body", "body": body})
+        detail = f"request body exceeds the upload limit of {limit} bytes (STEELPATH_MAX_UPLOAD_MB)"
+        await send_json(send, 413, {"detail": detail})
 
 
 class _TooLarge(Exception):

@@ -11,13 +11,13 @@ the same 507 instead of a 500.
 
 from __future__ import annotations
 
-import json
 import re
 
 from starlette.requests import Request
 from starlette.responses import JSONResponse
 from starlette.types import ASGIApp, Receive, Scope, Send
 
+from server.asgi_response import send_json
 from server.diskspace import DiskGauge, is_disk_full
 
 #: Paths that must work on a full disk: stopping robots and clearing a stop
@@ -59,18 +59,7 @@ class DiskReserve:
         if self.gauge.room_for(size):
             await self.app(scope, receive, send)
             return
-        body = json.dumps({"detail": _message(self.gauge)}).encode()
-        await send(
-            {
-                "type": "http.response.start",
-                "status": 507,
-                "headers": [
-                    (b"content-type", b"application/json"),
-                    (b"content-length", str(len(body)).encode()),
-                ],
-            }
-        )
-        await send({"type": "http.response.body", "body": body})
+        await send_json(send, 507, {"detail": _message(self.gauge)})
 
 
 def disk_full_response(gauge: DiskGauge, exc: BaseException) -> JSONResponse | None:
