@@ -306,6 +306,10 @@ def create_app(settings: Settings | None = None, *, start_scene: bool | None = N
     # bare 500; any other such error is re-raised to the 500 handler as before.
     app.add_exception_handler(sqlite3.OperationalError, disk_full_handler)
     app.add_exception_handler(OSError, disk_full_handler)
+    if settings.database_url:  # PostgreSQL's DiskFull (SQLSTATE 53100); psycopg loads only then
+        import psycopg
+
+        app.add_exception_handler(psycopg.Error, disk_full_handler)
 
     @app.exception_handler(RequestValidationError)
     async def _invalid(request: Request, exc: RequestValidationError) -> JSONResponse:

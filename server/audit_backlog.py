@@ -67,15 +67,6 @@ class AuditBacklog:
             return f"failed: {describe(exc)}; kept and written when the store accepts writes again"
         return "recorded"
 
-    def try_record(self, actor: str, entity: str, entity_id: str, action: str, reason: str) -> None:
-        """Write the record now (after any pending ones) or raise; nothing is kept.
-
-        For actions that must not happen unrecorded (clearing an E-stop): the
-        caller acts only after this returned.
-        """
-        self.flush()
-        self.store.audit(actor, entity, entity_id, action, reason)
-
     def pending(self) -> int:
         with self._lock:
             return len(self._pending)
