@@ -155,7 +155,9 @@ def test_an_estop_that_reached_nobody_is_latched_by_the_robots_next_driver(store
     b.start()
     try:
         deadline = time.monotonic() + LEASE + 3
-        while "ara" not in eng.owned and time.monotonic() < deadline:
+        # The latch comes right after the adoption in the same tick: wait for
+        # both (polling between the two saw ara owned and nothing latched yet).
+        while not ("ara" in eng.owned and eng.estops) and time.monotonic() < deadline:
             time.sleep(0.02)
         assert "ara" in eng.owned
         assert eng.estops == [("ara", eng.estops[0][1])] and "operator E-stop" in eng.estops[0][1]
