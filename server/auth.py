@@ -30,7 +30,6 @@ from __future__ import annotations
 import asyncio
 import hashlib
 import hmac
-import json
 import logging
 import os
 import re
@@ -48,6 +47,7 @@ from fastapi import Depends, HTTPException, Request, Response, status
 from starlette.requests import cookie_parser
 from starlette.types import ASGIApp, Message, Receive, Scope, Send
 
+from server.asgi_response import send_json
 from server.services import Services, get_services
 from server.store import Store
 
@@ -514,7 +514,7 @@ class CsrfGuard:
                         headers.get("origin"),
                         refusal.split(":")[0],
                     )
-                    await _send_json(send, 403, {"detail": refusal})
+                    await send_json(send, 403, {"detail": refusal})
                     return
             await self.app(scope, receive, send)
             return
@@ -534,18 +534,3 @@ class CsrfGuard:
             await send(message)
 
         await self.app(scope, receive, send_with_cookie)
-
-
-async def _send_json(send: Send, status_code: int, body: dict[str, str]) -> None:
-    data = json.dumps(body).encode()
-    await send(
-        {
-            "type": "http.response.start",
-            "status": status_code,
-            "headers": [
-                (b"content-type", b"application/json"),
-                (b"content-length", str(len(data)).encode()),
-            ],
-        }
-    )
-    await send({"type": "http.response.body", "body": data})
