@@ -152,7 +152,7 @@ def create_app(settings: Settings | None = None, *, start_scene: bool | None = N
     async def lifespan(app: FastAPI) -> AsyncIterator[None]:
         _check_robot_names(settings)  # before anything starts
         store = Store(settings.data, database_url=settings.database_url)
-        # Crash leftovers (issue #12 §6), before jobs/uploads run; the lock held
+        # Crash leftovers, before jobs/uploads run; the lock held
         # from here on tells a server starting beside this one what not to touch.
         run_locks = clean_at_start(store)
         bus = EventBus()

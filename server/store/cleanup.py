@@ -1,4 +1,4 @@
-"""Remove what a crash left behind (issue #12 §6).
+"""Remove what a crash left behind.
 
 A ``kill -9`` can leave, in the data directory:
 
@@ -18,7 +18,7 @@ export being zipped (``steelpath-export-*.zip``), a rosbag2 being written
 (``steelpath-bag-*/``) and an E57 upload copied for its reader
 (``.tmp-e57-*.e57``).
 
-Several servers may share one data directory (issue #17), and a server must
+Several servers may share one data directory, and a server must
 not delete what another one is still writing.  So each server holds a shared
 ``flock`` on ``<data>/.steelpath-server.lock`` for as long as it runs (the
 kernel drops it when the process dies, ``kill -9`` included); at start,
