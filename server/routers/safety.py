@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import asyncio
 import logging
+import time
 from concurrent.futures import ThreadPoolExecutor
 from typing import Annotated, Any
 
@@ -54,6 +55,7 @@ def trigger_estop(
         known = services.dispatch.robot_names()
         if robot not in known:
             raise NotFoundError(f"no robot {robot!r}; robots: {', '.join(known)}")
+    t0 = time.perf_counter()
     reached, errors = [], []
     local: list[str] = []
     for handler in list(services.estop_handlers):
@@ -90,11 +92,13 @@ def trigger_estop(
         except Exception as exc:
             log.exception("could not hold the E-stop for the unreached robots")
             errors.append(f"holding the E-stop for {', '.join(unreached)}: {exc}")
+    t_stopped = time.perf_counter()
     why = f"{reason} (forwarded by server {forwarded_by})" if forwarded_by else reason
     # The robots are stopped whatever the store does: the event goes out first,
     # then the record, kept in memory and written later if the store refuses it.
     services.events.publish("estop", {"robot": target, "reason": reason, "by": actor})
     audit = record_safety(services, actor, "robot", target, "estop", why)
+    t_end = time.perf_counter()
     return {
         "robot": target,
         "audit": audit,
@@ -106,6 +110,12 @@ def trigger_estop(
         "unreached": unreached,
         "held": held,
         "servers": forwarded,
+        # Where this server's time went: stopping the robots (every handler and
+        # peer), then the event and the audit record.
+        "timings_ms": {
+            "stop": round((t_stopped - t0) * 1e3, 2),
+            "record": round((t_end - t_stopped) * 1e3, 2),
+        },
     }
 
 
@@ -156,11 +166,16 @@ async def _estop_first(request: Request, robot: str | None, reason: str) -> dict
     token = token_from_request(request)
     forwarded_by = request.headers.get(FORWARDED_HEADER)
 
+    t_handler = time.perf_counter()
+
     def run() -> dict[str, Any]:
+        t_thread = time.perf_counter()
         who = _operator(services, token)
-        return trigger_estop(
+        out = trigger_estop(
             services, robot, who.actor, reason, token=token, forwarded_by=forwarded_by
         )
+        out["timings_ms"]["to_thread"] = round((t_thread - t_handler) * 1e3, 2)
+        return out
 
     return await asyncio.get_running_loop().run_in_executor(_ESTOP_POOL, run)
 

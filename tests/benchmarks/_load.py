@@ -272,3 +272,160 @@ def upload_load(url: str, token: str, path: str, busy: Any, stop: Any, out_path:
             if rec["status"] not in (200, 201):
                 stop.wait(2.0)  # a refused upload must not become a busy loop
     _dump(out_path, {"uploads": uploads})
+
+
+# ------------------------------------------------------------- mixed writes
+async def _writer(
+    client: httpx.AsyncClient,
+    mix: list[tuple[str, str]],
+    dispatch: list[tuple[str, str]],
+    interval_s: float,
+    stop: Any,
+    seed: int,
+    out: list[tuple[float, str, float, int]],
+    errors: list[str],
+) -> None:
+    """One console-like operator: reads, plans a small route, approves it,
+    dispatches a prepared plan to its robot (clearing that robot's E-stop
+    first when it is latched) and reads again, each request timed."""
+    rng = random.Random(seed)
+    await asyncio.sleep(rng.uniform(0, interval_s))
+
+    async def call(label: str, method: str, path: str, body: Any = None) -> httpx.Response | None:
+        t0 = time.monotonic()
+        try:
+            r = await client.request(method, path, json=body)
+            code = r.status_code
+        except httpx.HTTPError as exc:
+            r, code = None, -1
+            errors.append(f"{label} {type(exc).__name__}: {exc}")
+        t1 = time.monotonic()
+        out.append((t0, label, (t1 - t0) * 1e3, code))
+        await asyncio.sleep(max(0.0, interval_s - (t1 - t0)) * rng.uniform(0.8, 1.2))
+        return r
+
+    n = 0
+    while not stop.is_set():
+        n += 1
+        for _ in range(rng.randint(1, 3)):
+            label, path = rng.choice(mix)
+            await call(label, "GET", path)
+        length = rng.uniform(1.0, 4.0)
+        params = {
+            "nodes": {"s": [0.0, 0.0, 0.0], "e": [length, 0.0, 0.0]},
+            "edges": [["s", "e"]],
+            "start": "s",
+            "end": "e",
+            "max_length_m": length + 1.0,
+        }
+        r = await call("submit", "POST", "/api/v1/plans", {"kind": "demo.route", "params": params})
+        if r is not None and r.status_code == 202:
+            pid = r.json()["id"]
+            for _ in range(40):
+                if stop.is_set():
+                    break
+                got = await call("plan", "GET", f"/api/v1/plans/{pid}")
+                state = (
+                    got.json().get("state") if got is not None and got.status_code == 200 else None
+                )
+                if state in TERMINAL_PLAN_STATES:
+                    if state == "planned":
+                        await call("approve", "POST", f"/api/v1/plans/{pid}/approve", {})
+                    break
+        if dispatch and not stop.is_set():
+            plan_id, robot = dispatch[n % len(dispatch)]
+            st = await call("robot", "GET", f"/api/v1/robots/{robot}/state")
+            if st is not None and st.status_code == 200 and st.json().get("state") != "ready":
+                await call("clear", "POST", f"/api/v1/robots/{robot}/clear-estop")
+            await call("dispatch", "POST", f"/api/v1/plans/{plan_id}/dispatch", {"robot": robot})
+
+
+async def _stream(
+    client: httpx.AsyncClient, stop: Any, counts: list[int], errors: list[str]
+) -> None:
+    """An event-stream follower (the console's live updates): counts the lines
+    read, reconnecting when the stream ends."""
+    while not stop.is_set():
+        try:
+            async with client.stream("GET", "/api/v1/events", timeout=None) as r:
+                async for _ in r.aiter_lines():
+                    counts[0] += 1
+                    if stop.is_set():
+                        return
+        except httpx.HTTPError as exc:
+            errors.append(f"events {type(exc).__name__}: {exc}")
+            await asyncio.sleep(1.0)
+
+
+async def _mixed_main(
+    url: str,
+    token: str,
+    writers: int,
+    streams: int,
+    mix: list[tuple[str, str]],
+    dispatch: list[tuple[str, str]],
+    interval_s: float,
+    first_seed: int,
+    stop: Any,
+    errors: list[str],
+    counts: list[int],
+) -> list[tuple[float, str, float, int]]:
+    out: list[tuple[float, str, float, int]] = []
+    limits = httpx.Limits(max_connections=writers + streams, max_keepalive_connections=writers)
+    async with httpx.AsyncClient(
+        base_url=url, headers={"Authorization": f"Bearer {token}"}, timeout=60.0, limits=limits
+    ) as client:
+        tasks = [
+            asyncio.create_task(
+                _writer(client, mix, dispatch, interval_s, stop, first_seed + i, out, errors)
+            )
+            for i in range(writers)
+        ]
+        tasks += [
+            asyncio.create_task(_stream(client, stop, counts, errors)) for _ in range(streams)
+        ]
+        await asyncio.gather(*tasks[:writers])
+        for t in tasks[writers:]:
+            t.cancel()
+        await asyncio.gather(*tasks[writers:], return_exceptions=True)
+    return out
+
+
+def mixed_clients(
+    url: str,
+    token: str,
+    writers: int,
+    streams: int,
+    mix: list[tuple[str, str]],
+    dispatch: list[tuple[str, str]],
+    interval_s: float,
+    first_seed: int,
+    stop: Any,
+    out_path: str,
+) -> None:
+    """Process entry: ``writers`` operators mixing reads, plan submits,
+    approvals, clears and dispatches (``dispatch``: ``(plan id, robot)``
+    pairs of approved plans), and ``streams`` event-stream followers, until
+    ``stop``; every request's ``(start, label, ms, status)`` to ``out_path``."""
+    if writers < 1 or streams < 0:
+        raise ValueError(
+            f"mixed load needs writers >= 1 and streams >= 0, got {writers}, {streams}"
+        )
+    errors: list[str] = []
+    counts = [0]
+    samples = asyncio.run(
+        _mixed_main(
+            url,
+            token,
+            writers,
+            streams,
+            mix,
+            dispatch,
+            interval_s,
+            first_seed,
+            stop,
+            errors,
+            counts,
+        )
+    )
+    _dump(out_path, {"samples": samples, "errors": errors[:200], "event_lines": counts[0]})

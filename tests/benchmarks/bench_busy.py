@@ -593,6 +593,8 @@ class Trial:
     upload_in_flight: bool
     plans_in_flight: int
     execution: str
+    #: The server's own account of its time (the answer's ``timings_ms``), if given.
+    server_ms: dict[str, float] = field(default_factory=dict)
 
 
 @dataclass
@@ -704,8 +706,9 @@ def estop_trials(
         tail.new()  # everything before the E-stop is not its evidence
         upload, planning = bool(upload_flag.value), int(plans_flag.value)
         t0 = time.monotonic()
-        api.post("/estop", {"reason": f"bench_busy {label} trial {i}"})
+        answer = api.post("/estop", {"reason": f"bench_busy {label} trial {i}"})
         http_ms = (time.monotonic() - t0) * 1e3
+        server_ms = dict((answer or {}).get("timings_ms") or {})
         rec: dict[str, Any] | None = None
         if run.method == "emulator log":
             probe = not run.probed
@@ -736,7 +739,7 @@ def estop_trials(
 
             latency = (wait_for("mode ESTOP in the state report", host_sees, 30, 0.0) - t0) * 1e3
             moving = True
-        run.trials.append(Trial(latency, http_ms, moving, upload, planning, ex["id"]))
+        run.trials.append(Trial(latency, http_ms, moving, upload, planning, ex["id"], server_ms))
         # Clear only once the robot reported its E-stop and the execution is aborted:
         # the link service finishes an E-stop's bookkeeping after it has answered, and
         # that bookkeeping latches the link again (Streamer.estop), undoing a clear
