@@ -37,6 +37,12 @@ thread at once instead of queueing it behind the I/O loop.  Events go to
 subscribers (:meth:`RobotLink.subscribe`) from whichever thread produced them,
 serialised and in order; a subscriber must only hand them on (a queue, or
 ``loop.call_soon_threadsafe``), never block.
+
+Captures (docs/protocol.md §14): the robot's ``CAPTURE`` header and
+``CAPTURE_CHUNK`` messages are reassembled on the I/O thread into
+:class:`~robots.protocol.capture.SensorCapture` and emitted as
+:class:`CaptureReceived` events (complete or, with chunks lost, not);
+:meth:`RobotLink.subscribe_captures` subscribes to those alone.
 """
 
 from __future__ import annotations
@@ -47,6 +53,7 @@ from collections.abc import Callable
 from robots.adapters.link_io import _IoLoop
 from robots.adapters.link_types import (
     CONNECTED_STATES,
+    CaptureReceived,
     Connected,
     EstopLatched,
     FrameAcked,
@@ -59,6 +66,7 @@ from robots.adapters.link_types import (
     LinkStatus,
     ReportReceived,
 )
+from robots.protocol.capture import SensorCapture
 from robots.protocol.commands import Command
 from robots.protocol.messages import (
     Abort,
@@ -74,6 +82,7 @@ from robots.protocol.messages import (
 
 __all__ = [
     "CONNECTED_STATES",
+    "CaptureReceived",
     "Connected",
     "EstopLatched",
     "FrameAcked",
@@ -176,6 +185,33 @@ class RobotLink(_IoLoop):
 
         return unsubscribe
 
+    def subscribe_captures(self, callback: Callable[[SensorCapture], None]) -> Callable[[], None]:
+        """Call ``callback(capture)`` for every sensor frame the robot sends; returns
+        a function that unsubscribes.
+
+        Called like every subscriber: from whichever thread dispatches the
+        link's events — normally its I/O thread, sometimes a thread calling
+        one of its methods (``close``, ``flush_captures``, ``send_command``…)
+        — one event at a time, never concurrently, in order with the other
+        events: a capture arrives before the state report that shows its
+        command done.  Like every
+        subscriber it must only hand the capture on (a queue,
+        ``loop.call_soon_threadsafe``), never block: storing it belongs on
+        another thread.  ``capture.complete`` is False when chunks were lost.
+        """
+
+        def on_event(event: LinkEvent) -> None:
+            if isinstance(event, CaptureReceived):
+                callback(event.capture)
+
+        return self.subscribe(on_event)
+
+    def flush_captures(self) -> None:
+        """Hand on a capture still being reassembled now (incomplete), e.g. at a run's end."""
+        with self._lock:
+            self._flush_captures_locked()
+        self._dispatch()
+
     @property
     def state(self) -> LinkState:
         return self._state
@@ -212,7 +248,7 @@ class RobotLink(_IoLoop):
                 last_rx_wall=self._last_rx_wall,
                 estop_latched=self._estop_latched,
                 session=self._session,
-                stats=dict(self._stats),
+                stats={**self._stats, **self._captures.stats},
             )
 
     def wait_for(self, predicate: Callable[[RobotLink], bool], timeout: float) -> bool:

@@ -19,6 +19,7 @@ import serial
 
 from robots.adapters.link_types import (
     CONNECTED_STATES,
+    CaptureReceived,
     LinkConfig,
     LinkEvent,
     LinkState,
@@ -27,6 +28,7 @@ from robots.adapters.link_types import (
     _Pending,
 )
 from robots.protocol.auth import HostHandshake, SessionMac
+from robots.protocol.capture import CaptureAssembler
 from robots.protocol.framing import FrameDecoder
 from robots.protocol.messages import (
     HelloAck,
@@ -92,6 +94,8 @@ class _LinkCore:
         self._handshake: HostHandshake | None = None  # this port's handshake attempt
         self._mac: SessionMac | None = None  # set by a valid CHALLENGE; seals every frame
         self._takeover_requested = False
+        # Reassembles the robot's captures (bounded: one at a time, ≤ MAX_CAPTURE_POINTS).
+        self._captures = CaptureAssembler(timeout_s=self.config.capture_timeout_s)
 
     # --- internals: state and events -----------------------------------------------------
 
@@ -148,7 +152,14 @@ class _LinkCore:
         self._set_state(LinkState.DISCONNECTED, f"{reason}; retrying in {self._backoff:.1f} s")
         self._backoff = min(self._backoff * 2, self.config.backoff_max_s)
 
+    def _flush_captures_locked(self) -> None:
+        """Hand on the capture being reassembled (incomplete if chunks are missing)."""
+        for cap in self._captures.flush():
+            self._emit_locked(CaptureReceived(cap, self._session))
+
     def _close_port(self) -> None:
+        # Whatever part of a capture arrived goes on: the rest is lost with the link.
+        self._flush_captures_locked()
         with self._write_lock:
             port, self._port = self._port, None
         if port is not None:

@@ -12,6 +12,7 @@ from typing import Any
 
 from robots.adapters.link_session import _Session
 from robots.adapters.link_types import (
+    CaptureReceived,
     Connected,
     LinkState,
     ReportReceived,
@@ -21,6 +22,8 @@ from robots.adapters.link_types import (
 from robots.protocol.framing import PROTOCOL_MAJOR
 from robots.protocol.messages import (
     Ack,
+    CaptureChunk,
+    CaptureHeader,
     Challenge,
     FaultFlag,
     Heartbeat,
@@ -97,6 +100,9 @@ class _IoLoop(_Session):
             and now - self._estop_last_tx >= cfg.ack_timeout_s
         ):
             self._send_estop_locked()
+        if self._captures.pending:
+            for cap in self._captures.expire(now):
+                self._emit_locked(CaptureReceived(cap, self._session))
         if self._state == LinkState.HANDSHAKING:
             hs = self._handshake
             if (
@@ -147,6 +153,9 @@ class _IoLoop(_Session):
             self._on_ack_locked(msg)
         elif isinstance(msg, Nak):
             self._on_nak_locked(msg, now)
+        elif isinstance(msg, CaptureHeader | CaptureChunk):
+            for cap in self._captures.feed(msg, now):
+                self._emit_locked(CaptureReceived(cap, self._session))
         # Host-bound types only; anything else (an echo on loop://) is ignored.
 
     def _on_state_locked(self, msg: State) -> None:

@@ -13,6 +13,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from robots.protocol.auth import check_secret
+from robots.protocol.capture import SensorCapture
 from robots.protocol.messages import (
     Ack,
     FaultFlag,
@@ -64,6 +65,8 @@ class LinkConfig:
     # handshake.  For tools only: two servers with this set would fight over
     # the robot; a server uses RobotLink.takeover() on an operator's request.
     takeover: bool = False
+    # A capture whose chunks stop arriving is handed on incomplete after this long.
+    capture_timeout_s: float = 1.0
 
     def __post_init__(self) -> None:
         if self.secret is not None:
@@ -130,7 +133,29 @@ class FrameRefused:
         return f"{name} (detail {self.nak.detail})"
 
 
-LinkEvent = LinkStateChanged | EstopLatched | Connected | ReportReceived | FrameAcked | FrameRefused
+@dataclass(frozen=True)
+class CaptureReceived:
+    """A sensor frame the robot sent (``CAPTURE`` + ``CAPTURE_CHUNK``), reassembled.
+
+    ``capture.complete`` is False when chunks were lost: it is handed on with
+    the points that arrived when the next capture starts, when no chunk came
+    for ``LinkConfig.capture_timeout_s``, when the link is lost or closed, or
+    on :meth:`RobotLink.flush_captures`.
+    """
+
+    capture: SensorCapture
+    session: int
+
+
+LinkEvent = (
+    LinkStateChanged
+    | EstopLatched
+    | Connected
+    | ReportReceived
+    | FrameAcked
+    | FrameRefused
+    | CaptureReceived
+)
 
 
 @dataclass

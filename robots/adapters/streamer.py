@@ -20,6 +20,12 @@ the last *completed* one, and reports progress through callbacks:
 ``on_state(report)``
     every robot state report (:class:`robots.protocol.messages.State`) while the
     streamer is alive — mirror it into the store / scene.
+``on_capture(capture)``
+    every sensor frame (:class:`robots.protocol.capture.SensorCapture`) of
+    this run (``capture.run_id == run_id``) the link reassembles, on the
+    streamer's thread, before the ``on_ack`` of its ``capture`` command when
+    its frames arrived intact (they precede the report that completes it).
+    An incomplete one (``complete=False``: chunks lost) may come later.
 ``on_done(outcome)``
     once, when the execution ends for good: ``completed``, ``aborted`` or
     ``estopped``.
@@ -51,6 +57,7 @@ from typing import Any
 
 from robots.adapters.link import (
     CONNECTED_STATES,
+    CaptureReceived,
     EstopLatched,
     FrameAcked,
     FrameRefused,
@@ -60,9 +67,11 @@ from robots.adapters.link import (
     ReportReceived,
     RobotLink,
 )
+from robots.protocol.capture import SensorCapture
 from robots.protocol.commands import CommandError
 from robots.protocol.messages import (
     LINK_FAULTS,
+    ROBOT_FAULTS,
     AckStatus,
     CommandMessage,
     FaultFlag,
@@ -99,7 +108,7 @@ class Outcome(enum.StrEnum):
 
 class FaultKind(enum.StrEnum):
     LINK_LOST = "link_lost"  # → execution "interrupted"
-    ROBOT_FAULT = "robot_fault"  # robot latched a fault (DRIVE) or an E-stop is latched
+    ROBOT_FAULT = "robot_fault"  # robot latched a fault (DRIVE, FALL_RISK) or an E-stop
     REJECTED = "rejected"  # robot refused a command (limits, invalid, busy too often)
     ROBOT_BUSY = "robot_busy"  # robot is executing another run
     HOST = "host"  # a callback raised, or the program cannot be encoded
@@ -137,6 +146,7 @@ class Streamer:
         on_state: Callable[[State], None] | None = None,
         on_done: Callable[[Outcome], None] | None = None,
         on_fault: Callable[[StreamFault], None] | None = None,
+        on_capture: Callable[[SensorCapture], None] | None = None,
         window: int = 8,
         connect_timeout_s: float = 10.0,
         clear_robot_faults: bool = False,
@@ -157,6 +167,7 @@ class Streamer:
         self._on_state = on_state
         self._on_done = on_done
         self._on_fault = on_fault
+        self._on_capture = on_capture
         self._window = window
         self._connect_timeout_s = connect_timeout_s
         self._clear_robot_faults = clear_robot_faults
@@ -382,18 +393,19 @@ class Streamer:
             return
         latched = report.faults | self._refused_faults
         to_clear = latched & LINK_FAULTS
-        if latched & FaultFlag.DRIVE:
+        if latched & ROBOT_FAULTS:
             if not self._clear_robot_faults:
                 self._to_fault(
                     ExecState.FAULTED,
                     StreamFault(
                         FaultKind.ROBOT_FAULT,
-                        f"robot fault latched (code {report.fault_code}); "
+                        f"robot fault latched (code {report.fault_code}, "
+                        f"{_names(latched & ROBOT_FAULTS)}); "
                         "resume with clear_robot_faults=True to clear it",
                     ),
                 )
                 return
-            to_clear |= FaultFlag.DRIVE
+            to_clear |= latched & ROBOT_FAULTS
         self._clear_robot_faults = False
         self._refused_faults = 0
         self._pending_clear = None
@@ -473,6 +485,11 @@ class Streamer:
     # --- link events ----------------------------------------------------------------------
 
     def _link(self, event: LinkEvent) -> None:
+        if isinstance(event, CaptureReceived):
+            # Even after the end: what the robot saw is kept whatever the outcome.
+            if event.capture.run_id == self.run_id:
+                self._call(self._on_capture, event.capture)
+            return
         if self._state in TERMINAL_STATES:
             return
         if isinstance(event, EstopLatched):
@@ -501,6 +518,9 @@ class Streamer:
             index = msg.index if isinstance(msg, CommandMessage) else None
             what = f"command {index}" if index is not None else type(msg).__name__
             latched = int(event.nak.detail) if event.nak.reason == NakReason.FAULTED else 0
+            if event.nak.reason == NakReason.FALL_RISK:
+                # Refused because the robot would fall: it latched FALL_RISK and stopped.
+                latched = int(FaultFlag.FALL_RISK)
             if (
                 latched
                 and self._pending_clear is not None
@@ -538,8 +558,8 @@ class Streamer:
                 # Our run cannot go on as planned: stop it now rather than after
                 # the commands already queued (resume restarts from the last ack).
                 kind = FaultKind.REJECTED
-                if latched & FaultFlag.DRIVE:
-                    # The robot's drive fault, reaching us as this refusal before
+                if latched & ROBOT_FAULTS:
+                    # The robot's own fault, reaching us as this refusal before
                     # the state report carrying it: only an operator's explicit
                     # clear may resume from it.
                     kind = FaultKind.ROBOT_FAULT
@@ -591,12 +611,13 @@ class Streamer:
         faults = report.faults & ~(self._pending_clear[1] if self._pending_clear else 0)
         if faults & FaultFlag.ESTOP or report.mode == Mode.ESTOP:
             self._finish(Outcome.ESTOPPED)
-        elif faults & FaultFlag.DRIVE:
+        elif faults & ROBOT_FAULTS:
             self._to_fault(
                 ExecState.FAULTED,
                 StreamFault(
                     FaultKind.ROBOT_FAULT,
-                    f"robot fault code {report.fault_code} while executing command "
+                    f"robot fault code {report.fault_code} ({_names(faults & ROBOT_FAULTS)}) "
+                    "while executing command "
                     f"{report.executing if report.executing >= 0 else self._acked + 1}",
                     self._acked + 1,
                 ),
@@ -608,6 +629,10 @@ class Streamer:
             )
         else:
             self._pump()
+
+
+def _names(bits: int) -> str:
+    return "|".join(f.name for f in FaultFlag if f and bits & f and f.name) or str(bits)
 
 
 #: The name the dispatch engine may prefer.

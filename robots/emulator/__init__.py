@@ -7,14 +7,20 @@
   (an interrupted command must be *continued*, never repeated: docs/protocol.md §8.2).
 - :class:`StateFile`, :func:`read_port_file` — state and endpoint that outlive the
   emulator process (``--state-file``, ``--port-file``; :mod:`robots.emulator.persist`).
+- :class:`FeetSpec` — the feet rules of a two-footed robot (:mod:`robots.emulator.feet`);
+  :class:`CameraSpec`, :class:`World` — its camera and what it sees
+  (``--world``; :mod:`robots.emulator.camera`).
 - :func:`main` — ``steelpath emulate`` entry point.
 """
 
+from robots.emulator.camera import CameraSpec, World, WorldError
 from robots.emulator.cli import main
 from robots.emulator.faults import FaultConfig
+from robots.emulator.feet import FeetSpec
 from robots.emulator.persist import PortInfo, StateFile, StateFileError, read_port_file
 from robots.emulator.profiles import FALLBACK_PROFILES, RobotProfile, resolve_profile
 from robots.emulator.robot import (
+    CaptureInfo,
     ExecutionRecord,
     Interrupted,
     SimRobot,
@@ -25,9 +31,12 @@ from robots.emulator.server import Emulator
 
 __all__ = [
     "FALLBACK_PROFILES",
+    "CameraSpec",
+    "CaptureInfo",
     "Emulator",
     "ExecutionRecord",
     "FaultConfig",
+    "FeetSpec",
     "Interrupted",
     "PortInfo",
     "RobotProfile",
@@ -35,6 +44,8 @@ __all__ = [
     "StateFile",
     "StateFileError",
     "StopEvent",
+    "World",
+    "WorldError",
     "check_exactly_once",
     "main",
     "read_port_file",

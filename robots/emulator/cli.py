@@ -13,6 +13,12 @@ way out.  ``python -m robots.emulator`` is the same.
 0600; created when missing — :func:`robots.protocol.auth.load_or_create_secret`):
 only a host with the same secret can command the emulator.  Without it the
 emulator makes up a random secret it tells nobody, so nobody can control it.
+
+``--world PATH`` is what the robot's camera sees: an ``.npz`` with ``points``
+(N, 3) float32 in the program's world frame and optionally ``intensity`` (N,)
+uint8, at most 20 M points, reloaded whenever the file changes
+(:mod:`robots.emulator.camera`).  Without it, or while the file is missing,
+a ``capture`` command sends a frame of 0 points and the log says why.
 """
 
 from __future__ import annotations
@@ -67,6 +73,15 @@ def build_parser(prog: str = "steelpath emulate") -> argparse.ArgumentParser:
         help="the robot's link secret (64 hex chars, mode 0600; created if missing); "
         "without it a random secret is used and no host can control the emulator",
     )
+    c = p.add_argument_group("camera")
+    c.add_argument(
+        "--world",
+        default=None,
+        metavar="PATH",
+        help="point cloud the camera sees: .npz with points (N,3) float32 in the program's "
+        "world frame [and intensity (N,) uint8]; reloaded when it changes",
+    )
+    c.add_argument("--camera-seed", type=int, default=0, help="seed of the range noise")
     s = p.add_argument_group("surviving the server")
     s.add_argument(
         "--state-file",
@@ -182,6 +197,8 @@ def _run(args: argparse.Namespace, in_main: bool) -> int:
             port_file=args.port_file,
             exit_when_orphaned_s=args.exit_when_orphaned,
             on_orphaned=stop.set,
+            world=args.world,
+            camera_seed=args.camera_seed,
         )
     except ValueError as exc:
         print(f"steelpath emulate: {exc}", file=sys.stderr)
@@ -206,6 +223,14 @@ def _run(args: argparse.Namespace, in_main: bool) -> int:
     try:
         p = emu.profile
         print(f"robot {p.name}: {p.n_joints} joints (limits from {p.source})", flush=True)
+        if args.world is not None:
+            w = emu.world
+            what = (
+                f"{len(w.cloud)} points"
+                if w is not None and w.cloud is not None
+                else "no such file yet"
+            )
+            print(f"world {args.world}: {what}", flush=True)
         if listen is not None:
             print(f"listening on {emu.url}", flush=True)
         if args.pty:

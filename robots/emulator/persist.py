@@ -6,8 +6,10 @@ server crash would "teleport" the robot home and a resume could not be checked
 honestly.  Three pieces, used by :class:`robots.emulator.server.Emulator`:
 
 - :class:`StateFile` (``--state-file``): the robot's kept state as JSON —
-  pose, odometry, joints, lifting arm, magnets, plates, nozzle, latched
-  faults, ``run_id``/``last_done`` and the interrupted-command memory
+  pose, odometry, joints, lifting arm, magnets (and, for the record, which
+  feet are in the air — derived from magnets and joints on load), plates,
+  nozzle, latched faults, the base anchor and planar pose, the capture
+  counter, ``run_id``/``last_done`` and the interrupted-command memory
   (:class:`~robots.emulator.robot.Interrupted`).  A snapshot is *captured*
   (in memory, cheap) at each moment the robot comes to rest or changes its
   kept state at rest — halt, completion of a command, pause, clear — and the
@@ -138,6 +140,10 @@ def robot_state(robot: SimRobot) -> dict[str, Any]:
         "lift_rad": float(robot.lift),
         "odometry_m": [float(v) for v in robot.odometry],
         "magnets": int(robot.magnets),
+        "feet_in_air": int(robot.feet_in_air()),
+        "base_anchor": [[float(v) for v in row] for row in robot.base_anchor],
+        "base_planar": [float(v) for v in robot.base_planar],
+        "captures": int(robot.captures),
         "plates": int(robot.plates),
         "nozzle": bool(robot.nozzle),
         "faults": int(robot.faults),
@@ -202,7 +208,15 @@ def restore_robot_state(robot: SimRobot, state: Mapping[str, Any], source: str =
             "run_id": int(state["run_id"]),
             "last_done": int(state["last_done"]),
             "sim_t": float(state.get("sim_t", 0.0)),
+            "captures": int(state.get("captures", 0)),
         }
+        # Optional (files written before the base pose was kept: at the origin).
+        anchor = np.asarray(state.get("base_anchor", np.eye(4)), dtype=float)
+        planar = np.asarray(state.get("base_planar", np.zeros(3)), dtype=float)
+        if anchor.shape != (4, 4) or planar.shape != (3,):
+            raise StateFileError(f"{source}: base pose of the wrong shape")
+        if not (np.all(np.isfinite(anchor)) and np.all(np.isfinite(planar))):
+            raise StateFileError(f"{source}: non-finite base pose")
     except (KeyError, TypeError, ValueError) as exc:
         if isinstance(exc, StateFileError):
             raise
@@ -221,6 +235,9 @@ def restore_robot_state(robot: SimRobot, state: Mapping[str, Any], source: str =
     robot.run_id = values["run_id"]
     robot.last_done = robot.last_queued = values["last_done"]
     robot.sim_t = values["sim_t"]
+    robot.captures = values["captures"]
+    robot.base_anchor = anchor
+    robot.base_planar = planar
     robot.interrupted = mem
     robot.changed = True
 

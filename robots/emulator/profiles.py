@@ -12,6 +12,12 @@ warning).  A description may also describe its non-joint hardware in its
     n_plates = 0
     lift_limits_rad = [0.0, 1.5708]   # omit when there is no lifting arm
     nozzle = false
+
+Two-footed robots (the ARA) get their feet rules (:mod:`robots.emulator.feet`)
+from ``[magnets] mobile`` and the description's kinematics; a robot whose
+params have a ``[camera]`` table and whose description has ``camera_to_base``
+gets a depth camera (:mod:`robots.emulator.camera`); the wheel track (for the
+base pose the wheels drive) is ``[foot] wheel_track_m``.
 """
 
 from __future__ import annotations
@@ -24,7 +30,14 @@ from typing import Any
 
 import numpy as np
 
+from robots.emulator.camera import CameraSpec
+from robots.emulator.feet import FeetSpec
+
 log = logging.getLogger(__name__)
+
+
+#: Wheel track when a description gives none, m.
+DEFAULT_TRACK_M = 0.2
 
 
 @dataclass(frozen=True)
@@ -39,6 +52,9 @@ class RobotProfile:
     lift_limits: tuple[float, float] | None = None  # rad; None: no lifting arm
     nozzle: bool = False
     source: str = "fallback"  # where the joint limits came from
+    feet: FeetSpec | None = None  # two feet with magnets: the feet rules apply
+    camera: CameraSpec | None = None  # executes capture commands
+    wheel_track_m: float = DEFAULT_TRACK_M  # left/right wheel distance (differential drive)
 
     @property
     def n_joints(self) -> int:
@@ -64,7 +80,14 @@ FALLBACK_PROFILES: dict[str, RobotProfile] = {
         nozzle=True,
     ),
     "cmbot": RobotProfile("cmbot", _deg([(-170, 170)] * 12), n_magnets=2, n_plates=2, nozzle=True),
-    "ara": RobotProfile("ara", _deg([(-180, 180)] * 6), n_wheels=2, n_magnets=2),
+    "ara": RobotProfile(
+        "ara",
+        _deg([(-180, 180)] * 6),
+        n_wheels=2,
+        n_magnets=2,
+        feet=FeetSpec(q_mobile=np.zeros(6)),  # joint tolerance: no kinematics to decide
+        wheel_track_m=0.14,
+    ),
     "sbg_climber": RobotProfile(
         "sbg_climber", np.zeros((0, 2)), n_wheels=4, lift_limits=(0.0, math.pi / 2)
     ),
@@ -96,6 +119,36 @@ def _hardware_from_params(profile: RobotProfile, params: Mapping[str, Any]) -> R
     )
 
 
+def _feet_and_camera(profile: RobotProfile, model: Any) -> RobotProfile:
+    """Feet rules, camera and wheel track from a loaded description (see the module doc)."""
+    params = getattr(model, "params", {}) or {}
+    changes: dict[str, Any] = {}
+    foot = params.get("foot")
+    if isinstance(foot, Mapping) and "wheel_track_m" in foot:
+        changes["wheel_track_m"] = float(foot["wheel_track_m"])
+    magnets = params.get("magnets")
+    q_mobile = getattr(model, "q_mobile", None)
+    fk_all = getattr(model, "fk_all", None)
+    if (
+        isinstance(magnets, Mapping)
+        and "mobile" in magnets
+        and profile.n_magnets >= 2
+        and q_mobile is not None
+        and len(q_mobile) == profile.n_joints
+    ):
+        changes["feet"] = FeetSpec(
+            q_mobile=np.asarray(q_mobile, dtype=float),
+            foot_pose=None if fk_all is None else (lambda Q: fk_all(Q)[..., -1, :, :]),
+            plane_tol_m=float(magnets.get("mobile_plane_tol_m", 0.003)),
+            tilt_tol_rad=math.radians(float(magnets.get("mobile_tilt_tol_deg", 2.0))),
+        )
+    camera = params.get("camera")
+    camera_to_base = getattr(model, "camera_to_base", None)
+    if isinstance(camera, Mapping) and camera_to_base is not None:
+        changes["camera"] = CameraSpec.from_params(dict(camera), camera_to_base)
+    return replace(profile, **changes) if changes else profile
+
+
 def resolve_profile(name: str, joint_limits: np.ndarray | Sequence | None = None) -> RobotProfile:
     """Profile of robot ``name``: explicit limits > the robot's description > fallback."""
     base = FALLBACK_PROFILES.get(name)
@@ -114,7 +167,8 @@ def resolve_profile(name: str, joint_limits: np.ndarray | Sequence | None = None
         model = load_robot(name)
         lim = np.asarray(model.dispatch_joint_limits, dtype=float).reshape(-1, 2)
         profile = replace(base, joint_limits=lim, source=f"robots.load_robot({name!r})")
-        return _hardware_from_params(profile, getattr(model, "params", {}) or {})
+        profile = _hardware_from_params(profile, getattr(model, "params", {}) or {})
+        return _feet_and_camera(profile, model)
     except Exception as exc:  # descriptions are optional here; never fail the emulator
         log.warning("robot %r: no usable description (%s); using fallback limits", name, exc)
         return base

@@ -29,7 +29,25 @@ same command again — a resume — the robot executes only the remainder:
 - magnet, plate, nozzle, stop: absolute states, applied (idempotent).
 
 Any other command or run clears the memory; completed commands stay refused
-(``ALREADY_DONE``).  The interruption and the continuation are separate
+(``ALREADY_DONE``).  ``CMD_BASE_POSE`` and ``CMD_CAPTURE`` take no time: they
+are never interrupted, and a resume does not repeat them.
+
+Feet (two-footed robots, :mod:`robots.emulator.feet`): a command that would
+let the robot fall is refused and latches ``FALL_RISK`` (``fault_code`` = the
+:class:`~robots.protocol.messages.FallRule`), stopping the robot like any
+fault.  It is refused when it arrives (``NAK FALL_RISK``) if the state it
+would start from — the current state carried through the queued commands —
+breaks a rule, and again at the moment it would start (a safety net: a
+restored or continued state).  An E-stop stops the joints where they are
+and leaves both magnets as they are.
+
+Base pose and camera: ``CMD_BASE_POSE`` anchors the base in the program's
+world frame; wheel motion then moves it in its own x–y plane (differential
+drive: even wheels left, odd wheels right, ``profile.wheel_track_m``).
+``CMD_CAPTURE`` renders what the camera sees of :attr:`SimRobot.world`
+(:mod:`robots.emulator.camera`) and queues a ``CAPTURE`` header and its
+``CAPTURE_CHUNK`` messages in :attr:`SimRobot.outbox`, which the transport
+sends before the next state report.  The interruption and the continuation are separate
 records (``progress``, ``continued_from``), so :func:`check_exactly_once` can
 prove that no part of a motion was executed twice or skipped.
 """
@@ -37,6 +55,8 @@ prove that no part of a motion was executed twice or skipped.
 from __future__ import annotations
 
 import collections
+import logging
+import math
 import time
 from collections import Counter
 from collections.abc import Callable, Iterable
@@ -44,16 +64,23 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from robots.emulator.camera import World, render
 from robots.emulator.faults import FaultConfig
+from robots.emulator.feet import FEET_MASK
 from robots.emulator.profiles import RobotProfile
+from robots.protocol.capture import MAX_PENDING_CHUNKS, capture_messages, rpy_to_matrix
 from robots.protocol.framing import PROTOCOL_MAJOR
 from robots.protocol.messages import (
+    ROBOT_FAULTS,
     Abort,
     Ack,
     AckStatus,
+    BasePoseCmd,
+    CaptureCmd,
     Clear,
     CommandMessage,
     Estop,
+    FallRule,
     FaultFlag,
     Feature,
     Heartbeat,
@@ -78,7 +105,11 @@ from robots.protocol.messages import (
     is_sequenced,
 )
 
+log = logging.getLogger(__name__)
+
 REPLY_MEMORY = 64  # replies remembered per session for repeated (retransmitted) seqs
+#: Robot → host messages waiting for the transport at most (a few captures' worth).
+MAX_OUTBOX = 4 * (1 + MAX_PENDING_CHUNKS)
 LIMIT_TOL_URAD = 1  # one quantum of slack at the joint limits
 
 
@@ -136,6 +167,19 @@ class StopEvent:
     )
     moving: bool  # a command was executing
     index: int  # the command interrupted, −1 when none
+
+
+@dataclass(frozen=True)
+class CaptureInfo:
+    """One capture the robot took: what it sent and how long the rendering took."""
+
+    capture_id: int
+    run_id: int
+    index: int
+    n_points: int
+    render_ms: float
+    camera_to_world: np.ndarray
+    reason: str  # why it is empty ("" when the world was there)
 
 
 def check_exactly_once(
@@ -246,6 +290,9 @@ class SimRobot:
     # Called whenever the robot comes to rest or its kept state changes at rest
     # (halt, completion of a command, pause, clear): where a robot saves to NV memory.
     on_rest: Callable[[], None] | None = None
+    #: What the camera sees (``--world``); ``None``: captures are empty (and say why).
+    world: World | None = None
+    camera_seed: int = 0  # seeds the range noise (with the capture id)
 
     def __post_init__(self) -> None:
         lim = self.profile.joint_limits
@@ -256,6 +303,13 @@ class SimRobot:
         self.magnets = 0
         self.plates = 0
         self.nozzle = False
+        # Base pose: the last CMD_BASE_POSE (world ← anchor) and the planar pose
+        # (x, y, yaw) the wheels drove since, in the anchor's x–y plane.
+        self.base_anchor = np.eye(4)
+        self.base_planar = np.zeros(3)
+        self.captures = 0  # captures taken so far (the last capture id)
+        self.capture_log: collections.deque[CaptureInfo] = collections.deque(maxlen=256)
+        self.outbox: collections.deque[Message] = collections.deque()
         self.faults = 0
         self.fault_code = 0
         self.paused = False
@@ -333,7 +387,8 @@ class SimRobot:
             n_magnets=p.n_magnets,
             n_plates=p.n_plates,
             features=(Feature.LIFT_ARM if p.lift_limits else 0)
-            | (Feature.NOZZLE if p.nozzle else 0),
+            | (Feature.NOZZLE if p.nozzle else 0)
+            | (Feature.CAMERA if p.camera is not None else 0),
             run_id=self.run_id,
             last_done=self.last_done,
             name=p.name[:32],
@@ -397,6 +452,13 @@ class SimRobot:
         self.sim_t += max(0.0, remaining)
 
     def _start(self, msg: CommandMessage, now: float) -> None:
+        rule = self._fall_rule(msg, self.magnets, self.q)
+        if rule is not None:
+            # The queue-time check let it through, so the state changed under it
+            # (a restored state, a continued command): refuse it here, unstarted.
+            self.counters["fall_risk_at_start"] += 1
+            self._fall(rule, msg, now)
+            return
         planned = getattr(msg, "duration_ms", 0) / 1000.0
         seg = _Segment(msg, planned, sim_start=self.sim_t, wall_start=now, planned=planned)
         seg.q_from = self.q.copy()
@@ -500,6 +562,131 @@ class SimRobot:
             self.lift = seg.lift_from + (msg.angle_urad / 1e6 - seg.lift_from) * frac
         elif isinstance(msg, WheelsCmd):
             self.odometry += self.wheel_speeds * step
+            self._drive_base(step)
+
+    def _drive_base(self, step: float) -> None:
+        """Integrate the planar base pose over ``step`` s at the current wheel speeds
+        (differential drive, exact for constant speeds: an arc)."""
+        sp = self.wheel_speeds
+        if len(sp) < 2 or step <= 0:
+            return
+        left, right = float(np.mean(sp[0::2])), float(np.mean(sp[1::2]))
+        v = 0.5 * (left + right)
+        w = (right - left) / self.profile.wheel_track_m
+        x, y, th = self.base_planar
+        dth = w * step
+        if abs(dth) < 1e-12:
+            x += v * step * math.cos(th)
+            y += v * step * math.sin(th)
+        else:
+            x += v / w * (math.sin(th + dth) - math.sin(th))
+            y -= v / w * (math.cos(th + dth) - math.cos(th))
+        self.base_planar = np.array([x, y, math.remainder(th + dth, math.tau)])
+
+    def base_pose(self) -> np.ndarray:
+        """Base → world (4, 4): the last anchor, then the planar motion since."""
+        x, y, th = self.base_planar
+        c, s = math.cos(th), math.sin(th)
+        planar = np.array([[c, -s, 0.0, x], [s, c, 0.0, y], [0.0, 0.0, 1.0, 0.0], [0, 0, 0, 1.0]])
+        return self.base_anchor @ planar
+
+    def camera_pose(self) -> np.ndarray | None:
+        """Camera → world (4, 4), ``None`` without a camera."""
+        cam = self.profile.camera
+        return None if cam is None else self.base_pose() @ cam.camera_to_base
+
+    def feet_in_air(self) -> int:
+        """Bits of the feet in the air now (0 for robots without feet rules)."""
+        feet = self.profile.feet
+        return 0 if feet is None else feet.in_air(self.magnets, self.q)
+
+    def feet_held(self) -> int:
+        """Bits of the feet held now (by magnets, or by the wheels in mobile mode)."""
+        feet = self.profile.feet
+        return FEET_MASK if feet is None else feet.held(self.magnets, self.q)
+
+    def _fall_rule(self, msg: CommandMessage, magnets: int, q: np.ndarray) -> FallRule | None:
+        feet = self.profile.feet
+        return None if feet is None else feet.refusal(msg, magnets, q)
+
+    def _projected(self) -> tuple[int, np.ndarray]:
+        """Magnets and joints once the executing and queued commands are done."""
+        magnets, q = self.magnets, self.q
+        cmds = ([self.current.msg] if self.current is not None else []) + list(self.buffer)
+        for m in cmds:
+            if isinstance(m, MagnetCmd):
+                magnets = _set_bit(magnets, m.magnet, m.touched)
+            elif isinstance(m, JointsCmd):
+                q = np.asarray(m.q_urad, dtype=float) / 1e6
+        return magnets, q
+
+    def _fall(self, rule: FallRule, msg: CommandMessage, now: float) -> None:
+        """Refuse ``msg``: the robot would fall.  Latch FALL_RISK and stop."""
+        log.warning(
+            "robot %s: refused run %d command %d (%s): %s; FALL_RISK latched",
+            self.profile.name,
+            msg.run_id,
+            msg.index,
+            MsgType(msg.TYPE).name,
+            rule.name,
+        )
+        self.counters["fall_risk"] += 1
+        self._halt("fall_risk", now, latch=FaultFlag.FALL_RISK, code=int(rule))
+
+    def _capture(self, msg: CaptureCmd) -> None:
+        """Take one frame and queue its header and chunks for the host."""
+        cam = self.profile.camera
+        assert cam is not None  # refused in _validate otherwise
+        self.captures += 1
+        cid = self.captures
+        T_wc = self.base_pose() @ cam.camera_to_base
+        t0 = time.perf_counter()
+        pts = np.zeros((0, 3), dtype=np.float32)
+        inten = None
+        if self.world is None:
+            reason = "no world loaded (start the emulator with --world PATH)"
+        else:
+            cloud, reason = self.world.current()
+            if cloud is not None:
+                rng = np.random.default_rng([self.camera_seed, cid])
+                pts, inten = render(cam, cloud, None, T_wc, rng)
+        spent = time.perf_counter() - t0
+        ms = spent * 1000.0
+        # The camera is not the link: time spent rendering (or loading a new
+        # world) is not time the host was silent.
+        self.last_host_rx += spent
+        if reason:
+            log.warning(
+                "robot %s: capture %d (run %d command %d) has no points: %s",
+                self.profile.name,
+                cid,
+                msg.run_id,
+                msg.index,
+                reason,
+            )
+        self.capture_log.append(
+            CaptureInfo(cid, msg.run_id, msg.index, len(pts), ms, T_wc.copy(), reason)
+        )
+        self.counters["captures"] += 1
+        for m in capture_messages(
+            capture_id=cid,
+            run_id=msg.run_id,
+            index=msg.index,
+            t_s=self.sim_t,
+            camera_to_world=T_wc,
+            points_m=pts,
+            intensity=inten,
+        ):
+            self.outbox.append(m)
+        while len(self.outbox) > MAX_OUTBOX:
+            self.outbox.popleft()
+            self.counters["outbox_dropped"] += 1
+
+    def take_outbox(self) -> list[Message]:
+        """Robot → host messages waiting to go (captures), oldest first; empties it."""
+        out = list(self.outbox)
+        self.outbox.clear()
+        return out
 
     def _complete(self, seg: _Segment, now: float) -> None:
         msg = seg.msg
@@ -511,6 +698,16 @@ class SimRobot:
             self.nozzle = msg.on
         elif isinstance(msg, StopCmd | WheelsCmd):
             self.wheel_speeds[:] = 0.0
+        elif isinstance(msg, BasePoseCmd):
+            T = np.eye(4)
+            T[:3, :3] = rpy_to_matrix(
+                [msg.roll_urad / 1e6, msg.pitch_urad / 1e6, msg.yaw_urad / 1e6]
+            )
+            T[:3, 3] = np.array([msg.x_um, msg.y_um, msg.z_um], dtype=float) / 1e6
+            self.base_anchor = T
+            self.base_planar = np.zeros(3)
+        elif isinstance(msg, CaptureCmd):
+            self._capture(msg)
         self.current = None
         self.last_done = msg.index
         self._record(seg, "done", "", now, progress=1.0)
@@ -715,16 +912,16 @@ class SimRobot:
                 self._halt("abort", now)
         elif isinstance(msg, Clear):
             self.faults &= ~msg.faults
-            if msg.faults & FaultFlag.DRIVE:
+            if msg.faults & ROBOT_FAULTS and not self.faults & ROBOT_FAULTS:
                 self.fault_code = 0
             if not self.busy:
                 self._rested()
         elif isinstance(msg, CommandMessage):
-            return self._accept(msg, seq)
+            return self._accept(msg, seq, now)
         self.changed = self.urgent = True
         return self._ack(msg, seq)
 
-    def _accept(self, msg: CommandMessage, seq: int) -> Message:
+    def _accept(self, msg: CommandMessage, seq: int, now: float) -> Message:
         inj = self.faults_injected
         if inj.nak_index is not None and msg.index == inj.nak_index and self._nak_left > 0:
             self._nak_left -= 1
@@ -752,6 +949,11 @@ class SimRobot:
             return self._nak(msg, seq, NakReason.INDEX, (self.last_queued + 1) & 0x7FFF)
         if self._free() == 0:
             return self._nak(msg, seq, NakReason.BUSY)
+        rule = self._fall_rule(msg, *self._projected())
+        if rule is not None:
+            # Refused now rather than when its turn comes: the robot stops at once.
+            self._fall(rule, msg, now)
+            return self._nak(msg, seq, NakReason.FALL_RISK, int(rule))
         self.buffer.append(msg)
         self.last_queued = msg.index
         self.changed = True
@@ -782,7 +984,9 @@ class SimRobot:
             lo, hi = (round(v * 1e6) for v in p.lift_limits)
             if not lo - LIMIT_TOL_URAD <= msg.angle_urad <= hi + LIMIT_TOL_URAD:
                 return NakReason.LIMIT, 0
-        elif isinstance(msg, NozzleCmd) and not p.nozzle:
+        elif (isinstance(msg, NozzleCmd) and not p.nozzle) or (
+            isinstance(msg, CaptureCmd) and p.camera is None
+        ):
             return NakReason.INVALID, 0
         return None
 
@@ -792,6 +996,7 @@ def _set_bit(mask: int, bit: int, on: bool) -> int:
 
 
 __all__ = [
+    "CaptureInfo",
     "ExecutionRecord",
     "Interrupted",
     "SimRobot",

@@ -54,10 +54,11 @@ from urllib.parse import urlsplit
 import numpy as np
 
 from robots.background_io import LineWriter
+from robots.emulator.camera import World
 from robots.emulator.faults import FaultConfig
 from robots.emulator.persist import OrphanTimer, StateFile, remove_port_file, write_port_file
 from robots.emulator.profiles import RobotProfile, resolve_profile
-from robots.emulator.robot import ExecutionRecord, SimRobot, StopEvent
+from robots.emulator.robot import CaptureInfo, ExecutionRecord, SimRobot, StopEvent
 from robots.protocol.auth import (
     AuthError,
     ReplayError,
@@ -224,6 +225,14 @@ class Emulator:
     ``exit_when_orphaned_s`` ends the loop (state saved, ``on_orphaned``
     called, :attr:`orphaned` set) after that long with no controller and
     nothing executing.
+
+    The camera (robots with one, e.g. the ARA): ``world`` is an ``.npz``
+    point cloud in the program's world frame (:mod:`robots.emulator.camera`),
+    reloaded whenever it changes; a file that exists but cannot be used
+    raises :class:`~robots.emulator.camera.WorldError` here, a missing one
+    only makes captures empty (it may appear later).  ``camera_seed`` seeds
+    the range noise.  Captures go to the controller as ``CAPTURE`` +
+    ``CAPTURE_CHUNK`` frames, before the state report that shows them done.
     """
 
     def __init__(
@@ -244,6 +253,8 @@ class Emulator:
         port_file: str | os.PathLike[str] | None = None,
         exit_when_orphaned_s: float | None = None,
         on_orphaned: Callable[[], None] | None = None,
+        world: str | os.PathLike[str] | None = None,
+        camera_seed: int = 0,
     ) -> None:
         if exit_when_orphaned_s is not None and not exit_when_orphaned_s > 0:
             raise ValueError(f"exit_when_orphaned_s={exit_when_orphaned_s}: must be > 0")
@@ -260,6 +271,10 @@ class Emulator:
         self._want_pty = pty
         # Records go through a writer thread: a write() throttled by the
         # kernel's dirty-page flushing must not stall the loop (its watchdog).
+        self.world = World(world) if world is not None else None
+        if self.world is not None:
+            # A broken world is the caller's mistake: say so now, not at the first capture.
+            self.world.load()
         self._log_file: LineWriter | None = LineWriter(log_path) if log_path is not None else None
         self.robot = SimRobot(
             self.profile,
@@ -269,6 +284,8 @@ class Emulator:
             faults_injected=self.faults,
             on_record=self._write_record if self._log_file else None,
             on_stop=self._write_stop if self._log_file else None,
+            world=self.world,
+            camera_seed=camera_seed,
         )
         self._state_file = StateFile(state_file) if state_file is not None else None
         self._loop_prev = time.monotonic()
@@ -418,6 +435,11 @@ class Emulator:
         with self._lock:
             return list(self.robot.stops)
 
+    def capture_log(self) -> list[CaptureInfo]:
+        """The captures taken so far (the last 256): id, point count, render time, pose."""
+        with self._lock:
+            return list(self.robot.capture_log)
+
     def snapshot(self) -> State:
         """The state report the robot would send now."""
         with self._lock:
@@ -509,6 +531,7 @@ class Emulator:
             _, _, action = heapq.heappop(self._delayed)
             action(now)
         self.robot.advance(now)
+        self._send_outbox(now)
         if self.robot.report_due(now) or now >= self._next_state:
             self.robot.reported(now)
             self._next_state = now + self.robot.state_period_s
@@ -517,6 +540,15 @@ class Emulator:
                 if port is not None:
                     self._send(port, report, now)
         self._persist_tick(now)
+
+    def _send_outbox(self, now: float) -> None:
+        """Captures the robot took: to the host, before the report that shows them done."""
+        if not self.robot.outbox:
+            return
+        for msg in self.robot.take_outbox():
+            for port in (self._tcp, self._pty):
+                if port is not None:
+                    self._send(port, msg, now)
 
     def _capture_state(self) -> None:
         if self._state_file is not None:
@@ -683,6 +715,7 @@ class Emulator:
             replies = self.robot.receive_invalid(frame.type, frame.seq, now)
         for reply in replies:
             self._send(port, reply, now)
+        self._send_outbox(now)
         if self.robot.report_due(now):
             # Report at once after an E-stop, a halt or an operator command; progress
             # waits for its slot (SimRobot.min_report_gap_s; _tick sends it then).

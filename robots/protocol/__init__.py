@@ -5,6 +5,8 @@
 - :mod:`~robots.protocol.messages` — every wire message as a dataclass of integers.
 - :mod:`~robots.protocol.commands` — program commands in SI units (what plans compile to).
 - :mod:`~robots.protocol.program` — :class:`Program`, an immutable list of commands.
+- :mod:`~robots.protocol.capture` — :class:`SensorCapture` (a camera frame the robot
+  brings back) and :class:`CaptureAssembler` (its reassembly from header + chunks).
 """
 
 from robots.protocol.auth import (
@@ -17,8 +19,11 @@ from robots.protocol.auth import (
     load_or_create_secret,
     parse_secret,
 )
+from robots.protocol.capture import CaptureAssembler, SensorCapture
 from robots.protocol.commands import (
     COMMAND_TYPES,
+    BasePose,
+    Capture,
     Command,
     CommandError,
     JointMove,
@@ -45,7 +50,12 @@ from robots.protocol.framing import (
 )
 from robots.protocol.messages import (
     LINK_FAULTS,
+    MAX_CAPTURE_POINTS,
     MESSAGE_CLASSES,
+    ROBOT_FAULTS,
+    CaptureChunk,
+    CaptureHeader,
+    FallRule,
     FaultFlag,
     Message,
     MessageError,
@@ -61,13 +71,21 @@ from robots.protocol.program import Program
 __all__ = [
     "COMMAND_TYPES",
     "LINK_FAULTS",
+    "MAX_CAPTURE_POINTS",
     "MAX_PAYLOAD",
     "MESSAGE_CLASSES",
     "PROTOCOL_MAJOR",
     "PROTOCOL_MINOR",
+    "ROBOT_FAULTS",
     "AuthError",
+    "BasePose",
+    "Capture",
+    "CaptureAssembler",
+    "CaptureChunk",
+    "CaptureHeader",
     "Command",
     "CommandError",
+    "FallRule",
     "FaultFlag",
     "Frame",
     "FrameDecoder",
@@ -86,6 +104,7 @@ __all__ = [
     "ProtocolError",
     "SecretError",
     "SecretFileError",
+    "SensorCapture",
     "SessionMac",
     "SetMagnet",
     "State",

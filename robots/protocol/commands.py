@@ -17,6 +17,8 @@ from typing import Any, ClassVar
 
 from robots.protocol.messages import (
     MAX_ARRAY,
+    BasePoseCmd,
+    CaptureCmd,
     CommandMessage,
     JointsCmd,
     LiftCmd,
@@ -31,6 +33,11 @@ URAD_PER_RAD = 1_000_000
 UM_PER_M = 1_000_000
 MS_PER_S = 1000
 MAX_DURATION_S = 0xFFFFFFFF / MS_PER_S
+#: A program's world frame is local (its origin is recorded with the plan): positions
+#: stay within this, so that µm fit an i32 and metres a float32 to well under 1 mm.
+MAX_WORLD_M = 2000.0
+#: Angles of a base pose (roll, pitch, yaw) stay within ± this, rad.
+MAX_ANGLE_RAD = 2.0 * math.pi
 
 
 class CommandError(ValueError):
@@ -199,8 +206,86 @@ class Stop(Command):
         return {"op": self.OP}
 
 
+def _bounded(values: Sequence[float], limit: float, scale: int, what: str) -> tuple[int, ...]:
+    if len(values) != 3:
+        raise CommandError(f"{what}: {len(values)} values, expected 3")
+    for i, v in enumerate(values):
+        f = float(v)
+        if not math.isfinite(f) or abs(f) > limit:
+            raise CommandError(f"{what}[{i}]={v!r}: must be a finite number within ±{limit:g}")
+    return _fixed(values, scale, what)
+
+
+@dataclass(frozen=True)
+class BasePose(Command):
+    """Program step: the base is at ``position_m`` / ``rpy_rad`` in the program's world frame.
+
+    The robot re-anchors its base pose there (its wheel odometry counters go
+    on counting; only the pose it integrates from them restarts here), and
+    later wheel motion moves the base in its own x–y plane.  ``rpy_rad`` is
+    roll, pitch, yaw: ``R = Rz(yaw)·Ry(pitch)·Rx(roll)``.  Positions within
+    ±:data:`MAX_WORLD_M` m (the world frame is local), angles within
+    ±:data:`MAX_ANGLE_RAD`.  Zero duration.
+    """
+
+    OP = "base_pose"
+    position_m: tuple[float, ...]
+    rpy_rad: tuple[float, ...] = (0.0, 0.0, 0.0)
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "position_m", tuple(float(v) for v in self.position_m))
+        object.__setattr__(self, "rpy_rad", tuple(float(v) for v in self.rpy_rad))
+
+    def to_message(self, run_id: int, index: int) -> BasePoseCmd:
+        x, y, z = _bounded(self.position_m, MAX_WORLD_M, UM_PER_M, "base_pose.position_m")
+        r, p, w = _bounded(self.rpy_rad, MAX_ANGLE_RAD, URAD_PER_RAD, "base_pose.rpy_rad")
+        return BasePoseCmd(
+            run_id=run_id,
+            index=index,
+            x_um=x,
+            y_um=y,
+            z_um=z,
+            roll_urad=r,
+            pitch_urad=p,
+            yaw_urad=w,
+        )
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"op": self.OP, "position_m": list(self.position_m), "rpy_rad": list(self.rpy_rad)}
+
+
+@dataclass(frozen=True)
+class Capture(Command):
+    """Program step: take one sensor frame now (zero duration).
+
+    The robot sends it to the host as a header and point chunks
+    (docs/protocol.md); the host's link reassembles a
+    :class:`robots.protocol.capture.SensorCapture`.  Executed exactly once like
+    any command: a resume does not take it again.
+    """
+
+    OP = "capture"
+
+    def to_message(self, run_id: int, index: int) -> CaptureCmd:
+        return CaptureCmd(run_id=run_id, index=index)
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"op": self.OP}
+
+
 COMMAND_TYPES: dict[str, type[Command]] = {
-    c.OP: c for c in (JointMove, WheelSpeeds, SetMagnet, LiftArm, LimitingPlate, Nozzle, Stop)
+    c.OP: c
+    for c in (
+        JointMove,
+        WheelSpeeds,
+        SetMagnet,
+        LiftArm,
+        LimitingPlate,
+        Nozzle,
+        Stop,
+        BasePose,
+        Capture,
+    )
 }
 
 
@@ -249,6 +334,10 @@ def command_from_dict(d: Mapping[str, Any]) -> Command:
         cmd = LimitingPlate(_as_int(d, "plate", op), _as_bool(d, "engaged", op))
     elif op == "nozzle":
         cmd = Nozzle(_as_bool(d, "on", op))
+    elif op == "base_pose":
+        cmd = BasePose(_as_numbers(d, "position_m", op), _as_numbers(d, "rpy_rad", op))
+    elif op == "capture":
+        cmd = Capture()
     else:
         cmd = Stop()
     cmd.to_message(1, 0)  # range checks (durations, i32 fixed point) fail here, not on the wire
@@ -271,4 +360,11 @@ def command_from_message(msg: CommandMessage) -> Command:
         return Nozzle(msg.on)
     if isinstance(msg, StopCmd):
         return Stop()
+    if isinstance(msg, BasePoseCmd):
+        return BasePose(
+            (msg.x_um / UM_PER_M, msg.y_um / UM_PER_M, msg.z_um / UM_PER_M),
+            tuple(v / URAD_PER_RAD for v in (msg.roll_urad, msg.pitch_urad, msg.yaw_urad)),
+        )
+    if isinstance(msg, CaptureCmd):
+        return Capture()
     raise CommandError(f"{type(msg).__name__} is not a program command")

@@ -9,7 +9,9 @@ Payload layouts are declared as a compact string per class (``name:code``):
 ``B``/``H``/``I`` unsigned 8/16/32-bit, ``h``/``i`` signed 16/32-bit, ``o`` a
 bool byte (0 or 1 only), ``A`` an array (u8 count, then that many i32), ``S``
 an ASCII string (u8 length, then bytes), ``N`` 16 raw bytes (a nonce or a
-proof).  All multi-byte fields are little-endian.  A payload is at most
+proof), ``a`` an array of i16 and ``u`` an array of u8 (each: u8 count, then
+that many elements; at most :data:`MAX_ARRAY`).  All multi-byte fields are
+little-endian.  A payload is at most
 :data:`~robots.protocol.framing.MAX_MESSAGE_PAYLOAD` bytes, leaving room for
 the authentication trailer (:mod:`robots.protocol.auth`).
 """
@@ -49,6 +51,8 @@ class MsgType(enum.IntEnum):
     CMD_PLATE = 0x14
     CMD_NOZZLE = 0x15
     CMD_STOP = 0x16
+    CMD_BASE_POSE = 0x17
+    CMD_CAPTURE = 0x18
     PAUSE = 0x20
     RESUME = 0x21
     ABORT = 0x22
@@ -58,6 +62,8 @@ class MsgType(enum.IntEnum):
     NAK = 0x83
     STATE = 0x84
     CHALLENGE = 0x85
+    CAPTURE = 0x86
+    CAPTURE_CHUNK = 0x87
 
 
 def is_sequenced(msg_type: int) -> bool:
@@ -88,6 +94,19 @@ class FaultFlag(enum.IntFlag):
     LINK_RESET = 0x0002  # a new session (HELLO) or a dropped connection interrupted a run
     ESTOP = 0x0004  # emergency stop latched
     DRIVE = 0x0008  # robot-side hardware fault (fault_code says which)
+    FALL_RISK = 0x0010  # a command refused because the robot would fall (fault_code: FallRule)
+
+
+#: Faults of the robot itself: only an operator's explicit clear may resume from them.
+ROBOT_FAULTS = FaultFlag.DRIVE | FaultFlag.FALL_RISK
+
+
+class FallRule(enum.IntEnum):
+    """Which feet rule refused a command (``fault_code`` with ``FALL_RISK``, NAK detail)."""
+
+    JOINTS_WITHOUT_MAGNET = 1  # a joint move off the mobile configuration, no magnet touched
+    RELEASE_LAST_HOLD = 2  # a magnet release that would leave no foot held
+    WHEELS_FOOT_IN_AIR = 3  # a wheels command while a foot is in the air
 
 
 #: Faults caused by the link, not the robot: a host resuming a run clears them itself.
@@ -105,6 +124,7 @@ class NakReason(enum.IntEnum):
     INDEX = 6  # permanent: command index does not follow the run (detail = expected low 16 bits)
     NOT_READY = 7  # no session: the host must handshake again
     RUN_ACTIVE = 8  # permanent: another run is queued or executing (abort it first)
+    FALL_RISK = 9  # permanent: the robot would fall (detail = FallRule); FALL_RISK latched
 
 
 TRANSIENT_NAKS = frozenset({NakReason.SEQ_GAP, NakReason.BUSY})
@@ -134,9 +154,12 @@ class Feature(enum.IntFlag):
     NONE = 0
     LIFT_ARM = 0x01
     NOZZLE = 0x02
+    CAMERA = 0x04  # executes CMD_CAPTURE (sends CAPTURE + CAPTURE_CHUNK)
 
 
 _CODES = {"B": "B", "H": "H", "I": "I", "h": "h", "i": "i", "o": "B"}
+#: Array layout codes → struct code of one element.
+_ARRAYS = {"A": "i", "a": "h", "u": "B"}
 MAX_ARRAY = 32
 NONCE_FIELD_SIZE = 16  # layout code "N"
 
@@ -159,10 +182,10 @@ class Message:
         for name, code in self._spec:
             value = getattr(self, name)
             try:
-                if code == "A":
+                if code in _ARRAYS:
                     if len(value) > MAX_ARRAY:
                         raise ValueError(f"{len(value)} elements > {MAX_ARRAY}")
-                    out += struct.pack(f"<B{len(value)}i", len(value), *value)
+                    out += struct.pack(f"<B{len(value)}{_ARRAYS[code]}", len(value), *value)
                 elif code == "S":
                     raw = value.encode("ascii")
                     if len(raw) > MAX_ARRAY:
@@ -194,12 +217,13 @@ class Message:
             )
         try:
             for name, code in cls._spec:
-                if code == "A":
+                if code in _ARRAYS:
                     (count,) = struct.unpack_from("<B", data, pos)
                     if count > MAX_ARRAY:
                         raise MessageError(f"{cls.__name__}.{name}: {count} elements > {MAX_ARRAY}")
-                    values[name] = struct.unpack_from(f"<{count}i", data, pos + 1)
-                    pos += 1 + 4 * count
+                    fmt = f"<{count}{_ARRAYS[code]}"
+                    values[name] = struct.unpack_from(fmt, data, pos + 1)
+                    pos += 1 + struct.calcsize(fmt)
                 elif code == "S":
                     (count,) = struct.unpack_from("<B", data, pos)
                     raw = data[pos + 1 : pos + 1 + count]
@@ -351,6 +375,34 @@ class StopCmd(CommandMessage):
 
 
 @dataclass(frozen=True)
+class BasePoseCmd(CommandMessage):
+    """Program step: the base is at this pose of the program's world frame (µm, µrad).
+
+    The robot re-anchors its base pose there; later wheel motion moves the
+    base in its own x–y plane from it.  Orientation: roll, pitch, yaw
+    (``R = Rz(yaw)·Ry(pitch)·Rx(roll)``).
+    """
+
+    TYPE = MsgType.CMD_BASE_POSE
+    LAYOUT = "run_id:I index:I x_um:i y_um:i z_um:i roll_urad:i pitch_urad:i yaw_urad:i"
+    x_um: int = 0
+    y_um: int = 0
+    z_um: int = 0
+    roll_urad: int = 0
+    pitch_urad: int = 0
+    yaw_urad: int = 0
+
+
+@dataclass(frozen=True)
+class CaptureCmd(CommandMessage):
+    """Program step: take one sensor frame now (zero duration); the robot sends
+    a :class:`CaptureHeader` and its :class:`CaptureChunk` messages."""
+
+    TYPE = MsgType.CMD_CAPTURE
+    LAYOUT = "run_id:I index:I"
+
+
+@dataclass(frozen=True)
 class Pause(Message):
     """Hold position; keep the buffer."""
 
@@ -483,6 +535,63 @@ class State(Message):
     odometry_um: tuple[int, ...] = ()
 
 
+#: Most points one capture may announce (the host refuses more; the robot thins to it).
+MAX_CAPTURE_POINTS = 2048
+#: Points per :class:`CaptureChunk`: 4+2 bytes of head, 3 × (1 + 2n) coordinates,
+#: 1 + n intensities = 10 + 7n ≤ MAX_MESSAGE_PAYLOAD (220) → n ≤ 30.
+CHUNK_POINTS = 30
+#: Quaternion components on the wire: units of 1e-9.
+QUAT_SCALE = 1_000_000_000
+
+
+@dataclass(frozen=True)
+class CaptureHeader(Message):
+    """First message of a capture: who asked, when, where the camera was, how many points.
+
+    ``capture_id`` is the robot's number of this capture (increasing, kept
+    across restarts); ``run_id``/``index`` the ``CMD_CAPTURE`` that asked;
+    ``t_ms`` the robot clock.  Camera → world transform: position ``*_um``
+    (µm) and unit quaternion ``q*`` (units of 1e-9, w first).  ``n_points``
+    points follow in :class:`CaptureChunk` messages (0 when the camera saw
+    nothing); ``has_intensity``: each chunk carries one u8 intensity per point.
+    """
+
+    TYPE = MsgType.CAPTURE
+    LAYOUT = (
+        "capture_id:I run_id:I index:I t_ms:I x_um:i y_um:i z_um:i "
+        "qw:i qx:i qy:i qz:i n_points:H has_intensity:o"
+    )
+    capture_id: int = 0
+    run_id: int = 0
+    index: int = 0
+    t_ms: int = 0
+    x_um: int = 0
+    y_um: int = 0
+    z_um: int = 0
+    qw: int = QUAT_SCALE
+    qx: int = 0
+    qy: int = 0
+    qz: int = 0
+    n_points: int = 0
+    has_intensity: bool = False
+
+
+@dataclass(frozen=True)
+class CaptureChunk(Message):
+    """Points ``offset … offset + len(x_mm) − 1`` of capture ``capture_id``:
+    camera-frame coordinates in millimetres (i16) and, when the header says
+    so, one intensity byte per point (else ``intensity`` is empty)."""
+
+    TYPE = MsgType.CAPTURE_CHUNK
+    LAYOUT = "capture_id:I offset:H x_mm:a y_mm:a z_mm:a intensity:u"
+    capture_id: int = 0
+    offset: int = 0
+    x_mm: tuple[int, ...] = ()
+    y_mm: tuple[int, ...] = ()
+    z_mm: tuple[int, ...] = ()
+    intensity: tuple[int, ...] = ()
+
+
 MESSAGE_CLASSES: dict[int, type[Message]] = {
     cls.TYPE: cls
     for cls in (
@@ -497,6 +606,8 @@ MESSAGE_CLASSES: dict[int, type[Message]] = {
         PlateCmd,
         NozzleCmd,
         StopCmd,
+        BasePoseCmd,
+        CaptureCmd,
         Pause,
         Resume,
         Abort,
@@ -506,6 +617,8 @@ MESSAGE_CLASSES: dict[int, type[Message]] = {
         Nak,
         State,
         Challenge,
+        CaptureHeader,
+        CaptureChunk,
     )
 }
 

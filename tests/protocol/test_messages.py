@@ -10,9 +10,13 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 # deadline=None everywhere: a loaded 2-core machine must not fail a property on time.
-from robots.protocol.framing import Frame, FrameDecoder, ProtocolError
+from robots.protocol.framing import MAX_MESSAGE_PAYLOAD, Frame, FrameDecoder, ProtocolError
 from robots.protocol.messages import (
+    CHUNK_POINTS,
     MESSAGE_CLASSES,
+    BasePoseCmd,
+    CaptureChunk,
+    CaptureHeader,
     Hello,
     JointsCmd,
     Message,
@@ -39,6 +43,10 @@ _FIELD = {
     "A": st.lists(st.integers(-(2**31), 2**31 - 1), max_size=23).map(tuple),
     "S": st.text(st.characters(min_codepoint=32, max_codepoint=126), max_size=32),
     "N": st.binary(min_size=16, max_size=16),
+    # Capture chunks: three i16 arrays and one u8 array of ≤ 30 (CHUNK_POINTS)
+    # fill MAX_MESSAGE_PAYLOAD exactly at most.
+    "a": st.lists(st.integers(-(2**15), 2**15 - 1), max_size=30).map(tuple),
+    "u": st.lists(st.integers(0, 255), max_size=30).map(tuple),
 }
 
 
@@ -120,9 +128,36 @@ def test_encode_rejects_out_of_range_fields() -> None:
         State(q_urad=(0,) * 32, odometry_um=(0,) * 32).payload()
 
 
+def test_capture_messages_fit_and_refuse_what_does_not() -> None:
+    full = CaptureChunk(
+        capture_id=2**32 - 1,
+        offset=0xFFFF,
+        x_mm=(-(2**15),) * CHUNK_POINTS,
+        y_mm=(2**15 - 1,) * CHUNK_POINTS,
+        z_mm=(0,) * CHUNK_POINTS,
+        intensity=(255,) * CHUNK_POINTS,
+    )
+    assert len(full.payload()) <= MAX_MESSAGE_PAYLOAD
+    assert decode_message(Frame(MsgType.CAPTURE_CHUNK, 0, full.payload())) == full
+    with pytest.raises(ValueError, match=r"CaptureChunk\.x_mm"):
+        CaptureChunk(x_mm=(2**15,)).payload()
+    with pytest.raises(ValueError, match=r"CaptureChunk\.intensity"):
+        CaptureChunk(intensity=(256,)).payload()
+    with pytest.raises(ValueError, match="payload"):  # 31 points do not fit with intensity
+        CaptureChunk(x_mm=(0,) * 31, y_mm=(0,) * 31, z_mm=(0,) * 31, intensity=(0,) * 31).payload()
+    assert len(CaptureHeader().payload()) <= MAX_MESSAGE_PAYLOAD
+    assert len(BasePoseCmd().payload()) <= MAX_MESSAGE_PAYLOAD
+    # Array codes are strict too: an i16 array's count must match its bytes.
+    with pytest.raises(MessageError, match="too short"):
+        decode_message(Frame(MsgType.CAPTURE_CHUNK, 0, bytes(6) + b"\x02" + bytes(3)))
+
+
 def test_type_classes() -> None:
     assert is_sequenced(MsgType.CMD_JOINTS) and is_sequenced(MsgType.CLEAR)
     assert not is_sequenced(MsgType.ESTOP) and not is_sequenced(MsgType.HEARTBEAT)
     assert is_command(MsgType.CMD_STOP) and not is_command(MsgType.PAUSE)
+    assert is_command(MsgType.CMD_BASE_POSE) and is_command(MsgType.CMD_CAPTURE)
+    assert not is_sequenced(MsgType.CAPTURE) and not is_sequenced(MsgType.CAPTURE_CHUNK)
+    assert not Nak(reason=NakReason.FALL_RISK).transient
     assert Nak(reason=NakReason.SEQ_GAP).transient and Nak(reason=NakReason.BUSY).transient
     assert not Nak(reason=NakReason.LIMIT).transient

@@ -12,6 +12,8 @@ from hypothesis import strategies as st
 # deadline=None everywhere: a loaded 2-core machine must not fail a property on time.
 from robots.protocol import (
     COMMAND_TYPES,
+    BasePose,
+    Capture,
     CommandError,
     JointMove,
     LiftArm,
@@ -37,6 +39,12 @@ commands = st.one_of(
     st.builds(LimitingPlate, st.integers(0, 7), st.booleans()),
     st.builds(Nozzle, st.booleans()),
     st.just(Stop()),
+    st.builds(
+        BasePose,
+        st.lists(st.floats(-2000.0, 2000.0), min_size=3, max_size=3).map(tuple),
+        st.lists(st.floats(-2 * math.pi, 2 * math.pi), min_size=3, max_size=3).map(tuple),
+    ),
+    st.just(Capture()),
 )
 
 EVERY_KIND = [
@@ -47,6 +55,8 @@ EVERY_KIND = [
     LimitingPlate(0, False),
     Nozzle(True),
     Stop(),
+    BasePose((12.5, -3.0, 0.25), (0.0, 0.1, 1.5)),
+    Capture(),
 ]
 
 
@@ -92,11 +102,32 @@ def test_json_round_trip(cmds) -> None:
         ({"op": "plate", "plate": 1.5, "engaged": True}, "plate.plate"),
         ({"op": "nozzle"}, "nozzle.on"),
         ({"op": "lift", "angle_rad": None}, "lift.angle_rad"),
+        ({"op": "base_pose", "position_m": [0, 0], "rpy_rad": [0, 0, 0]}, "position_m"),
+        ({"op": "base_pose", "position_m": [2000.5, 0, 0], "rpy_rad": [0, 0, 0]}, "±2000"),
+        ({"op": "base_pose", "position_m": [0, 0, 0], "rpy_rad": [0, 7, 0]}, r"rpy_rad\[1\]"),
+        ({"op": "base_pose", "position_m": [0, 0, 0]}, "base_pose.rpy_rad"),
+        ({"op": "base_pose", "position_m": [0, None, 0], "rpy_rad": [0, 0, 0]}, "position_m"),
     ],
 )
 def test_bad_dicts_name_the_field(d: dict, match: str) -> None:
     with pytest.raises(CommandError, match=match):
         command_from_dict(d)
+
+
+def test_base_pose_and_capture_dicts() -> None:
+    d = {"op": "base_pose", "position_m": [1.0, -2.0, 0.5], "rpy_rad": [0.0, 0.0, 3.0]}
+    cmd = command_from_dict(d)
+    assert cmd == BasePose((1.0, -2.0, 0.5), (0.0, 0.0, 3.0)) and cmd.to_dict() == d
+    assert cmd.duration_s == 0.0
+    msg = cmd.to_message(7, 3)
+    assert (msg.x_um, msg.y_um, msg.z_um, msg.yaw_urad) == (
+        1_000_000,
+        -2_000_000,
+        500_000,
+        3_000_000,
+    )
+    assert command_from_dict({"op": "capture"}) == Capture()
+    assert Capture().to_dict() == {"op": "capture"} and Capture().duration_s == 0.0
 
 
 def test_program_error_names_the_index() -> None:
