@@ -30,6 +30,7 @@ from server import __version__, log_redaction
 from server.asgi_response import send_json
 from server.audit_backlog import AuditBacklog
 from server.auth import CsrfGuard, bootstrap_admin
+from server.captures import router as captures
 from server.disk_guard import DiskReserve, disk_full_handler
 from server.diskspace import DiskGauge
 from server.events import EventBus
@@ -212,6 +213,9 @@ def create_app(settings: Settings | None = None, *, start_scene: bool | None = N
             scene.start()
             services.scene = scene
             jobs.on_finished.append(scene.plan_finished)
+            from server.scene.captures import follow
+
+            follow(scene, bus)
         from robots import ROBOT_NAMES
         from server.linkservice import EmulatorSupervisor, LinkServiceClient
         from server.linkservice.client import server_url
@@ -347,6 +351,7 @@ def create_app(settings: Settings | None = None, *, start_scene: bool | None = N
         reports.router,
         archive.router,
         replay.router,
+        captures.router,
     ):
         app.include_router(r, prefix=API)
     app.include_router(proxy.api_router, prefix=API)

@@ -77,6 +77,7 @@ def export_plan(store: Store, plan_id: str, out: IO[bytes], actor: str) -> dict[
     :class:`~server.store.NotFoundError` for an unknown plan.
     """
     from server.recording import plan_cloud, write_recording
+    from server.recording.captures import load_captures
 
     plan = store.get_plan(plan_id)
     rows = ArchiveStore(store.db)
@@ -119,7 +120,16 @@ def export_plan(store: Store, plan_id: str, out: IO[bytes], actor: str) -> dict[
             recording_audit = store.list_audit("execution", ex.id, limit=10_000) + (
                 store.list_audit("plan", plan.id, limit=10_000)
             )
-            write_recording(buf, ex, plan, acks, states, recording_audit, cloud=recorded_cloud)
+            write_recording(
+                buf,
+                ex,
+                plan,
+                acks,
+                states,
+                recording_audit,
+                cloud=recorded_cloud,
+                captures=load_captures(store, ex.id, ex.robot, plan),
+            )
             w.data(f"executions/{ex.id}.mcap", buf.getvalue())
         counts["executions"] = len(executions)
 

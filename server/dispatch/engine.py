@@ -44,6 +44,8 @@ from robots.adapters.streamer import ExecState, Outcome, Streamer, StreamFault
 from robots.protocol.commands import CommandError
 from robots.protocol.messages import LINK_FAULTS, FaultFlag, State
 from robots.protocol.program import Program
+from server.captures.service import CaptureRecorder, capture_of
+from server.captures.world import write_plan_world
 from server.diskspace import describe
 from server.lifecycle import ExecutionState, IllegalTransitionError, PlanState
 from server.settings import Settings
@@ -127,6 +129,8 @@ class DispatchEngine:
         # Set by :meth:`shutdown` before it closes the links: the link losses
         # that follow are this engine's doing, not the robots' (see _on_fault).
         self._stopping = False
+        # What the robots' cameras saw, stored on a thread of its own (server/captures).
+        self.captures = CaptureRecorder(store, events, settings)
 
     # ------------------------------------------------------------- lifecycle
     def start(self, *, leased: bool = False) -> None:
@@ -179,6 +183,7 @@ class DispatchEngine:
             r.link.close(timeout=2)
         for s in streamers:
             s.close(timeout=2)
+        self.captures.close()
         self._mirror_q.put(None)
         if self._mirror_thread is not None:
             self._mirror_thread.join(timeout=2)
@@ -468,6 +473,8 @@ class DispatchEngine:
         why = not_ready_reason(status, allow_link_faults=True, require_idle=True)
         if why:
             raise DispatchError(f"robot {robot} {why}; check its connection ({r.url})")
+        if r.url == self._emulator_urls.get(robot):  # built in: its camera sees the plan's scan
+            write_plan_world(self.store, plan, robot, self.settings.data)
         run_id = secrets.randbelow(0xFFFFFFFE) + 1
         ex = self.store.create_execution(plan_id, robot, len(program), actor, run_id=run_id)
         self.events.publish(
@@ -657,6 +664,10 @@ class DispatchEngine:
 
     def _on_link_event(self, name: str, event: Any) -> None:
         # On the link's I/O thread: no import, no SQLite, no blocking call here.
+        capture = capture_of(event)
+        if capture is not None:  # a sensor frame: queued for the capture recorder
+            self.captures.submit(name, capture)
+            return
         r = self._robots.get(name)
         if r is None:
             return

@@ -13,7 +13,11 @@ Ctrl-C or a ``kill -9`` of the server does not reach it) with:
   reads), so only this server can command it;
 - ``--log-jsonl``: its execution log, the evidence tests read;
 - ``--exit-when-orphaned``: an emulator left behind by a killed server exits
-  after that long without a controller.
+  after that long without a controller;
+- ``--world`` (ARA's, once its emulator takes the option): the scan its
+  simulated camera sees, ``<robot>.world.npz``, which the dispatch engine
+  rewrites from each plan it dispatches to the emulator
+  (:mod:`server.captures.world`) and the emulator reloads when it changes.
 
 All of it lives under ``<data>/emulators/``.
 """
@@ -30,10 +34,14 @@ import subprocess
 import sys
 import time
 from dataclasses import dataclass
+from functools import lru_cache
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 from robots.emulator.persist import pid_alive
+from server.captures.world import WORLD_ROBOTS, world_path, write_world
 from server.linkservice.service import robot_key_path
 
 log = logging.getLogger(__name__)
@@ -93,6 +101,18 @@ class EmulatorProcess:
             return None
 
 
+@lru_cache(maxsize=1)
+def emulator_takes_world() -> bool:
+    """Whether ``python -m robots.emulator`` accepts ``--world`` (an emulator
+    without it would refuse to start when given one)."""
+    try:
+        from robots.emulator.cli import build_parser
+
+        return "--world" in build_parser()._option_string_actions
+    except Exception:
+        return False
+
+
 def _answers(url: str) -> bool:
     host, _, port = url.removeprefix("socket://").rpartition(":")
     try:
@@ -143,6 +163,7 @@ class EmulatorSupervisor:
             "port": self.dir / f"{name}.port.json",
             "state": self.dir / f"{name}.state.json",
             "log": self.dir / f"{name}.log.jsonl",
+            "world": world_path(self.dir.parent, name),
         }
 
     def _reuse(self, name: str) -> EmulatorProcess | None:
@@ -189,6 +210,10 @@ class EmulatorSupervisor:
             "--exit-when-orphaned",
             repr(ORPHAN_EXIT_S),
         ]
+        if name in WORLD_ROBOTS and emulator_takes_world():
+            if not paths["world"].exists():  # no plan dispatched yet: nothing to see
+                write_world(paths["world"], np.zeros((0, 3), np.float32))
+            cmd += ["--world", str(paths["world"])]
         root = str(Path(__file__).resolve().parents[2])
         env = {
             **os.environ,

@@ -26,7 +26,17 @@ decodes them without plugins:
   path at the run's start (:func:`server.recording.channels.planned_path`;
   positions, identity orientation);
 * ``/plan/cloud`` (``foxglove.PointCloud``, frame ``world``, float32 x y z):
-  the plan's stored cloud at the run's start, thinned to ≤ 200 000 points.
+  the plan's stored cloud at the run's start, thinned to ≤ 200 000 points;
+* ``/<robot>/camera/points`` (``foxglove.PointCloud``, frame
+  ``<robot>/camera``, float32 x y z and a uint8 ``intensity`` when the
+  capture has one): what the robot's camera saw, one message per capture at
+  the time the host received it, with, on ``/tf`` at the same time,
+  ``world → <robot>/base → <robot>/camera``, so Foxglove places it
+  (:mod:`server.recording.captures`).
+
+Every position is in the plan's local ``world`` frame; the ``world``
+metadata record states its origin (float64, the plan's ``world_origin_m``,
+zeros when the plan states none).
 
 A channel with nothing to hold (a kind without a path, a plan without a
 stored cloud, an unknown robot) is left out; the ``channels`` metadata record
@@ -45,12 +55,21 @@ from typing import IO, Any
 import numpy as np
 from mcap.writer import CompressionType, Writer
 
+from server.recording.captures import (
+    ExportCaptures,
+    base_frame,
+    camera_frame,
+    camera_topic,
+    origin_metadata,
+    transforms,
+)
 from server.recording.channels import PlanCloud, iso_ns, planned_path, robot_frames
 from server.recording.messages import (
     CHANNELS,
     INFO,
     WARNING,
     acked_msg,
+    capture_cloud_msg,
     cloud_msg,
     log_msg,
     path_msg,
@@ -58,6 +77,7 @@ from server.recording.messages import (
     state_msg,
     tf_msg,
     tool_pose_msg,
+    transforms_msg,
 )
 from server.store.records import AuditEvent, ExecutionRecord, PlanRecord
 
@@ -85,8 +105,13 @@ def write_recording(
     audit: Sequence[AuditEvent],
     *,
     cloud: PlanCloud | None = None,
+    captures: ExportCaptures | None = None,
 ) -> dict[str, int]:
-    """Write the run to ``out`` as MCAP; the message count of each channel written."""
+    """Write the run to ``out`` as MCAP; the message count of each channel written.
+
+    ``captures``: what the robot's camera saw
+    (:func:`server.recording.captures.load_captures`); none if not given.
+    """
     program = list(plan.program or [])
     start_ns = iso_ns(execution.created_at)
     path, path_note = planned_path(plan)
@@ -103,8 +128,16 @@ def write_recording(
         "/plan/path": path_note,
         "/plan/cloud": cloud.note,
     }
+    shots = captures.captures if captures is not None else []
+    cam_topic = camera_topic(execution.robot)
+    if shots and captures is not None:
+        notes[cam_topic] = captures.note
+        notes["/tf"] += "; per capture world → " + " → ".join(
+            (base_frame(execution.robot), camera_frame(execution.robot))
+        )
     present = {
-        "/tf": bool(placed),
+        cam_topic: bool(shots),
+        "/tf": bool(placed) or bool(shots),
         "/robot/tool_pose": any(np.isfinite(s[2].tip_pose).all() for s in placed if s[2]),
         "/plan/path": path is not None,
         "/plan/cloud": cloud.points is not None,
@@ -135,12 +168,22 @@ def write_recording(
             "written_points": str(0 if cloud.points is None else len(cloud.points)),
         },
     )
+    w.add_metadata("world", origin_metadata(plan))
+    if shots and captures is not None:
+        w.add_metadata("captures", captures.metadata())
     ids: dict[str, int] = {}
-    for topic, (name, schema) in CHANNELS.items():
+    sids: dict[str, int] = {}
+    channels = dict(CHANNELS)
+    if shots:
+        channels[cam_topic] = CHANNELS["/plan/cloud"]
+    for topic, (name, schema) in channels.items():
         if present.get(topic, True):
-            data = json.dumps(schema).encode()
-            sid = w.register_schema(name=name, encoding="jsonschema", data=data)
-            ids[topic] = w.register_channel(topic=topic, message_encoding="json", schema_id=sid)
+            if name not in sids:
+                data = json.dumps(schema).encode()
+                sids[name] = w.register_schema(name=name, encoding="jsonschema", data=data)
+            ids[topic] = w.register_channel(
+                topic=topic, message_encoding="json", schema_id=sids[name]
+            )
     counts = dict.fromkeys(ids, 0)
 
     def put(topic: str, t_ns: int, msg: dict[str, Any]) -> None:
@@ -167,6 +210,10 @@ def write_recording(
         tool = tool_pose_msg(ns, frames.base, fs)
         if tool is not None:
             put("/robot/tool_pose", ns, tool)
+    cam = camera_frame(execution.robot)
+    for c in shots:
+        put("/tf", c.t_ns, transforms_msg(c.t_ns, transforms(execution.robot, c)))
+        put(cam_topic, c.t_ns, capture_cloud_msg(c.t_ns, cam, c))
     for e in sorted(audit, key=lambda a: (a.ts, a.id)):
         put("/operator", iso_ns(e.ts), _log_line(e))
     w.finish()

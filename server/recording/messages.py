@@ -13,6 +13,7 @@ from typing import Any
 import numpy as np
 
 from server.recording import schemas
+from server.recording.captures import ExportCapture, cloud_fields, packed
 from server.recording.channels import WORLD_FRAME, FrameSample, quaternion, stamp
 
 CHANNELS: dict[str, tuple[str, dict[str, Any]]] = {
@@ -86,6 +87,30 @@ def cloud_msg(ns: int, points: np.ndarray) -> dict[str, Any]:
     }
 
 
+def capture_cloud_msg(ns: int, frame: str, c: ExportCapture) -> dict[str, Any]:
+    """A capture's points (``/<robot>/camera/points``) in its camera frame."""
+    fields, step = cloud_fields(c.intensity is not None)
+    kinds = {"f4": schemas.FLOAT32, "u1": schemas.UINT8}
+    return {
+        "timestamp": time_msg(ns),
+        "frame_id": frame,
+        "pose": point_msg(np.zeros(3)),
+        "point_stride": step,
+        "fields": [{"name": n, "offset": o, "type": kinds[k]} for n, o, k in fields],
+        "data": base64.b64encode(packed(c)).decode(),
+    }
+
+
+def transforms_msg(ns: int, tfs: list[tuple[str, str, np.ndarray]]) -> dict[str, Any]:
+    """``/tf``: the given (parent, child, 4×4) transforms at ``ns``."""
+    out = []
+    for parent, child, T in tfs:
+        pose = pose_msg(T)
+        out.append({"timestamp": time_msg(ns), "parent_frame_id": parent, "child_frame_id": child,
+                    "translation": pose["position"], "rotation": pose["orientation"]})  # fmt: skip
+    return {"transforms": out}
+
+
 def acked_msg(program: list[dict[str, Any]], idx: int) -> dict[str, Any]:
     """``/commands/acknowledged``: command ``idx`` of the program."""
     c = program[idx] if 0 <= idx < len(program) else {}
@@ -99,12 +124,7 @@ def state_msg(robot: str, state: dict[str, Any]) -> dict[str, Any]:
 
 def tf_msg(ns: int, sample: FrameSample) -> dict[str, Any]:
     """``/tf``: one transform per placed URDF joint (parent link → child link)."""
-    tfs = []
-    for parent, child, T in sample.transforms:
-        pose = pose_msg(T)
-        tfs.append({"timestamp": time_msg(ns), "parent_frame_id": parent, "child_frame_id": child,
-                    "translation": pose["position"], "rotation": pose["orientation"]})  # fmt: skip
-    return {"transforms": tfs}
+    return transforms_msg(ns, sample.transforms)
 
 
 def tool_pose_msg(ns: int, base: str, sample: FrameSample) -> dict[str, Any] | None:

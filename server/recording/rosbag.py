@@ -14,9 +14,16 @@ The same stored data as the MCAP export (:mod:`server.recording.channels`):
 * ``/plan/path`` (``nav_msgs/msg/Path``, frame ``world``): the planned path,
   one message at the run's start (positions, identity orientation);
 * ``/plan/cloud`` (``sensor_msgs/msg/PointCloud2``, frame ``world``, float32
-  x y z): the plan's stored cloud thinned to ≤ 200 000 points, one message.
+  x y z): the plan's stored cloud thinned to ≤ 200 000 points, one message;
+* ``/<robot>/camera/points`` (``sensor_msgs/msg/PointCloud2``, frame
+  ``<robot>/camera``, float32 x y z and a uint8 ``intensity`` when it has
+  one): what the robot's camera saw, one message per capture, and on ``/tf``
+  (``tf2_msgs/msg/TFMessage``) at the same stamp ``world → <robot>/base →
+  <robot>/camera`` (:mod:`server.recording.captures`).
 
-A topic with no message (a kind without a path, a plan without a stored cloud)
+Every position is in the plan's local ``world`` frame; the bag's
+``custom_data`` (``metadata.yaml``) states its origin (``world_origin_x_m``…,
+float64 as ``repr``).  A topic with no message (a kind without a path, a plan without a stored cloud)
 is not in the bag.  Stamps are the recorded Unix times.
 """
 
@@ -31,6 +38,16 @@ from typing import Any
 
 import numpy as np
 
+from server.recording.captures import (
+    ExportCapture,
+    ExportCaptures,
+    camera_frame,
+    camera_topic,
+    cloud_fields,
+    origin_metadata,
+    packed,
+    transforms,
+)
 from server.recording.channels import (
     WORLD_FRAME,
     PlanCloud,
@@ -49,6 +66,9 @@ ROSBAG_TOPICS: dict[str, str] = {
     "/plan/path": "nav_msgs/msg/Path",
     "/plan/cloud": "sensor_msgs/msg/PointCloud2",
 }
+#: Types of the capture topics (``/<robot>/camera/points`` and ``/tf``).
+POINT_CLOUD2 = "sensor_msgs/msg/PointCloud2"
+TF_MESSAGE = "tf2_msgs/msg/TFMessage"
 
 __all__ = ["ROSBAG_TOPICS", "write_rosbag2"]
 
@@ -81,6 +101,34 @@ class _Msgs:
             header=self.header(ns, frame), pose=self.pose(T)
         )
 
+    def transform(self, ns: int, parent: str, child: str, T: np.ndarray) -> Any:
+        x, y, z, w = quaternion(T[:3, :3])
+        p = [float(v) for v in T[:3, 3]]
+        return self.t["geometry_msgs/msg/TransformStamped"](
+            header=self.header(ns, parent),
+            child_frame_id=child,
+            transform=self.t["geometry_msgs/msg/Transform"](
+                translation=self.t["geometry_msgs/msg/Vector3"](x=p[0], y=p[1], z=p[2]),
+                rotation=self.t["geometry_msgs/msg/Quaternion"](x=x, y=y, z=z, w=w),
+            ),
+        )
+
+    def capture(self, ns: int, frame: str, c: ExportCapture) -> Any:
+        field = self.t["sensor_msgs/msg/PointField"]
+        fields, step = cloud_fields(c.intensity is not None)
+        kinds = {"f4": 7, "u1": 2}  # PointField FLOAT32, UINT8
+        return self.t[POINT_CLOUD2](
+            header=self.header(ns, frame),
+            height=1,
+            width=len(c.points),
+            fields=[field(name=n, offset=o, datatype=kinds[k], count=1) for n, o, k in fields],
+            is_bigendian=False,
+            point_step=step,
+            row_step=step * len(c.points),
+            data=np.frombuffer(packed(c), dtype=np.uint8),
+            is_dense=True,
+        )
+
     def cloud(self, ns: int, pts: np.ndarray) -> Any:
         field = self.t["sensor_msgs/msg/PointField"]
         data = np.frombuffer(np.ascontiguousarray(pts, dtype="<f4").tobytes(), dtype=np.uint8)
@@ -103,6 +151,7 @@ def _messages(
     states: Sequence[tuple[float, dict[str, Any]]],
     cloud: PlanCloud | None,
     m: _Msgs,
+    captures: ExportCaptures | None = None,
 ) -> list[tuple[str, int, Any]]:
     """(topic, Unix ns, message) of the run, in time order per topic."""
     out: list[tuple[str, int, Any]] = []
@@ -136,6 +185,11 @@ def _messages(
         fs = frames.at(q)
         if fs is not None and np.isfinite(fs.tip_pose).all():
             out.append(("/robot/tool_pose", ns, m.pose_stamped(ns, frames.base, fs.tip_pose)))
+    robot = execution.robot
+    for c in captures.captures if captures is not None else []:
+        tfs = [m.transform(c.t_ns, p, ch, T) for p, ch, T in transforms(robot, c)]
+        out.append(("/tf", c.t_ns, m.t[TF_MESSAGE](transforms=tfs)))
+        out.append((camera_topic(robot), c.t_ns, m.capture(c.t_ns, camera_frame(robot), c)))
     return out
 
 
@@ -145,24 +199,30 @@ def write_rosbag2(
     states: Sequence[tuple[float, dict[str, Any]]],
     *,
     cloud: PlanCloud | None = None,
+    captures: ExportCaptures | None = None,
 ) -> tuple[bytes, dict[str, int]]:
-    """The run as a zipped rosbag2 directory, and the message count per topic."""
+    """The run as a zipped rosbag2 directory, and the message count per topic;
+    ``captures``: what the robot's camera saw
+    (:func:`server.recording.captures.load_captures`)."""
     from rosbags.rosbag2 import StoragePlugin, Writer
 
     m = _Msgs()
-    msgs = _messages(execution, plan, states, cloud, m)
+    msgs = _messages(execution, plan, states, cloud, m, captures)
+    types = {**ROSBAG_TOPICS, "/tf": TF_MESSAGE, camera_topic(execution.robot): POINT_CLOUD2}
     counts: dict[str, int] = {}
     buf = io.BytesIO()
     with tempfile.TemporaryDirectory(prefix="steelpath-bag-") as tmp:
         bag = Path(tmp) / execution.id
         with Writer(bag, version=8, storage_plugin=StoragePlugin.SQLITE3) as writer:
+            origin = origin_metadata(plan)
+            for axis in "xyz":
+                writer.set_custom_data(f"world_origin_{axis}_m", origin[f"origin_{axis}_m"])
+            writer.set_custom_data("world_frame", WORLD_FRAME)
             conns: dict[str, Any] = {}
             for topic, ns, msg in msgs:
                 if topic not in conns:
-                    conns[topic] = writer.add_connection(
-                        topic, ROSBAG_TOPICS[topic], typestore=m.store
-                    )
-                writer.write(conns[topic], ns, m.store.serialize_cdr(msg, ROSBAG_TOPICS[topic]))
+                    conns[topic] = writer.add_connection(topic, types[topic], typestore=m.store)
+                writer.write(conns[topic], ns, m.store.serialize_cdr(msg, types[topic]))
                 counts[topic] = counts.get(topic, 0) + 1
         with zipfile.ZipFile(buf, "w", compression=zipfile.ZIP_DEFLATED) as z:
             for f in sorted(bag.iterdir()):

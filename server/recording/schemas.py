@@ -112,7 +112,10 @@ POINT_CLOUD: dict[str, Any] = {
                 "properties": {
                     "name": {"type": "string"},
                     "offset": {"type": "integer", "minimum": 0},
-                    "type": {"type": "integer", "description": "NumericType; 7 = FLOAT32"},
+                    "type": {
+                        "type": "integer",
+                        "description": "NumericType; 1 = UINT8, 7 = FLOAT32",
+                    },
                 },
             },
         },
@@ -120,5 +123,6 @@ POINT_CLOUD: dict[str, Any] = {
     },
 }
 
-#: foxglove.NumericType FLOAT32.
+#: foxglove.NumericType UINT8 and FLOAT32.
+UINT8 = 1
 FLOAT32 = 7

@@ -306,14 +306,16 @@ def execution_recording(
     import io
 
     from server.recording import plan_cloud, write_recording, write_rosbag2
+    from server.recording.captures import load_captures
 
     store = services.store
     ex = store.get_execution(execution_id)
     plan = store.get_plan(ex.plan_id)
     cloud = plan_cloud(store, plan)
     states = store.execution_states(ex.id)
+    captures = load_captures(store, ex.id, ex.robot, plan)
     if format == "rosbag2":
-        data, _counts = write_rosbag2(ex, plan, states, cloud=cloud)
+        data, _counts = write_rosbag2(ex, plan, states, cloud=cloud, captures=captures)
         return Response(
             data,
             media_type="application/zip",
@@ -323,7 +325,9 @@ def execution_recording(
         "plan", plan.id, limit=10_000
     )
     buf = io.BytesIO()
-    write_recording(buf, ex, plan, store.ack_times(ex.id), states, audit, cloud=cloud)
+    write_recording(
+        buf, ex, plan, store.ack_times(ex.id), states, audit, cloud=cloud, captures=captures
+    )
     return Response(
         buf.getvalue(),
         media_type="application/octet-stream",

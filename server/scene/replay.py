@@ -16,6 +16,11 @@ odometry but no base pose, so the replay places what the live robot places
 around ``t``, while the planned robot (and the plan's other animations)
 stands where the plan was at ``t`` by the acknowledgements (within a
 command, in proportion to the time between its neighbours' acks).
+
+What the robot's camera saw (:mod:`server.captures`) is on the timeline too
+(``captures``: each at the time the host received it), and the replay shows
+the latest capture received at or before ``t`` over the model
+(:func:`server.scene.captures.show_at`).
 """
 
 from __future__ import annotations
@@ -27,7 +32,9 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from server.captures.store import CaptureStore
 from server.recording.channels import iso_ns, robot_frames
+from server.scene import captures as scene_captures
 
 if TYPE_CHECKING:
     from server.recording.channels import RobotFrames
@@ -93,8 +100,19 @@ def timeline(store: Store, execution_id: str, max_samples: int = MAX_SAMPLES) ->
         for e in sorted(audit, key=lambda e: (e.ts, e.id))
     ]
     ack_s = [_secs(ts) - start for _, ts in store.ack_times(ex.id)]
+    captures = [
+        {
+            "capture_id": c.capture_id,
+            "t_s": c.received_at - start,
+            "command_index": c.command_index,
+            "n_points": c.n_points,
+            "complete": c.complete,
+        }
+        for c in CaptureStore(store).list(ex.id)
+    ]
     ends = [states[-1][0] - start] if states else []
     ends += ack_s[-1:]
+    ends += [c["t_s"] for c in captures[-1:]]
     if ex.state in FINISHED:
         ends.append(_secs(ex.updated_at) - start)
     ends += [_secs(e.ts) - start for e in audit if e.entity == "execution"]
@@ -113,6 +131,7 @@ def timeline(store: Store, execution_id: str, max_samples: int = MAX_SAMPLES) ->
         "samples": samples,
         "acks": acks,
         "operator": operator,
+        "captures": captures,
         "thinning": {
             "stored_samples": len(states),
             "returned_samples": len(samples),
@@ -241,6 +260,10 @@ def show(scene: SceneService, execution_id: str, t_s: float) -> dict[str, Any]:
             "plan_fraction": None if fraction is None else round(fraction, 6),
         }
         scene.current["replay"] = info
+    # What the camera saw by then (the latest capture at or before t), over the model.
+    info["capture"] = scene_captures.show_at(scene, ex.id, t)
+    with scene._lock:
+        scene.current["replay"] = info
     return info
 
 
@@ -270,6 +293,7 @@ def clear(scene: SceneService) -> bool:
     with scene._lock:
         scene.server.scene.remove_by_name(held["node"])
         scene.current.pop("replay", None)
+        scene_captures.clear(scene)
         if held.get("execution_id") is not None and scene._driven == held["execution_id"]:
             scene._driven = None  # the plan's animations loop again
     return True

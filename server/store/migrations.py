@@ -251,6 +251,28 @@ MIGRATIONS: list[str] = [
     """
     ALTER TABLE webhooks ADD COLUMN allow_private_network INTEGER NOT NULL DEFAULT 0;
     """,
+    # 13: what the robot's camera saw (server/captures): one row per sensor frame a
+    # ``capture`` command brought back; its points are .npy files under captures/
+    """
+    CREATE TABLE execution_captures (
+        execution_id TEXT NOT NULL REFERENCES executions(id) ON DELETE CASCADE,
+        capture_id INTEGER NOT NULL,
+        run_id INTEGER NOT NULL,
+        command_index INTEGER NOT NULL,
+        t_robot_s REAL NOT NULL,
+        received_at REAL NOT NULL,
+        position_m TEXT NOT NULL,
+        rotation TEXT NOT NULL,
+        n_points INTEGER NOT NULL,
+        complete INTEGER NOT NULL DEFAULT 1,
+        points_file TEXT NOT NULL,
+        intensity_file TEXT,
+        meta TEXT NOT NULL DEFAULT '{}',
+        created_at TEXT NOT NULL,
+        PRIMARY KEY (execution_id, capture_id)
+    );
+    CREATE INDEX execution_captures_by_time ON execution_captures (execution_id, received_at);
+    """,
 ]
 
 SCHEMA_VERSION = len(MIGRATIONS)

@@ -466,6 +466,10 @@ class Store:
             raise IllegalTransitionError(
                 "plan", plan_id, plan.state, "delete", allowed_actions(plan.state)
             )
+        executions = [
+            str(r["id"])
+            for r in self.db.query("SELECT id FROM executions WHERE plan_id = ?", (plan_id,))
+        ]
         with self.db.transaction() as conn:
             conn.execute("UPDATE plans SET parent_id = NULL WHERE parent_id = ?", (plan_id,))
             conn.execute(
@@ -477,6 +481,8 @@ class Store:
             conn.execute("DELETE FROM plans WHERE id = ?", (plan_id,))
             self._audit(conn, actor, "plan", plan_id, "delete", plan.state, None)
         self.arrays.delete_tree(f"plans/{plan_id}")
+        for eid in executions:  # what their robots' cameras saw (server.captures)
+            ArrayStore(self.data_dir / "captures").delete_tree(eid)
 
     def plans_in_states(self, states: set[str] | frozenset[str]) -> list[PlanRecord]:
         marks = ",".join("?" * len(states))
