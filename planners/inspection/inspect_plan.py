@@ -26,8 +26,11 @@ import numpy as np
 from planners.errors import InvalidInputError, UnknownVertexError
 from planners.inspection.faces import driving_face
 from planners.inspection.gaps import Gap
+from planners.inspection.jumps import JumpSetParams
+from planners.inspection.layout import LayoutParams
 from planners.inspection.params import InspectionParams
 from planners.inspection.plan import InspectionPlan, plan_inspection
+from planners.inspection.program_plan import plan_route_program, world_origin
 from planners.inspection.transitions import Transition
 from planners.pointcloud._validate import as_points
 from planners.pointcloud.spacing import decide_units, measure_spacing
@@ -102,6 +105,10 @@ def plan_inspection_result(
     end: int | None = None,
     units: str = "m",
     progress: Callable[[float, str], None] | None = None,
+    robot: Any = None,
+    layout: LayoutParams | None = None,
+    jumps: JumpSetParams | None = None,
+    joint_names: list[str] | None = None,
 ) -> PlanResult:
     """Model the structure in ``points`` (N, 3, any frame) and plan the ARA's
     inspection route over it from vertex ``start`` to ``end`` of the member
@@ -120,6 +127,14 @@ def plan_inspection_result(
     params (``InvalidInputError``), ``start``/``end`` not a vertex of the
     member graph (``UnknownVertexError``), two vertices in pieces no jump
     joins (``DisconnectedGraphError``).
+
+    With ``robot`` (the ARA model, or a
+    :class:`planners.switching.jump.JumpRobot`) the main route's program
+    parts are planned too (:func:`planners.inspection.program_plan.plan_route_program`:
+    stretches, every inch-worm jump planned with OMPL RRT-Connect, seed
+    §3.2): the summary's ``program`` and ``world_origin_m``, the arrays
+    ``jump_q``, ``jump_times``, ``jump_offsets``, the checks
+    ``jumps_planned``, ``jump_clearance``, ``landings_on_steel``.
     """
     t0 = time.perf_counter()
     raw = as_points(points, "points", dims=3)
@@ -138,6 +153,25 @@ def plan_inspection_result(
         progress(_MODEL_SHARE, "inspection route")
     plan = _plan(model, start, end, inspection)
     checks, extra = _checks(model, plan)
+    parts = None
+    if robot is not None and plan is not None:
+
+        def jump_progress(fraction: float, stage: str) -> None:
+            if progress is not None:
+                progress(_MODEL_SHARE + (0.99 - _MODEL_SHARE) * fraction, stage)
+
+        parts = plan_route_program(
+            model,
+            plan,
+            pts,
+            robot,
+            layout=layout,
+            jumps=jumps,
+            joint_names=joint_names,
+            progress=jump_progress,
+        )
+        checks += parts.checks
+        extra.update(parts.metrics)
     metrics = {
         **_model_metrics(model, len(raw), len(pts)),
         **(_plan_metrics(plan) if plan is not None else {}),
@@ -157,6 +191,8 @@ def plan_inspection_result(
         "crop_box_m": crop_box_m,
         "counts": {"input": len(raw), "cropped": len(pts)},
     }
+    summary["world_origin_m"] = [float(x) for x in world_origin(pts)]
+    summary["program"] = parts.summary if parts is not None else None
     summary["timings_s"] = {
         "crop": crop_s,
         "structure": dict(model.timings_s),
@@ -167,6 +203,8 @@ def plan_inspection_result(
         "points": np.asarray(pts[keep], dtype=np.float64),
         "labels": np.asarray(model.labels[keep], dtype=np.int32),
     }
+    if parts is not None:
+        arrays.update(parts.arrays)
     if progress is not None:
         progress(1.0, "done")
     return PlanResult(summary=json_safe(summary), arrays=arrays, checks=checks, metrics=metrics)

@@ -1439,3 +1439,22 @@ def plan_inchworm_jump(
     if progress:
         progress(1.0, "done")
     return plan
+
+
+def jump_clearance(
+    robot: Any,
+    plan: JumpPlan,
+    obstacles: np.ndarray,
+    *,
+    base_height: float = 0.0,
+    params: JumpParams | None = None,
+) -> tuple[np.ndarray, np.ndarray]:
+    """(scene clearance, self clearance) per sample of ``plan``'s trajectory
+    against other ``obstacles`` (N,3, base frame): the re-check that ends
+    :func:`plan_inchworm_jump` (:func:`_recheck`, the same contact
+    exemptions), for a planned jump placed in another scene — e.g. one
+    inspection jump shared by several joints of the same geometry."""
+    if params is None:
+        params = JumpParams()
+    cx = _jump_context(robot, plan.foot1_target, obstacles, base_height, params)
+    return _recheck(cx, plan.joint_trajectory, plan.anchor, plan.foot1_target, plan.foot2_target)

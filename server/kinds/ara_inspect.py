@@ -1,5 +1,6 @@
 """``ara.inspect``: the ARA's inspection route over a whole scanned steel
-structure (issue #14 §5; see docs/inspection.md).
+structure, with its robot program (issue #14 §5, issue #19; see
+docs/inspection.md).
 
 The cloud is a stored scan (``cloud_id``: a TLS / photogrammetry survey of
 the whole structure, any frame, any spacing) or a synthetic TLS scan
@@ -10,23 +11,48 @@ over every member span with the ARA's mobile / inch-worm transitions at each
 vertex and inch-worm jumps across the gaps within reach
 (``planners.inspection``; seed 000 §3.1, Eq. 3.1–3.4, Alg. 2, Alg. 5).
 
+The planning job also plans the program's parts (``planners.inspection.
+program_plan``): the stretches driven on wheels along the members' driving
+faces, and every inch-worm jump of the main route with the ``ara.switch``
+jump planner (seed §3.2, OMPL RRT-Connect), one plan per distinct jump
+geometry placed at every joint of that geometry and re-checked there.
+:func:`assemble_program` turns those stored parts into commands — per
+stretch a ``base_pose``, wheel commands split every 0.5 m by a ``capture``;
+per jump a ``capture`` at the joint, magnet 2 touched, the jump's joint
+way-points, magnet 1 touched, magnet 2 released, foot 2's way-points,
+magnet 1 released (mobile) — and the job runs it through the checks
+(``feet_attached``: the two feet are never both released; joint and wheel
+limits) before the plan is stored; :func:`compile_program` assembles the
+same program for dispatch.  It never plans: it reads what the job stored.
+
 Robot numbers default to the ARA's ``robots/ara/params.toml``: the foot
 rectangle [foot] and the jump reach, the largest sole-to-sole distance of
-the [arm] chain.  The plan has no robot program: it says where the robot
-drives and where it must jump; each jump is planned by ``ara.switch``.
+the [arm] chain.
 """
 
 from __future__ import annotations
 
+import itertools
+import math
+from collections.abc import Callable, Mapping
 from functools import lru_cache
-from typing import Literal
+from typing import Any, Literal
 
 import numpy as np
 from pydantic import Field
 
 from planners.errors import InvalidInputError
 from planners.inspection.inspect_plan import plan_inspection_result, validate_crop_box
+from planners.inspection.jumps import JumpSetParams, inspection_jump_params
+from planners.inspection.layout import LayoutParams
 from planners.inspection.params import InspectionParams
+from planners.inspection.program import (
+    attachment_check,
+    command_limits,
+    program_metrics,
+    simulate_attachment,
+)
+from planners.result import PlanResult
 from planners.structure.params import StructureParams
 from planners.structure.synthetic import SCAN_SAMPLES
 from server.kinds.base import (
@@ -35,6 +61,7 @@ from server.kinds.base import (
     JobContext,
     KindOutput,
     PlanKind,
+    PlanView,
     Seed,
     StrictParams,
     VertexId,
@@ -132,6 +159,17 @@ class AraInspectParams(StrictParams):
         lt=1,
         description="a voxel is on a member when its linearity is at least this (None: 0.6)",
     )
+    plan_jumps: bool = Field(
+        False,
+        description="plan the robot program: every inch-worm jump of the main route with the "
+        "ARA's jump planner, and the program's checks (False: the route only, no program; "
+        "off by default while the jump planner cannot land the samples' jumps, see "
+        "docs/inspection.md)",
+    )
+    jump_seed: Seed = Field(0, description="seed of the jumps' RRT-Connect samples")
+    clearance_margin_m: float = Field(
+        0.01, ge=0, le=0.2, description="required clearance along every jump"
+    )
 
 
 def ara_robot_numbers() -> dict[str, float]:
@@ -187,10 +225,37 @@ def sample_points(name: str, seed: int) -> np.ndarray:
     return pts
 
 
+def _ara() -> Any:
+    from robots import load_robot
+
+    return load_robot("ara")
+
+
 def run(p: AraInspectParams, ctx: JobContext) -> KindOutput:
     validate(p)
     ctx.progress(0.0, "loading cloud")
     points = ctx.load_cloud(p.cloud_id) if p.cloud_id else sample_points(p.sample, p.sample_seed)
+    extra: dict[str, Any] = {}
+    if p.plan_jumps:
+        from planners.switching.jump import JumpRobot
+
+        ara = _ara()
+        ip = inspection_params(p)
+        spacing = float(ara.params["arm"]["foot_spacing_m"])
+        extra = {
+            "robot": JumpRobot.from_model(ara),
+            "layout": LayoutParams(
+                foot_length_m=ip.foot_length_m,
+                foot_width_m=ip.foot_width_m,
+                foot_spacing_m=spacing,
+            ),
+            "jumps": JumpSetParams(
+                jump=inspection_jump_params(
+                    spacing, seed=p.jump_seed, clearance_margin_m=p.clearance_margin_m
+                )
+            ),
+            "joint_names": list(ara.joint_names),
+        }
     r = plan_inspection_result(
         points,
         crop_box_m=p.crop_box_m,
@@ -200,8 +265,186 @@ def run(p: AraInspectParams, ctx: JobContext) -> KindOutput:
         end=p.end,
         units=p.units,
         progress=ctx.progress,
+        **extra,
     )
+    if p.plan_jumps:
+        program_checks(r)
     return KindOutput.from_result(r)
+
+
+#: The ARA's drive limits (the same as ``ara.navigate``'s).
+def _drive_limits() -> tuple[float, float]:
+    from server.kinds.ara_navigate import DRIVE_SPEED_M_S, TURN_RATE_RAD_S
+
+    return DRIVE_SPEED_M_S, TURN_RATE_RAD_S
+
+
+#: Magnet channels of the ARA's two feet on the wire (as ``ara.switch``).
+MAGNET_CHANNEL = {"foot1": 0, "foot2": 1}
+
+
+def rpy(R: np.ndarray) -> tuple[float, float, float]:
+    """(roll, pitch, yaw) with ``R = Rz(yaw)·Ry(pitch)·Rx(roll)`` (the
+    ``base_pose`` convention); at pitch ±90° roll is 0."""
+    R = np.asarray(R, float)
+    pitch = math.asin(float(np.clip(-R[2, 0], -1.0, 1.0)))
+    if abs(math.cos(pitch)) < 1e-9:
+        return 0.0, pitch, math.atan2(float(-R[0, 1]), float(R[1, 1]))
+    return (
+        math.atan2(float(R[2, 1]), float(R[2, 2])),
+        pitch,
+        math.atan2(float(R[1, 0]), float(R[0, 0])),
+    )
+
+
+def split_drive(poses: np.ndarray, every_m: float) -> list[np.ndarray]:
+    """The differential-drive pose sequence ``poses`` (K, 3) cut into pieces
+    at every ``every_m`` metres driven (a cut pose interpolated on its
+    straight piece); the pieces share their end poses."""
+    q = np.asarray(poses, float).reshape(-1, 3)
+    pieces: list[list[np.ndarray]] = [[q[0]]]
+    run = 0.0
+    for a, b in itertools.pairwise(q):
+        d = float(np.hypot(*(b[:2] - a[:2])))
+        start = a
+        while d > 1e-9 and run + d >= every_m - 1e-9:
+            f = (every_m - run) / d
+            cut = start + f * (b - start)
+            cut[2] = b[2]
+            pieces[-1].append(cut)
+            pieces.append([cut])
+            d -= every_m - run
+            start, run = cut, 0.0
+        if d > 1e-9 or float(np.abs(b - start).max()) > 1e-12:
+            pieces[-1].append(b)
+            run += d
+    return [np.array(p) for p in pieces if len(p) > 1]
+
+
+def _jump_commands(
+    t: np.ndarray, q: np.ndarray, phases: list[Mapping[str, Any]], sample_s: float
+) -> list[Any]:
+    """Seed §3.2's sequence for one jump's stored trajectory: magnet 2
+    touched (the standing foot), foot 1's way-points (phases B, C: to
+    P_conv, RRT-Connect path, straight approach), magnet 1 touched (the
+    landed foot holds), magnet 2 released, foot 2's way-points (phase E),
+    magnet 1 released (both untouched: the mobile configuration).  Way-points
+    every ``sample_s`` of the trajectory, always including the sample where
+    foot 1 lands and the last one."""
+    from robots.protocol.commands import JointMove, SetMagnet
+
+    by = {str(ph["name"]): ph for ph in phases}
+    land = int(by["C"]["stop"]) - 1
+    dt = float(np.median(np.diff(t))) if len(t) > 1 else sample_s
+    step = max(1, round(sample_s / max(dt, 1e-6)))
+    idx = np.unique(np.r_[np.arange(0, len(t), step), land, len(t) - 1])
+    out: list[Any] = [SetMagnet(MAGNET_CHANNEL["foot2"], True)]
+    prev = None
+    for i in idx:
+        if prev is not None and prev <= land < i:
+            out += [SetMagnet(MAGNET_CHANNEL["foot1"], True)]
+            out += [SetMagnet(MAGNET_CHANNEL["foot2"], False)]
+        dur = 0.0 if prev is None else float(t[i] - t[prev])
+        out.append(JointMove(tuple(float(v) for v in q[i]), dur))
+        prev = int(i)
+    out.append(SetMagnet(MAGNET_CHANNEL["foot1"], False))
+    return out
+
+
+def assemble_program(
+    result: Mapping[str, Any],
+    array: Callable[[str], np.ndarray],
+    *,
+    track_m: float,
+    speed_m_s: float,
+    turn_rate_rad_s: float,
+    sample_s: float = 0.1,
+) -> list[Any]:
+    """The robot program (command objects) from a plan's stored parts:
+    ``result`` the summary, ``array(name)`` its arrays.  Used by the
+    planning job (for the program checks) and by :func:`compile_program`,
+    so both see the same program.  Per stretch: ``base_pose`` (its start,
+    relative to ``world_origin_m``), wheel commands
+    (:func:`server.kinds.programs.differential_drive_poses`) cut every
+    ``capture_every_m`` by a ``capture``; per jump that ends a stretch: a
+    ``capture`` at the joint and :func:`_jump_commands`.  A jump that was
+    not planned ends the program there.  Empty without a program."""
+    from robots.protocol.commands import BasePose, Capture, Stop
+    from server.kinds.programs import differential_drive_poses
+
+    prog = result.get("program")
+    if not prog or not prog.get("stretches"):
+        return []
+    origin = np.asarray(result.get("world_origin_m") or prog["world_origin_m"], float)
+    offsets = np.asarray(array("jump_offsets"), np.int64)
+    jq, jt = array("jump_q"), array("jump_times")
+    out: list[Any] = []
+    for st in prog["stretches"]:
+        S = np.asarray(st["start"], float)
+        out.append(BasePose(tuple(float(v) for v in S[:3, 3] - origin), rpy(S[:3, :3])))
+        for piece in split_drive(
+            np.asarray(st["waypoints"], float), float(prog["capture_every_m"])
+        ):
+            cmds = differential_drive_poses(
+                piece, track_m=track_m, speed_m_s=speed_m_s, turn_rate_rad_s=turn_rate_rad_s
+            )
+            out += cmds
+            moved = float(np.hypot(*(piece[-1, :2] - piece[0, :2])))
+            if moved > 1e-9 and len(cmds) > 1:
+                out.append(Capture())
+        if st["ends_in"] is None:
+            continue
+        site = prog["sites"][st["ends_in"]]
+        out.append(Capture())  # the structural joint, before the jump
+        k = site["unique"]
+        if k is None or site["foot1"] is None:
+            break
+        sl = slice(int(offsets[k]), int(offsets[k + 1]))
+        out += _jump_commands(jt[sl], jq[sl], prog["unique_jumps"][k]["phases"], sample_s)
+    out.append(Stop())
+    return out
+
+
+def _program_dicts(result: Mapping[str, Any], array: Callable[[str], np.ndarray]) -> list[dict]:
+    from server.kinds.programs import as_dicts
+
+    speed, turn = _drive_limits()
+    track = float(_ara().params["foot"]["wheel_track_m"])
+    return as_dicts(
+        assemble_program(result, array, track_m=track, speed_m_s=speed, turn_rate_rad_s=turn)
+    )
+
+
+def program_checks(r: PlanResult) -> list[dict]:
+    """Assemble the program from ``r``'s stored parts and add its checks to
+    ``r``: ``feet_attached`` (:func:`planners.inspection.program.simulate_attachment`),
+    ``program_joint_limits``, ``program_joint_speeds``,
+    ``program_wheel_speeds``; metrics ``program_duration_s``,
+    ``program_distance_m`` and the command counts.  Returns the program."""
+    ara = _ara()
+    program = _program_dicts(r.summary, r.arrays.__getitem__)
+    speed, turn = _drive_limits()
+    r.checks.append(attachment_check(simulate_attachment(program, q_mobile=ara.q_mobile)))
+    r.checks += command_limits(
+        program,
+        joint_limits=ara.joint_limits,
+        max_speed=ara.max_speed,
+        drive_speed_m_s=speed,
+        turn_rate_rad_s=turn,
+        track_m=float(ara.params["foot"]["wheel_track_m"]),
+        q_start=ara.q_mobile,
+    )
+    r.metrics.update(program_metrics(program))
+    return program
+
+
+def compile_program(plan: PlanView) -> list[dict[str, Any]] | None:
+    """The stored program parts assembled into commands
+    (:func:`assemble_program`, the same code the planning job checked);
+    ``None`` when the plan has no program (``plan_jumps`` false, or no
+    member to drive)."""
+    program = _program_dicts(plan.result, plan.array)
+    return program or None
 
 
 KIND = PlanKind(
@@ -212,5 +455,6 @@ KIND = PlanKind(
     run=run,
     validate=validate,
     robot="ara",
+    compile=compile_program,
     samples=dict(SCAN_SAMPLES),
 )
