@@ -627,9 +627,12 @@ function renderDetail(p) {
   $("#revise").disabled = !allowed.has("revise");
   $("#delete").disabled = !allowed.has("delete");
   $("#dispatch").disabled = !allowed.has("dispatch") || !p.program;
+  // Say why Dispatch is greyed, on hover, not only inside the program section.
+  const noProgram = (p.result && p.result.program_note) || "this kind has no robot program";
+  $("#dispatch").title = p.program ? "" : noProgram;
   applyRole();
   $("#dispatch-box").hidden = true;
-  $("#d-program-len").textContent = p.program ? `(${p.program.length} commands)` : "(this kind has no compiler)";
+  $("#d-program-len").textContent = p.program ? `(${p.program.length} commands)` : `(${noProgram})`;
   $("#d-program").textContent = p.program ? p.program.map((c, i) => `${i}: ${JSON.stringify(c)}`).join("\n") : "";
   loadExecutionFor(p.id);
   const ct = $("#d-checks tbody");

@@ -231,31 +231,34 @@ def _ara() -> Any:
     return load_robot("ara")
 
 
+def _program_inputs(p: AraInspectParams) -> dict[str, Any]:
+    """The robot, layout and jump parameters the planning job needs to plan the program."""
+    from planners.switching.jump import JumpRobot
+
+    ara = _ara()
+    ip = inspection_params(p)
+    spacing = float(ara.params["arm"]["foot_spacing_m"])
+    return {
+        "robot": JumpRobot.from_model(ara),
+        "layout": LayoutParams(
+            foot_length_m=ip.foot_length_m,
+            foot_width_m=ip.foot_width_m,
+            foot_spacing_m=spacing,
+        ),
+        "jumps": JumpSetParams(
+            jump=inspection_jump_params(
+                spacing, seed=p.jump_seed, clearance_margin_m=p.clearance_margin_m
+            )
+        ),
+        "joint_names": list(ara.joint_names),
+    }
+
+
 def run(p: AraInspectParams, ctx: JobContext) -> KindOutput:
     validate(p)
     ctx.progress(0.0, "loading cloud")
     points = ctx.load_cloud(p.cloud_id) if p.cloud_id else sample_points(p.sample, p.sample_seed)
-    extra: dict[str, Any] = {}
-    if p.plan_jumps:
-        from planners.switching.jump import JumpRobot
-
-        ara = _ara()
-        ip = inspection_params(p)
-        spacing = float(ara.params["arm"]["foot_spacing_m"])
-        extra = {
-            "robot": JumpRobot.from_model(ara),
-            "layout": LayoutParams(
-                foot_length_m=ip.foot_length_m,
-                foot_width_m=ip.foot_width_m,
-                foot_spacing_m=spacing,
-            ),
-            "jumps": JumpSetParams(
-                jump=inspection_jump_params(
-                    spacing, seed=p.jump_seed, clearance_margin_m=p.clearance_margin_m
-                )
-            ),
-            "joint_names": list(ara.joint_names),
-        }
+    extra = _program_inputs(p) if p.plan_jumps else {}
     r = plan_inspection_result(
         points,
         crop_box_m=p.crop_box_m,
@@ -269,7 +272,16 @@ def run(p: AraInspectParams, ctx: JobContext) -> KindOutput:
     )
     if p.plan_jumps:
         program_checks(r)
+    else:
+        # Shown where Dispatch would be: why this plan cannot be sent to the robot.
+        r.summary["program_note"] = NO_PROGRAM_NOTE
     return KindOutput.from_result(r)
+
+
+NO_PROGRAM_NOTE = (
+    "no robot program: the inch-worm jumps were not planned (plan_jumps is off; the jump "
+    "planner cannot yet land the sample trusses' jumps, see docs/inspection.md)"
+)
 
 
 #: The ARA's drive limits (the same as ``ara.navigate``'s).

@@ -2,8 +2,9 @@
 loaded and picked where the kind takes one, choices picked in the scene
 (start and end vertices, blast's surface), plan, review,
 approve, dispatch to the kind's robot (the embedded emulators) and watch the
-execution to completion (issue #15 "Done when"); a kind with no robot program
-(ara.inspect's survey route) stops at approval, its Dispatch disabled.
+execution to completion; a plan with no robot program (ara.inspect without
+its jumps planned) stops at approval, its Dispatch disabled with the reason on
+hover.
 
 One server for the module; each kind gets a fresh page.  Emulated motions
 run :data:`TIME_SCALE` times faster than real time so the longest default
@@ -155,9 +156,12 @@ def _flow(page: Any, errors: list[str], app: Any, kind: str) -> None:
     assert "FAIL" not in page.inner_text("#d-checks")
     page.click("#approve")
     page.wait_for_function("document.querySelector('#d-state').textContent === 'approved'")
-    if spec.compile is None:
-        # A survey route (ara.inspect) has no robot program: nothing to dispatch.
+    if not plan.program:
+        # ara.inspect without its jumps planned has no robot program: nothing
+        # to dispatch, and the greyed button says why.
         assert page.is_disabled("#dispatch")
+        note = (plan.result or {}).get("program_note")
+        assert note and page.get_attribute("#dispatch", "title") == note
         assert not errors, errors
         return
 
