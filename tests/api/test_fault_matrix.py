@@ -1,6 +1,12 @@
 """Each injected link/robot fault × each plan kind that compiles to commands:
 the run completes after operator resumes, with nothing lost and nothing
-executed twice (asserted from the emulator's own execution log)."""
+executed twice (asserted from the emulator's own execution log).
+
+``host_crash`` kills the robot-link service; ``kill -9`` of the whole server
+(web server and link service) mid-run, with the ARA driving, with a foot in the
+air and right after a magnet release, then restart and resume, are the cells
+of tests/api/test_resume_mid_jump.py (a real ``steelpath serve`` subprocess and
+its embedded emulator processes, which outlive it)."""
 
 from __future__ import annotations
 
