@@ -47,7 +47,16 @@ from planners.errors import CancelledError, PlannerError
 from planners.inspection.faces import FaceGeom
 from planners.inspection.layout import JumpSite, ProgramLayout
 from planners.structure.model import Member, StructureModel
-from planners.switching.jump import JumpParams, JumpPlan, jump_clearance, plan_inchworm_jump
+from planners.switching.jump import (
+    JumpParams,
+    JumpPlan,
+    JumpRobot,
+    arm_length,
+    jump_clearance,
+    landing_configurations,
+    plan_inchworm_jump,
+    wrist_distance,
+)
 
 __all__ = [
     "JumpSetParams",
@@ -57,7 +66,9 @@ __all__ = [
     "jump_key",
     "plan_geometry",
     "plan_site_jumps",
+    "reach_test",
     "site_obstacles",
+    "unreachable_reason",
 ]
 
 Progress = Callable[[float, str], None]
@@ -89,17 +100,31 @@ class JumpSetParams:
     jump: JumpParams = field(default_factory=lambda: inspection_jump_params(0.5))
 
 
+#: The known standing surface the jump planner adds (``standing_patch_m``)
+#: for an inspection jump: only under foot 2's sole (0.18 × 0.12 m).  The
+#: ``ara.switch`` default (0.88 × 0.4 m, the floor the camera cannot see)
+#: invents steel beside a diagonal's 0.2 m web where the arm must pass
+#: below the standing plane; here the standing face itself is among the
+#: obstacles (the member faces' samples, :func:`face_samples`).
+STANDING_PATCH_M = ((-0.09, 0.09), (-0.06, 0.06))
+
+
 def inspection_jump_params(foot_spacing_m: float, **overrides: Any) -> JumpParams:
     """The jump planner's params for an inspection jump: foot 2 lands
     ``foot_spacing_m`` ahead of foot 1 along its x axis and nowhere else
     (the mobile configuration: the robot drives on without re-arranging its
-    feet), foot 1 exactly on its target (not flipped, not shifted)."""
+    feet), foot 1 exactly on its target (not flipped, not shifted), the
+    standing patch only under foot 2 (:data:`STANDING_PATCH_M`), and foot
+    2's landing IK seeded with the mobile configuration (the straight arm
+    is singular: random seeds miss it)."""
     base = JumpParams(
         second_foot_distances_m=(float(foot_spacing_m),),
         second_foot_angles_deg=(0.0,),
         max_second_foot_candidates=1,
         try_flipped=False,
         inward_shifts_m=(0.0,),
+        standing_patch_m=STANDING_PATCH_M,
+        mobile_ik_seed=True,
     )
     return replace(base, **overrides)
 
@@ -244,6 +269,81 @@ def _surface(site: JumpSite) -> tuple[np.ndarray, np.ndarray, np.ndarray, Any] |
     return origin, R.T @ ln.direction, R.T @ ln.across, ln.polygon
 
 
+def unreachable_reason(robot: Any, relative: np.ndarray) -> str | None:
+    """Why foot 1 can never land at ``relative`` (4×4, standing base frame),
+    or ``None``: the wrist points are farther apart than the arm
+    (:func:`planners.switching.jump.wrist_distance` > link2 + link3 + link4,
+    an exact bound: no joint values reach it; seed §3.2)."""
+    model = robot if hasattr(robot, "params") else None
+    d, arm = wrist_distance(relative, model), arm_length(model)
+    if d <= arm:
+        return None
+    return (
+        f"UnreachableError: the landing is out of the arm's reach: its wrist point (0.1 m off "
+        f"the face) is {d:.3f} m from joint 2 (0.1 m above the standing sole), the arm "
+        f"(link2 + link3 + link4) is {arm:.2f} m"
+    )
+
+
+def _is_robot(robot: Any) -> bool:
+    """A jump robot or a robot model :meth:`JumpRobot.from_model` adapts
+    (not a test's stand-in object)."""
+    return isinstance(robot, JumpRobot) or (
+        hasattr(robot, "ik_solutions") and hasattr(robot, "collision_shapes")
+    )
+
+
+def adapt_robot(robot: Any, params: JumpParams) -> JumpRobot | None:
+    """The jump planner's robot (:meth:`JumpRobot.from_model`, adapted once),
+    ``None`` for an object that is no robot model (tests' stub planners)."""
+    if isinstance(robot, JumpRobot):
+        return robot
+    if _is_robot(robot):
+        return JumpRobot.from_model(robot, ik_seeds=params.ik_seeds)
+    return None
+
+
+def reach_test(
+    robot: Any,
+    model: StructureModel,
+    points: np.ndarray,
+    params: JumpSetParams | None = None,
+    *,
+    adapted: JumpRobot | None = None,
+) -> Callable[[np.ndarray, np.ndarray, np.ndarray], bool]:
+    """``reach(standing, landing, joint)`` for
+    :func:`planners.inspection.layout.layout_program`: can foot 1 land at
+    ``landing`` from foot 2 at ``standing`` (4×4, model frame)?  First the
+    exact arm-length bound (:func:`unreachable_reason`), then the landing
+    configurations phase C would accept
+    (:func:`planners.switching.jump.landing_configurations`: IK, straight
+    approach clear of the site's obstacles and of the robot itself, foot 2
+    able to lift off) — no RRT, about 0.1 s a placement.  Obstacles per
+    joint as :func:`plan_site_jumps` builds them (cached by joint)."""
+    p = params or JumpSetParams()
+    rob = adapted if adapted is not None else adapt_robot(robot, p.jump)
+    if rob is None:
+        raise PlannerError("reach_test needs a robot model (ik_solutions, collision_shapes)")
+    pts = np.asarray(points, float).reshape(-1, 3)
+    scan = cKDTree(pts) if len(pts) else None
+    fpts = face_samples(model, p.face_step_m)
+    ftree = cKDTree(fpts) if len(fpts) else None
+    cache: dict[tuple[float, ...], np.ndarray] = {}
+    model_robot = robot if hasattr(robot, "params") else None
+
+    def reach(standing: np.ndarray, landing: np.ndarray, joint: np.ndarray) -> bool:
+        rel = np.linalg.inv(standing) @ landing
+        if wrist_distance(rel, model_robot) > arm_length(model_robot):
+            return False
+        key = tuple(np.round(np.asarray(joint, float), 6))
+        if key not in cache:
+            cache[key] = site_obstacles(scan, pts, ftree, fpts, np.asarray(joint, float), p)
+        obs = _to_frame(standing, cache[key])
+        return len(landing_configurations(rob, rel, obstacles=obs, params=p.jump, limit=1)) > 0
+
+    return reach
+
+
 def plan_geometry(
     robot: Any,
     foothold: np.ndarray,
@@ -328,9 +428,22 @@ def plan_site_jumps(
     keys: list[tuple[Any, ...]] = []
     unique_of: dict[int, int] = {}
     first: list[int] = []
+    real = _is_robot(robot)
+    skipped: dict[int, str] = {}
     for i, site in enumerate(layout.sites):
         if site.error is not None:
             continue
+        if real:
+            why = unreachable_reason(robot, site.relative)
+            if why is None and site.reachable is False:
+                why = (
+                    f"UnreachableError: foot 1 cannot land from any of the {site.reach_tries} "
+                    "placements tried (no IK solution with a clear straight approach, "
+                    "free of the robot itself, from which foot 2 can lift)"
+                )
+            if why is not None:
+                skipped[i] = why
+                continue
         centre = 0.5 * (site.standing[:3, 3] + site.landing[:3, 3])
         obstacles[i] = _to_frame(site.standing, site_obstacles(scan, pts, ftree, fpts, centre, p))
         key = jump_key(site, members, p)
@@ -375,8 +488,9 @@ def plan_site_jumps(
     t0 = time.perf_counter()
     placed: list[PlacedJump] = []
     for i, site in enumerate(layout.sites):
-        if site.error is not None:
-            placed.append(PlacedJump(i, None, site.standing, error=site.error))
+        if site.error is not None or i in skipped:
+            err = site.error if site.error is not None else skipped[i]
+            placed.append(PlacedJump(i, None, site.standing, error=err))
             continue
         k = unique_of[i]
         plan = plans[k]

@@ -37,7 +37,7 @@ rest driven backwards, as ``ara.navigate`` does).
 from __future__ import annotations
 
 import math
-from collections.abc import Hashable
+from collections.abc import Callable, Hashable
 from dataclasses import dataclass, field
 
 import networkx as nx
@@ -57,6 +57,7 @@ __all__ = [
     "JumpSite",
     "LayoutParams",
     "ProgramLayout",
+    "Reach",
     "Stretch",
     "drive_line",
     "layout_program",
@@ -77,7 +78,15 @@ class LayoutParams:
     at its vertex stands a whole number of these from it (see :func:`_snaps`),
     the first where the box over the robot's feet (pad ``clear_pad_m``, from
     ``clear_above_m`` to ``clear_height_m`` over the sole) holds no obstacle
-    point (the other members at the joint)."""
+    point (the other members at the joint).
+
+    Reachable placements (used when :func:`layout_program` gets a ``reach``
+    test): the standing foot may also stand ``across_offsets_m`` to either
+    side of its line (a flange wider than the foot) and up to
+    ``back_steps`` snaps further back; the landing foot may land
+    ``landing_along_m`` along its line and ``across_offsets_m`` across; the
+    combinations are tried cheapest first (displacement from the nearest
+    placement, m), at most ``max_reach_tries`` per site."""
 
     foot_length_m: float = 0.18
     foot_width_m: float = 0.12
@@ -89,6 +98,16 @@ class LayoutParams:
     clear_pad_m: float = 0.02
     clear_above_m: float = 0.02
     clear_height_m: float = 0.15
+    across_offsets_m: tuple[float, ...] = (0.04, 0.08)
+    back_steps: int = 2
+    landing_along_m: tuple[float, ...] = (-0.05, 0.05, 0.1)
+    max_reach_tries: int = 24
+
+
+#: ``reach(standing, landing, joint) -> bool``: can the robot standing at
+#: ``standing`` (4×4, foot 2) land foot 1 at ``landing`` (4×4) at the joint
+#: ``joint`` (3,)?  (:func:`planners.inspection.program_plan.reach_test`.)
+Reach = Callable[[np.ndarray, np.ndarray, np.ndarray], bool]
 
 
 def _snaps(s0: float, away: float, lo: float, hi: float, step: float) -> list[float]:
@@ -300,6 +319,13 @@ class JumpSite:
     error: str | None = None
     standing_clear: bool = True
     landing_clear: bool = True
+    #: with a ``reach`` test: whether the placement passed it (``None``: not
+    #: tested), how many placements were tested, and the chosen one's
+    #: displacement (standing back, standing across, landing along, landing
+    #: across; m) from the nearest placement
+    reachable: bool | None = None
+    reach_tries: int = 0
+    offsets_m: tuple[float, float, float, float] = (0.0, 0.0, 0.0, 0.0)
 
     @property
     def relative(self) -> np.ndarray:
@@ -366,6 +392,7 @@ def layout_program(
     plan: InspectionPlan,
     params: LayoutParams | None = None,
     obstacles: np.ndarray | None = None,
+    reach: Reach | None = None,
 ) -> ProgramLayout:
     """Stretches and jump sites of ``plan``'s main route (``routes[0]``; the
     other routes need the robot carried there and are not laid out).
@@ -374,7 +401,10 @@ def layout_program(
     until the jump before it is planned; its way-points are then laid out
     again from the landing (:func:`relayout_stretch`).  The way-points of
     each span are the base's stop on the span's driving line nearest the
-    span's end vertex, within :meth:`DriveLine.base_range`."""
+    span's end vertex, within :meth:`DriveLine.base_range`.
+
+    ``reach``: when given, a site whose nearest placement fails it is moved
+    to the cheapest reachable one (:func:`reachable_placement`)."""
     p = params or LayoutParams()
     members = {m.id: m for m in model.members}
     obstacles = np.zeros((0, 3)) if obstacles is None else np.asarray(obstacles, float)
@@ -425,6 +455,8 @@ def layout_program(
         )
         n_sites += end is not None
     sites: list[JumpSite] = []
+    learned: list[tuple[float, float, float, float]] = []
+    failed: set[tuple[object, ...]] = set()
     for r, end in enumerate(ends):
         if end is None:
             continue
@@ -451,6 +483,19 @@ def layout_program(
             site.standing, site.standing_clear = _place(
                 la, sv, -sa, sa, lo, hi, robot, tree, obstacles, p
             )
+            if reach is not None and site.landing_line is not None:
+                reachable_placement(
+                    site,
+                    la,
+                    site.landing_line,
+                    (lo, hi),
+                    reach,
+                    tree,
+                    obstacles,
+                    p,
+                    learned,
+                    failed,
+                )
         sites.append(site)
     out = ProgramLayout(lines=lines, stretches=stretches, sites=sites, params=p)
     if stretches and stretches[0].edges:
@@ -611,3 +656,115 @@ def _site(
         lb, sw, sign, sign, min(lo, hi), max(lo, hi), robot, tree, obstacles, p
     )
     return site
+
+
+def _on_face(line: DriveLine, T: np.ndarray, x_range: tuple[float, float], p: LayoutParams) -> bool:
+    """Does the box ``x_range`` along ``T``'s x (the robot's feet, each
+    ``foot_width_m`` wide) lie on ``line``'s face with ``edge_margin_m``?
+    (S_am of seed Alg. 2 in exact form, for a pose off the centre line.)"""
+    m = p.edge_margin_m
+    hw = p.foot_width_m / 2 + m
+    local = np.array([[x, y, 0.0] for x in (x_range[0] - m, x_range[1] + m) for y in (-hw, hw)])
+    c = local @ T[:3, :3].T + T[:3, 3] - line.origin
+    st = np.column_stack([c @ line.direction, c @ line.across])
+    return bool(line.polygon.covers(Polygon(st[[0, 1, 3, 2]])))
+
+
+def reachable_placement(
+    site: JumpSite,
+    la: DriveLine,
+    lb: DriveLine,
+    base_range: tuple[float, float],
+    reach: Reach,
+    tree: cKDTree | None,
+    obstacles: np.ndarray,
+    p: LayoutParams,
+    learned: list[tuple[float, float, float, float]] | None = None,
+    failed: set[tuple[object, ...]] | None = None,
+) -> None:
+    """Move ``site``'s feet to the cheapest placement that ``reach`` accepts
+    (seed §3.2: the target pose must be one the arm can land foot 1 on).
+
+    Candidates: the standing foot ``k`` snaps further back (k ≤
+    ``back_steps``, inside ``base_range``) and ``across_offsets_m`` to either
+    side; the landing foot ``landing_along_m`` along its line and
+    ``across_offsets_m`` across.  A candidate must keep both feet of the
+    mobile configuration on their face (:func:`_on_face`) and its robot box
+    clear (:func:`_clear`); the rest are tried in order of total
+    displacement (ties: standing before landing changes, then the order
+    listed), at most ``max_reach_tries`` of them; the displacements that
+    served earlier sites (``learned``, appended to) go first — the joints
+    of a truss repeat — and a site whose nearest placement matches one that
+    found nothing (``failed``: the standing → landing transform rounded to
+    5 cm / 0.1 per rotation entry) is not searched again.  The first accepted one is
+    kept (``reachable`` true); when none is, the nearest placement stays
+    (``reachable`` false) and the planner's reason names the site."""
+    S0, L0 = site.standing, site.landing
+    rel = np.linalg.inv(S0) @ L0
+    key = (
+        "failed",
+        *(int(v) for v in np.round(rel[:3, 3] / 0.05)),
+        *(int(v) for v in np.round(rel[:3, :3].ravel() / 0.1)),
+    )
+    if failed is not None and key in failed:
+        site.reachable, site.reach_tries = False, 0
+        return
+    sp, fl = p.foot_spacing_m, p.foot_length_m
+    behind = (-sp - fl / 2, fl / 2)  # foot 1 behind the standing foot 2
+    ahead = (-fl / 2, sp + fl / 2)  # foot 2 ahead of the landed foot 1
+    across = (0.0, *[s * a for a in p.across_offsets_m for s in (1.0, -1.0)])
+    s_now = la.s_of(S0[:3, 3])
+    heading = float(S0[:3, 0] @ la.direction)
+    stand: list[tuple[float, float, float, np.ndarray]] = []
+    for k in range(p.back_steps + 1):
+        back = k * p.snap_m
+        s = s_now - math.copysign(back, heading)
+        if not (base_range[0] - 1e-9 <= s <= base_range[1] + 1e-9):
+            continue
+        for t in across:
+            T = S0.copy()
+            T[:3, 3] = S0[:3, 3] + (s - s_now) * la.direction + t * S0[:3, 1]
+            if (k or t) and not (
+                _on_face(la, T, behind, p) and _clear(T, tree, obstacles, behind, p)
+            ):
+                continue
+            stand.append((back, t, back + abs(t), T))
+    land: list[tuple[float, float, float, np.ndarray]] = []
+    for a in (0.0, *p.landing_along_m):
+        for t in across:
+            T = L0.copy()
+            T[:3, 3] = L0[:3, 3] + a * L0[:3, 0] + t * L0[:3, 1]
+            if (a or t) and not (
+                _on_face(lb, T, ahead, p) and _clear(T, tree, obstacles, ahead, p)
+            ):
+                continue
+            land.append((a, t, abs(a) + abs(t), T))
+    known = learned if learned is not None else []
+
+    def rank(c: tuple[float, int, int]) -> tuple[int, float, int, int, int]:
+        off = (stand[c[1]][0], stand[c[1]][1], land[c[2]][0], land[c[2]][1])
+        first = known.index(off) if off in known else len(known)
+        return (first, round(c[0], 6), c[1] + c[2], c[1], c[2])
+
+    pairs = sorted(
+        (
+            (sc + lc, i, j)
+            for i, (*_, sc, _) in enumerate(stand)
+            for j, (*_, lc, _) in enumerate(land)
+        ),
+        key=rank,
+    )
+    tries = 0
+    for _, i, j in pairs[: p.max_reach_tries]:
+        tries += 1
+        S, L = stand[i][3], land[j][3]
+        if reach(S, L, site.joint):
+            site.standing, site.landing = S, L
+            site.reachable, site.reach_tries = True, tries
+            site.offsets_m = (stand[i][0], stand[i][1], land[j][0], land[j][1])
+            if site.offsets_m not in known:
+                known.append(site.offsets_m)
+            return
+    site.reachable, site.reach_tries = False, tries
+    if failed is not None:
+        failed.add(key)

@@ -22,7 +22,14 @@ from typing import Any
 
 import numpy as np
 
-from planners.inspection.jumps import JumpSetParams, PlannedJumps, face_samples, plan_site_jumps
+from planners.inspection.jumps import (
+    JumpSetParams,
+    PlannedJumps,
+    adapt_robot,
+    face_samples,
+    plan_site_jumps,
+    reach_test,
+)
 from planners.inspection.layout import LayoutParams, ProgramLayout, layout_program, relayout_stretch
 from planners.inspection.plan import InspectionPlan
 from planners.result import Check, check_ge
@@ -88,7 +95,11 @@ def plan_route_program(
     lp = layout or LayoutParams()
     jp = jumps or JumpSetParams()
     obstacles = np.vstack([np.asarray(points, float).reshape(-1, 3), face_samples(model, 0.02)])
-    lay = layout_program(model, plan, lp, obstacles=obstacles)
+    # Reachable placements (seed §3.2): with a robot model, each site's feet
+    # go where the arm can land foot 1 (layout.reachable_placement).
+    adapted = adapt_robot(robot, jp.jump)
+    reach = reach_test(robot, model, points, jp, adapted=adapted) if adapted is not None else None
+    lay = layout_program(model, plan, lp, obstacles=obstacles, reach=reach)
     pj = plan_site_jumps(
         robot,
         lay,

@@ -84,6 +84,11 @@ class JumpParams:
     # rectangle anchored on an edge where the plane meets another surface
     # (a wall on a floor) puts the foot against that surface.
     inward_shifts_m: tuple[float, ...] = (0.0, 0.03, 0.06)
+    # Seed foot 2's landing IK with the mobile configuration too: a foot 2
+    # landing exactly one foot spacing ahead of foot 1 is the straight arm,
+    # a singular pose that damped least squares from random seeds does not
+    # converge to (inspection jumps, which land in the mobile configuration).
+    mobile_ik_seed: bool = False
     seed: int = 0
 
 
@@ -851,6 +856,7 @@ def _landing_configs(
     seed: int,
     prefer: Callable[[np.ndarray], np.ndarray] | None = None,
     post: Callable[[np.ndarray], bool] | None = None,
+    q0: np.ndarray | None = None,
 ) -> list[tuple[np.ndarray, np.ndarray]]:
     """(hover config, approach path hover→contact) pairs for a target.
 
@@ -858,13 +864,14 @@ def _landing_configs(
     at contact and hovering ``standoff_m`` off the surface.  Contact IK
     solutions are tracked straight back to the hover pose (so the approach is
     a straight line), and kept when every approach sample is valid and the
-    hover pose is valid for free motion.
+    hover pose is valid for free motion.  ``q0``: an extra IK seed (the
+    solutions come sorted by their distance to it).
     """
     out: list[tuple[np.ndarray, np.ndarray]] = []
     up = _cartesian_line(target_rel, hover_rel, params.cartesian_steps)
     # IK retries: a fresh batch of random seeds while nothing usable is found.
     for retry in range(int(params.ik_retries)):
-        sols = robot.ik(target_rel, None, seed + 1000 * retry)
+        sols = robot.ik(target_rel, q0, seed + 1000 * retry)
         if len(sols) == 0:
             continue
         if prefer is not None:
@@ -1163,7 +1170,15 @@ def _phase_e(
         # Foot 2 hovers above its spot: in foot 2's frame foot 1 is lower.
         hover_rel = np.linalg.inv(_translate(T2, T2[:3, 2] * params.standoff_m)) @ W1_actual
         goals2 = _landing_configs(
-            cx.rob, target_rel, hover_rel, free1, land2_zone, params, params.seed + 1, _flatness
+            cx.rob,
+            target_rel,
+            hover_rel,
+            free1,
+            land2_zone,
+            params,
+            params.seed + 1,
+            _flatness,
+            q0=cx.rob.q_mobile if params.mobile_ik_seed else None,
         )
         if not goals2:
             if _DEBUG:
@@ -1458,3 +1473,69 @@ def jump_clearance(
         params = JumpParams()
     cx = _jump_context(robot, plan.foot1_target, obstacles, base_height, params)
     return _recheck(cx, plan.joint_trajectory, plan.anchor, plan.foot1_target, plan.foot2_target)
+
+
+def wrist_distance(foothold: np.ndarray, robot: Any = None) -> float:
+    """Distance (m) between the two wrist points of a jump onto ``foothold``
+    (4×4, foot 1's sole in the standing base frame): the ARA's joint 2 sits
+    ``j1_above_sole + j2_above_j1`` (0.1 m) along foot 2's normal, joint 5
+    ``j6_below_j5 + sole_below_j6`` (0.1 m) along foot 1's normal, and
+    between them the arm is three straight links (link2 + link3 + link4 =
+    0.5 m, ara.urdf), so a foothold farther than that is out of reach for
+    every joint value (seed §3.2: the six-DoF arm, joints 2 and 5 pitch).
+    ``robot`` (a RobotModel with ``params['arm']``) overrides the ARA
+    numbers."""
+    a = (robot.params["arm"] if robot is not None and hasattr(robot, "params") else None) or {}
+    up2 = float(a.get("j1_above_sole_m", 0.05)) + float(a.get("j2_above_j1_m", 0.05))
+    up5 = float(a.get("j6_below_j5_m", 0.05)) + float(a.get("sole_below_j6_m", 0.05))
+    W = np.asarray(foothold, float)
+    j5 = W[:3, 3] + up5 * W[:3, 2]
+    return float(np.linalg.norm(j5 - np.array([0.0, 0.0, up2])))
+
+
+def arm_length(robot: Any = None) -> float:
+    """link2 + link3 + link4 (m): the most the wrist points of
+    :func:`wrist_distance` can be apart (0.5 m for the ARA)."""
+    a = (robot.params["arm"] if robot is not None and hasattr(robot, "params") else None) or {}
+    return (
+        float(a.get("link2_m", 0.15)) + float(a.get("link3_m", 0.2)) + float(a.get("link4_m", 0.15))
+    )
+
+
+def landing_configurations(
+    robot: Any,
+    foothold: np.ndarray,
+    *,
+    obstacles: np.ndarray,
+    base_height: float = 0.0,
+    params: JumpParams | None = None,
+    limit: int | None = None,
+) -> np.ndarray:
+    """Foot-1 landing configurations of a jump onto ``foothold`` (4×4, base
+    frame) that phase C (seed §3.2: foot 1 to the target) would accept,
+    without planning the swing: IK solutions whose straight approach from
+    ``standoff_m`` off the face is clear of the scene (contact zone exempt),
+    whose hover pose is clear, and from which foot 2 can lift straight off
+    (:class:`_Lift2`).  (K, n), K ≤ ``limit`` (default ``params.max_goals``);
+    empty when the foothold cannot be landed on — the cheap reachability
+    test of a candidate placement (no RRT)."""
+    p = params or JumpParams()
+    if limit is not None:
+        p = replace(p, max_goals=int(limit))
+    cx = _jump_context(robot, foothold, obstacles, base_height, p)
+    W = cx.footholds[0]
+    free2 = cx.checker(0, np.eye(4), None)
+    zone = cx.checker(0, np.eye(4), cx.zone(W))
+    lift2 = _Lift2(cx)
+    goals = _landing_configs(
+        cx.rob,
+        W,
+        _translate(W, W[:3, 2] * p.standoff_m),
+        free2,
+        zone,
+        p,
+        p.seed,
+        post=lambda q: lift2(q) is not None,
+    )
+    n = len(cx.rob.joint_limits)
+    return np.array([a[-1] for _, a in goals]) if goals else np.zeros((0, n))
