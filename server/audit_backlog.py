@@ -13,6 +13,8 @@ from __future__ import annotations
 
 import logging
 import threading
+from concurrent.futures import ThreadPoolExecutor
+from concurrent.futures import TimeoutError as FutureTimeout
 from dataclasses import dataclass
 
 from server.diskspace import describe
@@ -47,17 +49,48 @@ class AuditBacklog:
         self._wake = threading.Event()
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
+        # Writes a caller does not wait for to the end (record(wait_s=...)).
+        self._writer = ThreadPoolExecutor(1, thread_name_prefix="audit-write")
 
-    def record(self, actor: str, entity: str, entity_id: str, action: str, reason: str) -> str:
+    def record(
+        self,
+        actor: str,
+        entity: str,
+        entity_id: str,
+        action: str,
+        reason: str,
+        *,
+        wait_s: float | None = None,
+    ) -> str:
         """Write the record (after any older ones still pending) and say how it went:
         ``"recorded"``, or ``"failed: <why>; kept and written when the store accepts
-        writes again"``."""
+        writes again"``.
+
+        With ``wait_s``, the write runs on the backlog's writer thread and the
+        caller waits at most that long: past it the answer is ``"queued: …"``
+        and the record is written in order when the store takes it (an E-stop
+        has already acted and must not wait for a busy database to say so)."""
         rec = PendingAudit(utcnow(), actor, entity, entity_id, action, reason)
         with self._lock:
             self._pending.append(rec)
             if len(self._pending) > MAX_PENDING:
                 dropped = self._pending.pop(0)
                 log.error("audit backlog full; dropped %s", dropped)
+        if wait_s is None:
+            return self._write_pending(rec)
+        try:
+            future = self._writer.submit(self._write_pending, rec)
+        except RuntimeError:  # stopped: write from this thread
+            return self._write_pending(rec)
+        try:
+            return future.result(timeout=wait_s)
+        except FutureTimeout:
+            return (
+                f"queued: the store did not take the record within {wait_s * 1000:.0f} ms; "
+                "it is written in order as soon as it does"
+            )
+
+    def _write_pending(self, rec: PendingAudit) -> str:
         try:
             self.flush()
         except Exception as exc:
@@ -113,6 +146,7 @@ class AuditBacklog:
         """Try a last time to write what is pending, then stop the thread."""
         self._stop.set()
         self._wake.set()
+        self._writer.shutdown(wait=True)
         try:
             self.flush()
         except Exception as exc:

@@ -97,7 +97,11 @@ def trigger_estop(
     # The robots are stopped whatever the store does: the event goes out first,
     # then the record, kept in memory and written later if the store refuses it.
     services.events.publish("estop", {"robot": target, "reason": reason, "by": actor})
-    audit = record_safety(services, actor, "robot", target, "estop", why)
+    # On a disk known to be full the write fails at once: say so rather than "queued".
+    full = services.disk is not None and services.disk.read().state == "full"
+    audit = record_safety(
+        services, actor, "robot", target, "estop", why, wait_s=None if full else ESTOP_AUDIT_WAIT_S
+    )
     t_end = time.perf_counter()
     return {
         "robot": target,
@@ -119,10 +123,23 @@ def trigger_estop(
     }
 
 
+#: How long an E-stop's answer waits for its audit record to be written; past
+#: it the answer says "queued" and the record follows (the stop has happened).
+ESTOP_AUDIT_WAIT_S = 0.03
+
+
 def record_safety(
-    services: Services, actor: str, entity: str, entity_id: str, action: str, reason: str
+    services: Services,
+    actor: str,
+    entity: str,
+    entity_id: str,
+    action: str,
+    reason: str,
+    *,
+    wait_s: float | None = None,
 ) -> str:
-    """Audit a safety action already taken: "recorded", or why not and that it is kept."""
+    """Audit a safety action already taken: "recorded", "queued" (``wait_s``
+    passed, written later in order), or why not and that it is kept."""
     backlog = services.audit_backlog
     if backlog is None:
         try:
@@ -131,7 +148,7 @@ def record_safety(
             log.exception("the %s record could not be written", action)
             return f"failed: {describe(exc)}"
         return "recorded"
-    return str(backlog.record(actor, entity, entity_id, action, reason))
+    return str(backlog.record(actor, entity, entity_id, action, reason, wait_s=wait_s))
 
 
 #: E-stop requests never queue behind other requests for a worker thread: they

@@ -50,3 +50,31 @@ def test_a_record_after_the_refusal_waits_behind_the_older_ones() -> None:
     assert backlog.record("op", "robot", "all", "estop", "new") == "recorded"
     assert [r[5] for r in store.rows] == ["old", "new"]
     backlog.stop()
+
+
+class HeldStore(RefusingStore):
+    """Holds every write until ``gate`` is set (a database busy with another writer)."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.gate = threading.Event()
+
+    def audit(self, *args: Any, **kwargs: Any) -> None:
+        self.gate.wait(10)
+        super().audit(*args, **kwargs)
+
+
+def test_a_bounded_wait_answers_queued_and_the_record_follows_once() -> None:
+    """A caller that waits at most ``wait_s`` (the E-stop) is told "queued" while
+    the store holds the write; the record is written once, and before a later one."""
+    store = HeldStore()
+    backlog = AuditBacklog(store, retry_s=0.05)  # type: ignore[arg-type]
+    said = backlog.record("op", "robot", "all", "estop", "busy store", wait_s=0.02)
+    assert said.startswith("queued: the store did not take the record within 20 ms"), said
+    assert backlog.pending() == 1
+    store.gate.set()
+    wait_for(lambda: backlog.pending() == 0, 10, "the queued record written")
+    assert backlog.record("op", "robot", "all", "estop", "after", wait_s=5.0) == "recorded"
+    reasons = [row[5] for row in store.rows]
+    assert reasons == ["busy store", "after"], store.rows
+    backlog.stop()
