@@ -20,6 +20,7 @@ MODULES = [
     "laspy",
     "lazrs",
     "pye57",
+    "pyproj",
     "weasyprint",
     "matplotlib.pyplot",
     "PIL.Image",

@@ -33,14 +33,20 @@ import resource
 import sys
 import tempfile
 from collections.abc import Iterator
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Protocol
 
 import numpy as np
 
 from server.lifetime import die_with_parent
-from server.survey_io import SurveyReadError, read_e57, read_las, survey_of_npy
+from server.survey_io import (
+    UPLOAD_UNITS,
+    SurveyReadError,
+    read_e57,
+    read_las,
+    survey_of_npy,
+)
 
 FORMATS = ("ply", "pcd", "xyz", "csv", "txt", "npy", "las", "laz", "e57")
 
@@ -117,7 +123,7 @@ def read_cloud(data: bytes, filename: str = "") -> tuple[np.ndarray, int]:
     """Parse ``data``; returns ``(points (N,3) float64, dropped_nonfinite)``."""
     blocks: list[np.ndarray] = []
     dropped = 0
-    for block, bad in _finite_blocks(BytesSource(data), filename):
+    for block, bad, _ in _finite_blocks(BytesSource(data), filename):
         blocks.append(block)
         dropped += bad
     pts = np.concatenate(blocks) if blocks else np.zeros((0, 3))
@@ -129,26 +135,137 @@ class ParseResult:
     n_points: int
     dropped: int
     bounds: dict[str, list[float]]
+    #: Per-point attributes kept, name → what they hold (dtype, range, bit depth...).
+    attributes: dict[str, dict[str, Any]] = field(default_factory=dict)
+    #: ... and where each was written (beside ``out``: ``<stem>.<name>.npy``).
+    attribute_paths: dict[str, Path] = field(default_factory=dict)
 
 
-def parse_to_npy(src: Source, filename: str, out: Path) -> ParseResult:
-    """Parse ``src`` into an (N,3) float64 ``.npy`` at ``out``, atomically.
+#: Per-point attributes an upload keeps, in the order the record lists them.
+ATTRIBUTES = ("intensity", "rgb", "classification")
+
+
+def attribute_path(out: Path, name: str) -> Path:
+    """Where the attribute ``name`` of the cloud stored at ``out`` is written."""
+    return out.with_name(f"{out.stem}.{name}.npy")
+
+
+class _DropAttribute(Exception):
+    """An attribute cannot be kept for every point: it is not kept at all."""
+
+
+class _ArraySink:
+    """An ``.npy`` written block by block behind a reserved header (as the
+    points are), its dtype and columns fixed by the first block."""
+
+    def __init__(self, name: str, target: Path) -> None:
+        self.name, self.target = name, target
+        fd, self.tmp = tempfile.mkstemp(dir=target.parent, prefix=".tmp-", suffix=".npy")
+        self.fh = os.fdopen(fd, "wb")
+        self.fh.write(b"\0" * NPY_HEADER_BYTES)
+        self.dtype: np.dtype | None = None
+        self.cols: tuple[int, ...] = ()
+        self.n = 0
+        self.lo = math.inf
+        self.hi = -math.inf
+        self.counts = np.zeros(256, dtype=np.int64)
+
+    def write(self, arr: np.ndarray) -> None:
+        if self.dtype is None:
+            self.dtype, self.cols = arr.dtype, arr.shape[1:]
+        elif arr.dtype != self.dtype or arr.shape[1:] != self.cols:
+            raise _DropAttribute(f"its type changes within the file ({self.dtype} → {arr.dtype})")
+        if not len(arr):
+            return
+        self.fh.write(np.ascontiguousarray(arr, dtype=self.dtype.newbyteorder("<")).tobytes())
+        self.n += len(arr)
+        with np.errstate(invalid="ignore"):
+            lo, hi = float(np.nanmin(arr)), float(np.nanmax(arr))
+        if math.isfinite(lo):
+            self.lo = min(self.lo, lo)
+        if math.isfinite(hi):
+            self.hi = max(self.hi, hi)
+        if self.name == "classification":
+            self.counts += np.bincount(arr.astype(np.uint8, copy=False), minlength=256)
+
+    def finish(self) -> dict[str, Any]:
+        """Write the header, fsync and rename into place; what the array holds."""
+        assert self.dtype is not None
+        descr = str(np.lib.format.dtype_to_descr(self.dtype.newbyteorder("<")))
+        self.fh.seek(0)
+        self.fh.write(npy_header(self.n, descr, self.cols))
+        self.fh.flush()
+        os.fsync(self.fh.fileno())
+        self.fh.close()
+        os.replace(self.tmp, self.target)
+        info: dict[str, Any] = {"dtype": str(self.dtype)}
+        if self.name == "rgb":
+            info["bits"] = 8 if self.hi <= 255 else 16
+        elif self.name == "classification":
+            info["classes"] = {str(c): int(k) for c, k in enumerate(self.counts) if k}
+        else:
+            info["min"] = self.lo if math.isfinite(self.lo) else None
+            info["max"] = self.hi if math.isfinite(self.hi) else None
+        return info
+
+    def abandon(self) -> None:
+        with contextlib.suppress(OSError):
+            self.fh.close()
+        Path(self.tmp).unlink(missing_ok=True)
+
+
+def parse_to_npy(
+    src: Source, filename: str, out: Path, meta: dict[str, Any] | None = None
+) -> ParseResult:
+    """Parse ``src`` into an (N,3) float64 ``.npy`` at ``out``, atomically, and
+    its per-point attributes (:data:`ATTRIBUTES`, where the file has them for
+    every point) into ``<stem>.<name>.npy`` beside it.
 
     The rows go to a temporary file beside ``out`` behind a reserved header;
     the header is written once N is known, the file is fsynced and renamed
-    over ``out``.  On any error the temporary file is removed.
-    """
+    over ``out``; each attribute likewise, its rows those of the kept points.
+    An attribute that is not given for every point, changes type, or is zero
+    for every point (LAS writers fill fields they have no data for with 0) is
+    not kept: ``meta["attribute_notes"]`` says why.  On any error every
+    temporary file is removed.  ``meta`` receives what the reader learnt of
+    the file as a whole (its CRS)."""
     out = Path(out)
     out.parent.mkdir(parents=True, exist_ok=True)
+    meta = {} if meta is None else meta
+    notes: dict[str, str] = meta.setdefault("attribute_notes", {})
     fd, tmp = tempfile.mkstemp(dir=out.parent, prefix=".tmp-", suffix=".npy")
     n = dropped = 0
     lo = np.full(3, np.inf)
     hi = np.full(3, -np.inf)
+    sinks: dict[str, _ArraySink] = {}
+    done: dict[str, Path] = {}
+    infos: dict[str, dict[str, Any]] = {}
+
+    def drop(name: str, why: str) -> None:
+        notes.setdefault(name, why)
+        sink = sinks.pop(name, None)
+        if sink is not None:
+            sink.abandon()
+
     try:
         with os.fdopen(fd, "wb") as fh:
             fh.write(b"\0" * NPY_HEADER_BYTES)
-            for block, bad in _finite_blocks(src, filename):
+            for block, bad, attrs in _finite_blocks(src, filename, meta):
                 dropped += bad
+                for name in list(sinks):
+                    if name not in attrs:
+                        drop(name, "not given for every point")
+                for name in ATTRIBUTES:
+                    if name in attrs and name not in sinks and name not in notes:
+                        if n:
+                            notes[name] = "not given for every point"
+                        else:
+                            sinks[name] = _ArraySink(name, attribute_path(out, name))
+                for name, sink in list(sinks.items()):
+                    try:
+                        sink.write(attrs[name])
+                    except _DropAttribute as exc:
+                        drop(name, str(exc))
                 if len(block):
                     fh.write(block.tobytes())
                     n += len(block)
@@ -158,18 +275,34 @@ def parse_to_npy(src: Source, filename: str, out: Path) -> ParseResult:
             fh.write(npy_header(n))
             fh.flush()
             os.fsync(fh.fileno())
+        for name in list(sinks):
+            sink = sinks[name]
+            if sink.n != n or sink.dtype is None:
+                drop(name, "not given for every point")
+            elif sink.hi <= 0 and sink.lo >= 0:
+                drop(name, "zero for every point: the file does not record it")
+            else:
+                infos[name] = sinks.pop(name).finish()
+                done[name] = attribute_path(out, name)
         os.replace(tmp, out)
     except BaseException:
         Path(tmp).unlink(missing_ok=True)
+        for sink in sinks.values():
+            sink.abandon()
+        for path in done.values():
+            path.unlink(missing_ok=True)
         raise
-    return ParseResult(n, dropped, {"min": lo.tolist(), "max": hi.tolist()})
+    ordered = {k: infos[k] for k in ATTRIBUTES if k in infos}
+    return ParseResult(n, dropped, {"min": lo.tolist(), "max": hi.tolist()}, ordered, done)
 
 
-def npy_header(n: int) -> bytes:
-    """A version-1.0 ``.npy`` header for an (n,3) little-endian float64 array,
-    padded to exactly :data:`NPY_HEADER_BYTES` (the format allows any padding
-    that keeps the data 64-byte aligned and ends the header with a newline)."""
-    d = f"{{'descr': '<f8', 'fortran_order': False, 'shape': ({n}, 3), }}"
+def npy_header(n: int, descr: str = "<f8", cols: tuple[int, ...] = (3,)) -> bytes:
+    """A version-1.0 ``.npy`` header for an (n, *cols) little-endian array of
+    ``descr`` (default (n,3) float64), padded to exactly :data:`NPY_HEADER_BYTES`
+    (the format allows any padding that keeps the data 64-byte aligned and
+    ends the header with a newline)."""
+    shape = (n, *cols)
+    d = f"{{'descr': '{descr}', 'fortran_order': False, 'shape': {shape!r}, }}"
     body_len = NPY_HEADER_BYTES - 10
     if len(d) + 1 > body_len:
         raise CloudFormatError(f"{n} points do not fit an .npy header")
@@ -178,29 +311,39 @@ def npy_header(n: int) -> bytes:
 
 
 # ------------------------------------------------------------------ readers
-def _finite_blocks(src: Source, filename: str) -> Iterator[tuple[np.ndarray, int]]:
-    """(finite rows, number dropped) per chunk; raises if nothing finite is left."""
+def _finite_blocks(
+    src: Source, filename: str, meta: dict[str, Any] | None = None
+) -> Iterator[tuple[np.ndarray, int, dict[str, np.ndarray]]]:
+    """(finite rows, number dropped, their attributes) per chunk; raises if
+    nothing finite is left."""
     if src.size == 0:
         raise CloudFormatError("the uploaded file is empty")
+    meta = {} if meta is None else meta
     head = src.read_at(0, 8192)
     fmt = detect_format(head, filename)
-    reader = {
+    readers: dict[str, Any] = {
         "ply": _read_ply,
         "pcd": _read_pcd,
         "npy": _read_npy,
-        "las": read_las,
-        "e57": read_e57,
-    }.get(fmt, _read_text)
+    }
     kept = dropped = 0
     try:
-        for raw in reader(src):
-            pts = np.asarray(raw, dtype=np.float64).reshape(-1, 3)
+        if fmt in readers:
+            blocks: Iterator[Any] = readers[fmt](src)
+        else:
+            blocks = {"las": read_las, "e57": read_e57}.get(fmt, _read_text)(src, meta)
+        for raw in blocks:
+            xyz, attrs = raw if isinstance(raw, tuple) else (raw, {})
+            pts = np.asarray(xyz, dtype=np.float64).reshape(-1, 3)
             finite = np.isfinite(pts).all(axis=1)
             bad = int(len(pts) - finite.sum())
-            block = pts if bad == 0 else pts[finite]
-            kept += len(block)
+            attrs = {k: np.asarray(v) for k, v in attrs.items() if len(v) == len(pts)}
+            if bad:
+                pts = pts[finite]
+                attrs = {k: v[finite] for k, v in attrs.items()}
+            kept += len(pts)
             dropped += bad
-            yield block, bad
+            yield pts, bad, attrs
     except CloudFormatError:
         raise
     except SurveyReadError as exc:  # its message is written for people already
@@ -228,7 +371,15 @@ def detect_format(data: bytes, filename: str) -> str:
     head = data[:2048].decode("latin-1")
     if re.search(r"^\s*(VERSION|FIELDS)\s", head, re.M) and "DATA" in data[:8192].decode("latin-1"):
         return "pcd"
-    if ext in ("ply", "pcd", "npy", "las", "laz", "e57"):
+    if ext in ("las", "laz"):
+        raise CloudFormatError(
+            f"not a {ext.upper()} file: bad signature (a LAS or LAZ file starts with 'LASF')"
+        )
+    if ext == "e57":
+        raise CloudFormatError(
+            "not an E57 file: bad signature (an E57 file starts with 'ASTM-E57')"
+        )
+    if ext in ("ply", "pcd", "npy"):
         raise CloudFormatError(f"file {filename!r} does not start like a {ext.upper()} file")
     return "xyz"
 
@@ -477,9 +628,61 @@ _NUM = re.compile(r"^[\s,;]*[-+]?(\d|\.\d|nan|inf)", re.I)
 _SEPARATORS = str.maketrans(",;", "  ")
 
 
-def _read_text(src: Source) -> Iterator[np.ndarray]:
+#: Column names a text file's header line may use, and what they are.
+_COLUMN_NAMES = {
+    "x": "x", "y": "y", "z": "z",
+    "i": "intensity", "intensity": "intensity", "scalar_intensity": "intensity",
+    "r": "r", "red": "r", "g": "g", "green": "g", "b": "b", "blue": "b",
+}  # fmt: skip
+#: Columns by count when no header line names them.
+_COLUMN_RULE: dict[int, tuple[str, ...]] = {
+    3: ("x", "y", "z"),
+    4: ("x", "y", "z", "intensity"),
+    6: ("x", "y", "z", "r", "g", "b"),
+    7: ("x", "y", "z", "r", "g", "b", "intensity"),
+}
+COLUMN_RULE_TEXT = (
+    "3 columns: x y z; 4: x y z i; 6: x y z r g b; 7: x y z r g b i; "
+    "or a header line naming the columns (x, y, z, intensity, r/red, g/green, b/blue)"
+)
+
+
+def text_columns(header: str | None, first_row: str) -> tuple[dict[str, int], str | None]:
+    """Which column holds what (``x``, ``y``, ``z``, ``intensity``, ``r``,
+    ``g``, ``b`` → index) for a text cloud whose first numeric row is
+    ``first_row`` and whose last line before it is ``header``; and a note when
+    columns were left unread.  A header naming x, y and z decides; otherwise
+    the number of columns does (:data:`COLUMN_RULE_TEXT`)."""
+    if header is not None:
+        line = header.strip().lstrip("/#").strip()
+        sep = "," if "," in line else (";" if ";" in line else None)
+        names = [_COLUMN_NAMES.get(w.strip().lower()) for w in line.split(sep)]
+        if all(c in names for c in "xyz"):
+            cols = {c: names.index(c) for c in dict.fromkeys(n for n in names if n)}
+            if not all(c in cols for c in "rgb"):
+                cols = {k: v for k, v in cols.items() if k not in "rgb"}
+            return cols, None
+    n = len(first_row.split("#", 1)[0].translate(_SEPARATORS).split())
+    rule = _COLUMN_RULE.get(n)
+    if rule is None:
+        return {c: i for i, c in enumerate("xyz")}, (
+            f"rows have {n} columns: only x y z (the first three) were read; "
+            f"the column rule is {COLUMN_RULE_TEXT}"
+        )
+    return {c: i for i, c in enumerate(rule)}, None
+
+
+def _read_text(src: Source, meta: dict[str, Any] | None = None) -> Iterator[Any]:
+    """Rows of ``x y z`` (commas, semicolons or blanks between), after any
+    header lines; intensity and colour columns by :func:`text_columns`.  A
+    chunk whose colour is not whole numbers 0–65535, or whose rows lack a
+    column, is yielded without it (so the attribute is not kept)."""
+    meta = {} if meta is None else meta
+    notes: dict[str, str] = meta.setdefault("attribute_notes", {})
     first: int | None = None  # header lines before the first numeric row
     skipped = 0
+    last_header: str | None = None
+    cols: dict[str, int] = {}
     for chunk in _line_chunks(src, 0):
         try:
             text = chunk.decode("utf-8")
@@ -491,19 +694,56 @@ def _read_text(src: Source) -> Iterator[np.ndarray]:
             # Skip comments and header lines (column names) before the first numeric row.
             lines = text.splitlines(keepends=True)
             at = next((i for i, ln in enumerate(lines) if _NUM.match(ln)), None)
+            heads = [ln for ln in lines[: len(lines) if at is None else at] if ln.strip()]
+            if heads:
+                last_header = heads[-1]
             if at is None:
                 skipped += len(lines)
                 continue
             first = skipped + at
             text = "".join(lines[at:])
+            cols, note = text_columns(last_header, lines[at])
+            if note:
+                meta["columns_note"] = note
+            meta["columns"] = sorted(cols, key=cols.__getitem__)
+        body = text.translate(_SEPARATORS)
+        use = sorted(set(cols.values()))
         try:
-            arr = _loadtxt(text.translate(_SEPARATORS), usecols=(0, 1, 2), comments="#")
-        except ValueError as exc:
-            raise CloudFormatError(
-                f"rows must hold at least 3 numbers (x y z), after {first} header line(s): {exc}"
-            ) from None
-        if arr is not None:
-            yield arr
+            arr = _loadtxt(body, usecols=use, comments="#")
+        except ValueError:
+            arr = None
+            if len(use) > 3:  # rows without the extra columns: x y z only from here on
+                for name in ("intensity", "rgb"):
+                    notes.setdefault(name, "not given on every row")
+                cols = {c: cols[c] for c in "xyz"}
+                use = sorted(set(cols.values()))
+            try:
+                arr = _loadtxt(body, usecols=use, comments="#")
+            except ValueError as exc:
+                raise CloudFormatError(
+                    f"rows must hold at least 3 numbers (x y z), after {first} header line(s): "
+                    f"{exc}"
+                ) from None
+        if arr is None:
+            continue
+        at_col = {c: use.index(i) for c, i in cols.items()}
+        xyz = arr[:, [at_col["x"], at_col["y"], at_col["z"]]]
+        attrs: dict[str, np.ndarray] = {}
+        if "intensity" in at_col:
+            attrs["intensity"] = arr[:, at_col["intensity"]].astype(np.float32)
+        if all(c in at_col for c in "rgb"):
+            rgb = arr[:, [at_col["r"], at_col["g"], at_col["b"]]]
+            if (
+                np.isfinite(rgb).all()
+                and (rgb == np.round(rgb)).all()
+                and (rgb.min(initial=0) >= 0 and rgb.max(initial=0) <= 65535)
+            ):
+                attrs["rgb"] = rgb.astype(np.uint16)
+            else:
+                notes.setdefault(
+                    "rgb", "the r g b columns are not whole numbers 0–255 (or 0–65535)"
+                )
+        yield xyz, attrs
     if first is None:
         raise CloudFormatError("no numeric rows found: expected lines of 'x y z' or 'x,y,z'")
 
@@ -576,7 +816,8 @@ def _find_all(src: Source, needle: bytes) -> Iterator[int]:
 def parse_upload(raw: Path, content_type: str, out: Path) -> dict[str, Any]:
     """Parse a spooled multipart upload into ``out``; the JSON-able outcome.
 
-    ``{"ok": true, "n_points", "dropped", "bounds", "survey", "filename", "name"}`` or
+    ``{"ok": true, "n_points", "dropped", "bounds", "survey", "attributes" (names of the
+    arrays written beside ``out``), "crs_wkt", "filename", "name"}`` or
     ``{"ok": false, "status": 400|422, "detail": "..."}``, with ``"log"``: a
     reader library's full report for the server's log, when it had one.
     """
@@ -607,18 +848,20 @@ def parse_upload(raw: Path, content_type: str, out: Path) -> dict[str, Any]:
         if units_part is not None:
             raw_units = body.read_at(units_part.start, min(units_part.end - units_part.start, 20))
             units = raw_units.decode("utf-8", "replace").strip().lower() or "auto"
-        if units not in ("auto", "m", "mm"):
+        if units not in UPLOAD_UNITS:
             return {
                 "ok": False,
                 "status": 422,
-                "detail": f"units must be 'auto', 'm' or 'mm', got {units!r}",
+                "detail": f"units must be one of {', '.join(UPLOAD_UNITS)}; got {units!r}",
             }
         filename = file.filename or ""
         src = FileSource(fd, file.start, file.end)
+        meta: dict[str, Any] = {}
+        res: ParseResult | None = None
         try:
-            res = parse_to_npy(src, filename, out)
+            res = parse_to_npy(src, filename, out, meta)
             if res.n_points < MIN_CLOUD_POINTS:
-                out.unlink(missing_ok=True)
+                _remove(out, res)
                 return {
                     "ok": False,
                     "status": 422,
@@ -626,8 +869,15 @@ def parse_upload(raw: Path, content_type: str, out: Path) -> dict[str, Any]:
                     f"x, y, z; a cloud needs at least {MIN_CLOUD_POINTS} points, fewer than "
                     "any plan kind can use",
                 }
-            survey = survey_of_npy(out, detect_format(src.read_at(0, 8192), filename), units)
+            fmt = detect_format(src.read_at(0, 8192), filename)
+            try:
+                survey = survey_of_npy(out, fmt, units, meta)
+            except ValueError as exc:  # a CRS in degrees: the file is read, but unusable
+                _remove(out, res)
+                return {"ok": False, "status": 422, "detail": f"{filename or 'upload'}: {exc}"}
         except CloudFormatError as exc:
+            if res is not None:
+                _remove(out, res)
             refused = {"ok": False, "status": 400, "detail": f"{filename or 'upload'}: {exc}"}
             debug = getattr(exc.__cause__, "debug", "")
             if debug:
@@ -635,15 +885,33 @@ def parse_upload(raw: Path, content_type: str, out: Path) -> dict[str, Any]:
             return refused
     finally:
         os.close(fd)
+    survey["attributes"] = res.attributes
+    notes = {k: v for k, v in meta.get("attribute_notes", {}).items() if k not in res.attributes}
+    if notes:
+        survey["attributes_not_kept"] = notes
+    if meta.get("columns"):
+        survey["columns"] = meta["columns"]
+    if meta.get("columns_note"):
+        survey["columns_note"] = meta["columns_note"]
+    crs = meta.get("crs")
     return {
         "ok": True,
         "n_points": res.n_points,
         "dropped": res.dropped,
         "bounds": survey.pop("bounds"),
         "survey": survey,
+        "attributes": list(res.attributes),
+        "crs_wkt": None if crs is None else crs["wkt"],
         "filename": filename,
         "name": name,
     }
+
+
+def _remove(out: Path, res: ParseResult) -> None:
+    """Remove a parsed cloud and its attribute arrays (refused after parsing)."""
+    out.unlink(missing_ok=True)
+    for path in res.attribute_paths.values():
+        path.unlink(missing_ok=True)
 
 
 # ------------------------------------------------------------------ child process

@@ -486,8 +486,15 @@ async function loadClouds() {
   const ul = $("#clouds");
   ul.innerHTML = "";
   for (const c of clouds) {
-    ul.append(el("li", { title: "show in scene", onclick: () => showCloud(c.id) },
-      `${c.id} · ${c.name} · ${c.n_points} pts` + (c.dropped_nonfinite ? ` (${c.dropped_nonfinite} dropped)` : "")));
+    const li = el("li", { title: "show in scene", onclick: () => showCloud(c.id) },
+      `${c.id} · ${c.name} · ${c.n_points} pts` + (c.dropped_nonfinite ? ` (${c.dropped_nonfinite} dropped)` : ""));
+    // Colour by: the cloud's stored RGB / intensity, or height (a plain click: RGB when it has it).
+    const colours = ["rgb", "intensity"].filter((a) => (c.attributes || []).includes(a));
+    for (const by of colours.length ? [...colours, "height"] : []) {
+      li.append(" · ", el("a", { href: "#", title: `show coloured by ${by}`, "data-colour-by": by,
+        onclick: (ev) => { ev.preventDefault(); ev.stopPropagation(); showCloud(c.id, by); } }, by));
+    }
+    ul.append(li);
   }
 }
 
@@ -512,8 +519,8 @@ $("#upload-cloud").addEventListener("click", async () => {
   } catch (e) { $("#cloud-msg").textContent = e.message; }
 });
 
-async function showCloud(id) {
-  try { await api("POST", "/scene/show", { cloud_id: id }); } catch (e) { flash(e.message, true); }
+async function showCloud(id, colourBy = "auto") {
+  try { await api("POST", "/scene/show", { cloud_id: id, colour_by: colourBy }); } catch (e) { flash(e.message, true); }
 }
 
 // ------------------------------------------------------------------- plans

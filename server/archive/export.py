@@ -101,6 +101,10 @@ def export_plan(store: Store, plan_id: str, out: IO[bytes], actor: str) -> dict[
                 (row,) = rows.rows("clouds", "id", [cloud.id])
                 w.data(f"cloud/{cloud.id}.json", _dumps(row))
                 w.file(f"cloud/{cloud.id}.npy", store.cloud_path(cloud.id))
+                for name in cloud.attributes:  # intensity, rgb, classification
+                    w.file(
+                        f"cloud/{cloud.id}.{name}.npy", store.cloud_attribute_path(cloud.id, name)
+                    )
                 counts["clouds"] = 1
 
         executions = rows.rows("executions", "plan_id", [plan.id])

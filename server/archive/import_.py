@@ -68,6 +68,7 @@ from server.lifecycle import ExecutionState, PlanState
 from server.store import Store
 from server.store.archive import ArchiveStore, IdConflictError, UnknownColumnsError
 from server.store.database import IntegrityError, ensure_private_dir, utcnow
+from server.store.store import cloud_attribute_relname
 
 #: Execution states imported as ``interrupted``: the run was still going on
 #: the exporting server, and how it ended is not known here.
@@ -343,7 +344,19 @@ class _Importer:
                 result.cloud = "already here"
                 continue
             rel = f"clouds/{cid}.npy"
-            rows["clouds"].append({**row, "array_file": rel})
+            # Per-point attributes travel beside the points; one the archive
+            # lacks is dropped from the row rather than named without its file.
+            attrs = row.get("attributes") or "{}"
+            named = json.loads(attrs) if isinstance(attrs, str) else dict(attrs)
+            kept: dict[str, str] = {}
+            for attr in sorted(named):
+                check_id(attr, "cloud attribute")
+                src = f"cloud/{cid}.{attr}.npy"
+                if src in self.files:
+                    self._check_npy(src)
+                    kept[attr] = cloud_attribute_relname(cid, attr)
+                    self.moves.append((self.files[src], self.store.arrays.path(kept[attr])))
+            rows["clouds"].append({**row, "array_file": rel, "attributes": json.dumps(kept)})
             new["clouds"] = [cid]
             self.moves.append((self.files[npy], self.store.arrays.path(rel)))
             result.cloud = "imported"

@@ -47,6 +47,7 @@ LAYOUT = re.compile(
     r"^(?:plan\.json|findings\.json|audit\.json"
     rf"|arrays/[A-Za-z0-9_][A-Za-z0-9_.-]{{0,99}}\.npy"
     rf"|cloud/{ID}\.(?:json|npy)"
+    rf"|cloud/{ID}\.(?:intensity|rgb|classification)\.npy"
     rf"|executions/{ID}\.(?:json|mcap)"
     rf"|photos/{ID}/{ID}\.[A-Za-z0-9]{{1,8}})$"
 )

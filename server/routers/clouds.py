@@ -34,6 +34,8 @@ from server.kinds import get_kind, sample_names
 from server.routers.responses import AUTH, errors
 from server.services import Services, get_services
 from server.store import new_id
+from server.store.store import cloud_attribute_relname
+from server.survey_io import UPLOAD_UNITS
 
 log = logging.getLogger(__name__)
 
@@ -72,10 +74,12 @@ _UPLOAD_BODY: dict[str, Any] = {
                         "name": {"type": "string", "description": "display name"},
                         "units": {
                             "type": "string",
-                            "enum": ["auto", "m", "mm"],
-                            "description": "unit of the file's coordinates; auto (default) "
-                            "decides from the measured point spacing; millimetres are "
-                            "stored as metres",
+                            "enum": list(UPLOAD_UNITS),
+                            "description": "unit of the file's coordinates (m, mm, ft: "
+                            "international feet, us-ft: US survey feet); auto (default) "
+                            "takes the unit of the file's CRS (LAS/LAZ) when it names "
+                            "one, else decides metres or millimetres from the measured "
+                            "point spacing; the cloud is stored in metres",
                         },
                     },
                 }
@@ -100,10 +104,14 @@ def list_samples(_: Viewer) -> dict[str, str]:
 )
 async def upload_cloud(request: Request, services: Svc, who: Operator) -> dict[str, Any]:
     """Store a cloud: multipart ``file`` (PLY, PCD ascii/binary, XYZ/CSV, NPY,
-    LAS/LAZ, E57) with optional ``name`` and ``units`` (auto | m | mm), or JSON
-    ``{"sample": name}``.  Non-finite rows are dropped and counted.  The
-    response's ``survey`` says how the file was read: format, units and why,
-    the scale applied to reach metres, and the measured point spacing."""
+    LAS/LAZ, E57) with optional ``name`` and ``units`` (auto | m | mm | ft |
+    us-ft), or JSON ``{"sample": name}``.  Non-finite rows are dropped and
+    counted.  The response's ``survey`` says how the file was read: format,
+    units, how (``units_from``: from the CRS, detected, set by the request)
+    and why, the scale applied to reach metres, the CRS (name, EPSG code),
+    the measured point spacing and the per-point attributes kept
+    (intensity, rgb, classification: ``GET /clouds/{id}/attributes/{name}``);
+    ``crs_wkt`` is the file's CRS in full.  See docs/uploads.md."""
     ctype = request.headers.get("content-type", "")
     if ctype.startswith("application/json"):
         rec = await _store_sample(request, services, who.actor)
@@ -164,8 +172,14 @@ async def _store_upload(request: Request, services: Services, actor: str, ctype:
         outcome = await _parse(request, raw, ctype, out)
     finally:
         raw.unlink(missing_ok=True)
-    if not outcome.get("ok"):
+
+    def remove_arrays() -> None:
         out.unlink(missing_ok=True)
+        for name in outcome.get("attributes") or []:
+            services.store.arrays.delete(cloud_attribute_relname(cid, str(name)))
+
+    if not outcome.get("ok"):
+        remove_arrays()
         if outcome.get("log"):  # the reader's full report: for us, not the uploader
             log.warning("upload refused (%s): %s", outcome.get("detail"), outcome["log"])
         raise HTTPException(int(outcome.get("status", 400)), detail=str(outcome.get("detail")))
@@ -188,10 +202,12 @@ async def _store_upload(request: Request, services: Services, actor: str, ctype:
                 int(outcome["dropped"]),
                 actor,
                 survey=outcome.get("survey"),
+                crs_wkt=outcome.get("crs_wkt"),
+                attributes=[str(a) for a in outcome.get("attributes") or []],
             )
         )
     except BaseException:
-        out.unlink(missing_ok=True)  # no row will refer to it
+        remove_arrays()  # no row will refer to them
         raise
 
 
@@ -288,6 +304,26 @@ def get_cloud(cloud_id: str, services: Svc, _: Viewer) -> dict[str, Any]:
 def download_points(cloud_id: str, services: Svc, _: Viewer) -> FileResponse:
     """The cloud's points as an (N,3) float64 ``.npy`` file (streamed from disk)."""
     path = services.store.cloud_path(cloud_id)
+    return FileResponse(path, media_type="application/octet-stream")
+
+
+@router.get(
+    "/{cloud_id}/attributes/{name}",
+    response_class=FileResponse,
+    responses={
+        200: {
+            "content": {"application/octet-stream": {}},
+            "description": ".npy of one value per point, rows as points.npy: intensity "
+            "(N,) (uint16 from LAS, float32 from E57 and text), rgb (N,3) uint16 (its "
+            "bit depth in the survey record's attributes), classification (N,) uint8",
+        },
+        **errors(404),
+    },
+)
+def download_attribute(cloud_id: str, name: str, services: Svc, _: Viewer) -> FileResponse:
+    """One per-point attribute of the cloud as ``.npy`` (streamed from disk);
+    the cloud's record lists which it has (``attributes``)."""
+    path = services.store.cloud_attribute_path(cloud_id, name)
     return FileResponse(path, media_type="application/octet-stream")
 
 

@@ -40,6 +40,7 @@ from server.auth import Operator, TokenRefused, Viewer, resolve
 from server.routers.findings import FindingType
 from server.routers.plans import JsonSafeErrorsRoute
 from server.routers.responses import errors
+from server.scene.cloud_colours import ColourBy
 from server.scene.proposals import STATES, ProposalBook, ProposalDecidedError
 from server.scene.wsguard import TICKET_HEADER
 from server.services import Services, get_services
@@ -148,6 +149,11 @@ async def scene_socket(websocket: WebSocket) -> None:
 class ShowRequest(BaseModel):
     plan_id: str | None = None
     cloud_id: str | None = None
+    colour_by: ColourBy = Field(
+        "auto",
+        description="a cloud's colours: rgb, intensity (its stored attributes), height; "
+        "auto: rgb when the cloud has it, else height",
+    )
 
     @model_validator(mode="after")
     def _one(self) -> ShowRequest:
@@ -188,7 +194,7 @@ def scene_show(req: ShowRequest, services: Svc, _: Operator) -> dict[str, Any]:
     if req.plan_id is not None:
         return scene.show_plan(req.plan_id)
     assert req.cloud_id is not None
-    return scene.show_cloud(req.cloud_id)
+    return scene.show_cloud(req.cloud_id, req.colour_by)
 
 
 # --------------------------------------------------------------- proposals

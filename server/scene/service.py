@@ -24,6 +24,7 @@ from typing import Any
 import numpy as np
 
 from server.lifecycle import PlanState
+from server.scene import cloud_colours
 from server.scene.context import Animation, DrawContext, current_scene_client
 from server.scene.drawers import drawer_for, robot_for
 from server.scene.finding_pick import MODIFIER as FINDING_MODIFIER
@@ -308,20 +309,32 @@ class SceneService:
                 "radius_m": round(view.radius, 4),
             }
 
-    def show_cloud(self, cloud_id: str) -> dict[str, Any]:
+    def show_cloud(self, cloud_id: str, colour_by: str = "auto") -> dict[str, Any]:
+        """Draw a stored cloud, coloured by ``colour_by`` (:mod:`server.scene.cloud_colours`:
+        ``auto`` is its RGB when it has one, else height); a colour the cloud has
+        no attribute for raises :class:`NotFoundError`."""
         rec = self.store.get_cloud(cloud_id)
+        colour = cloud_colours.resolve(colour_by, rec.attributes)
+        if colour in ("rgb", "intensity"):
+            attr = self.store.cloud_attribute(cloud_id, colour)  # NotFoundError: none
         if not self.running:
             return {"shown": None, "reason": "scene is not running"}
         pts = self.store.cloud_points(cloud_id)
+        step = 1
         if len(pts) > MAX_CLOUD_POINTS:
             # Deterministic thinning keeps the browser responsive on big scans.
-            pts = pts[:: int(np.ceil(len(pts) / MAX_CLOUD_POINTS))]
-        z = pts[:, 2]
-        t = (z - z.min()) / max(float(np.ptp(z)), 1e-9)
-        colors = np.stack([60 + 180 * t, 120 + 60 * t, 220 - 160 * t], axis=1).astype(np.uint8)
+            step = int(np.ceil(len(pts) / MAX_CLOUD_POINTS))
+            pts = pts[::step]
+        if colour == "rgb":
+            bits = (rec.survey.get("attributes") or {}).get("rgb", {}).get("bits")
+            colors = cloud_colours.by_rgb(np.asarray(attr[::step]), bits)
+        elif colour == "intensity":
+            colors = cloud_colours.by_intensity(np.asarray(attr[::step]))
+        else:
+            colors = cloud_colours.by_height(pts)
         with self._lock:
             self._clear()
-            self.current = {"cloud_id": rec.id}
+            self.current = {"cloud_id": rec.id, "colour_by": colour}
             center = pts.mean(axis=0)
             # float32 relative to the centre keeps precision far from the origin.
             self._server.scene.add_point_cloud(
@@ -334,7 +347,7 @@ class SceneService:
             )
             self._frame(pts)
             self.measurer.set_points([pts])
-        return {"shown": rec.id, "points_drawn": len(pts)}
+        return {"shown": rec.id, "points_drawn": len(pts), "colour_by": colour}
 
     # -------------------------------------------------------------- measuring
     def _on_measure_click(self, event: Any) -> None:

@@ -66,7 +66,15 @@ SYSTEM_TEMP_PATTERNS = ("steelpath-export-*.zip", "steelpath-bag-*", ".tmp-e57-*
 
 def referenced_arrays(store: Any) -> set[str]:
     """Relative names (under ``arrays/``) of every array a row refers to."""
-    refs = {r["array_file"] for r in store.db.query("SELECT array_file FROM clouds")}
+    refs: set[str] = set()
+    for row in store.db.query("SELECT array_file, attributes FROM clouds"):
+        refs.add(row["array_file"])
+        try:  # the cloud's per-point attribute arrays, beside its points
+            attrs = json.loads(row["attributes"] or "{}") or {}
+        except (TypeError, ValueError):
+            attrs = {}
+        if isinstance(attrs, dict):
+            refs.update(str(v) for v in attrs.values())
     for row in store.db.query("SELECT arrays FROM plans WHERE arrays IS NOT NULL"):
         try:
             names = json.loads(row["arrays"]) or {}

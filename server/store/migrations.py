@@ -273,6 +273,13 @@ MIGRATIONS: list[str] = [
     );
     CREATE INDEX execution_captures_by_time ON execution_captures (execution_id, received_at);
     """,
+    # 14: clouds: the coordinate reference system the upload named (WKT; NULL: none),
+    # kept for exports, and its per-point attributes (JSON: name → array file beside the
+    # points, e.g. {"intensity": "clouds/<id>.intensity.npy"})
+    """
+    ALTER TABLE clouds ADD COLUMN crs_wkt TEXT;
+    ALTER TABLE clouds ADD COLUMN attributes TEXT NOT NULL DEFAULT '{}';
+    """,
 ]
 
 SCHEMA_VERSION = len(MIGRATIONS)

@@ -29,12 +29,17 @@ class CloudRecord:
     created_at: str
     created_by: str
     survey: dict[str, Any] = field(default_factory=dict)
+    #: The upload's coordinate reference system as WKT (None: the file named none).
+    crs_wkt: str | None = None
+    #: Per-point attribute name → its array file (relative name, beside the points).
+    attributes: dict[str, str] = field(default_factory=dict)
 
     @classmethod
     def from_row(cls, row: RowLike) -> CloudRecord:
         d = dict(row)
         d["bounds"] = json.loads(d["bounds"])
         d["survey"] = _loads(d.get("survey"), {})
+        d["attributes"] = _loads(d.get("attributes"), {})
         return cls(**d)
 
     def public(self) -> dict[str, Any]:
@@ -46,6 +51,8 @@ class CloudRecord:
             "bounds": self.bounds,
             "dropped_nonfinite": self.dropped,
             "survey": self.survey,
+            "attributes": list(self.attributes),
+            "crs_wkt": self.crs_wkt,
             "created_at": self.created_at,
             "created_by": self.created_by,
         }

@@ -113,8 +113,13 @@ _RAISE_ACKED = (
 
 _INSERT_CLOUD = (
     "INSERT INTO clouds (id, name, source, n_points, bounds, dropped, array_file, created_at,"
-    " created_by, survey) VALUES (?,?,?,?,?,?,?,?,?,?)"
+    " created_by, survey, crs_wkt, attributes) VALUES (?,?,?,?,?,?,?,?,?,?,?,?)"
 )
+
+
+def cloud_attribute_relname(cloud_id: str, name: str) -> str:
+    """Where an upload's per-point attribute ``name`` is stored (beside its points)."""
+    return f"clouds/{cloud_id}.{name}.npy"
 
 
 class Store:
@@ -211,7 +216,7 @@ class Store:
             conn.execute(
                 _INSERT_CLOUD,
                 (cid, name, source, len(points), _json(bounds), dropped, relname, utcnow(), actor)
-                + (_json(survey or {}),),
+                + (_json(survey or {}), None, "{}"),
             )
             self._audit(
                 conn, actor, "cloud", cid, "upload", reason=f"{name} ({len(points)} points)"
@@ -228,16 +233,25 @@ class Store:
         dropped: int,
         actor: str,
         survey: dict[str, Any] | None = None,
+        *,
+        crs_wkt: str | None = None,
+        attributes: list[str] | tuple[str, ...] = (),
     ) -> CloudRecord:
-        """Record a cloud whose array a parser already wrote at ``clouds/{cloud_id}.npy``."""
+        """Record a cloud whose array a parser already wrote at ``clouds/{cloud_id}.npy``,
+        with the per-point ``attributes`` it wrote beside it
+        (``clouds/{cloud_id}.<name>.npy``) and the CRS the file named (WKT)."""
         relname = f"clouds/{cloud_id}.npy"
         if not self.arrays.path(relname).is_file():
             raise FileNotFoundError(f"cloud array {relname} was not written")
+        files = {a: cloud_attribute_relname(cloud_id, a) for a in attributes}
+        for rel in files.values():
+            if not self.arrays.path(rel).is_file():
+                raise FileNotFoundError(f"cloud attribute array {rel} was not written")
         with self.db.transaction() as conn:
             conn.execute(
                 _INSERT_CLOUD,
                 (cloud_id, name, source, n_points, _json(bounds), dropped, relname, utcnow(), actor)
-                + (_json(survey or {}),),
+                + (_json(survey or {}), crs_wkt, _json(files)),
             )
             self._audit(
                 conn, actor, "cloud", cloud_id, "upload", reason=f"{name} ({n_points} points)"
@@ -262,12 +276,35 @@ class Store:
     def cloud_path(self, cloud_id: str) -> Path:
         return self.arrays.path(self.get_cloud(cloud_id).array_file)
 
+    def cloud_attribute_path(self, cloud_id: str, name: str) -> Path:
+        """The ``.npy`` of a cloud's per-point attribute ``name``; raises
+        :class:`NotFoundError` when the cloud has no such attribute (or its file
+        is gone: a cloud imported from an archive carries its points only)."""
+        rec = self.get_cloud(cloud_id)
+        if name not in rec.attributes:
+            have = ", ".join(rec.attributes) or "none"
+            raise NotFoundError(f"cloud {cloud_id!r} has no attribute {name!r} (it has: {have})")
+        path = self.arrays.path(rec.attributes[name])
+        if not path.is_file():
+            raise NotFoundError(f"the {name} array of cloud {cloud_id!r} is not stored here")
+        return path
+
+    def cloud_attribute(self, cloud_id: str, name: str, mmap: bool = True) -> np.ndarray:
+        """A cloud's per-point attribute (rows match :meth:`cloud_points`)."""
+        return np.load(
+            self.cloud_attribute_path(cloud_id, name),
+            mmap_mode="r" if mmap else None,
+            allow_pickle=False,
+        )
+
     def delete_cloud(self, cloud_id: str, actor: str) -> None:
         rec = self.get_cloud(cloud_id)
         with self.db.transaction() as conn:
             conn.execute("DELETE FROM clouds WHERE id = ?", (cloud_id,))
             self._audit(conn, actor, "cloud", cloud_id, "delete")
         self.arrays.delete(rec.array_file)
+        for rel in rec.attributes.values():
+            self.arrays.delete(rel)
 
     # ------------------------------------------------------------------ plans
     def create_plan(

@@ -356,3 +356,37 @@ def test_export_needs_a_token_and_a_plan(small_archive) -> None:
     src, pid, _ = small_archive
     assert src.client.get(f"/api/v1/plans/{pid}/export").status_code == 401
     assert src.get("/api/v1/plans/pl_nope/export", "viewer").status_code == 404
+
+
+def test_a_clouds_colour_and_intensity_travel_with_it(make_api, tmp_path):
+    """The per-point attributes an upload kept (rgb, intensity, classification)
+    are exported beside the points and imported under the new server's names."""
+    src = make_api(tmp_path / "src")
+    store = src.services.store
+    rng = np.random.default_rng(5)
+    cid = "cl_attrs0001"
+    pts = rng.normal(size=(300, 3))
+    attrs = {
+        "rgb": rng.integers(0, 65535, size=(300, 3), dtype=np.uint16),
+        "intensity": rng.integers(0, 65535, size=300, dtype=np.uint16),
+        "classification": rng.integers(0, 20, size=300, dtype=np.uint8),
+    }
+    store.arrays.save(f"clouds/{cid}.npy", pts)
+    for name, arr in attrs.items():
+        store.arrays.save(f"clouds/{cid}.{name}.npy", arr)
+    bounds = {"min": pts.min(axis=0).tolist(), "max": pts.max(axis=0).tolist()}
+    store.register_cloud(
+        cid, "coloured", "upload:c.las", 300, bounds, 0, "surveyor (tk_s)", attributes=list(attrs)
+    )
+    plan = store.create_plan("demo.route", {"cloud_id": cid}, "planner (tk_p)")
+    data = export(src, plan.id)
+    assert {f"cloud/{cid}.{n}.npy" for n in attrs} <= set(
+        zipfile.ZipFile(io.BytesIO(data)).namelist()
+    )
+    dst = make_api(tmp_path / "dst")
+    r = upload(dst, data)
+    assert r.status_code == 201, r.text
+    got = dst.services.store
+    assert sorted(got.get_cloud(cid).attributes) == sorted(attrs)
+    for name, arr in attrs.items():
+        assert np.array_equal(got.cloud_attribute(cid, name, mmap=False), arr)
