@@ -11,11 +11,12 @@ Entry point: :func:`plan_inspection` (``model, *, start, end, params`` →
 
 from planners.inspection.faces import driving_face
 from planners.inspection.gaps import Gap
-from planners.inspection.params import ARA_JUMP_REACH_M, InspectionParams
+from planners.inspection.params import ARA_ARM_LENGTH_M, ARA_JUMP_REACH_M, InspectionParams
 from planners.inspection.plan import InspectionPlan, plan_inspection
 from planners.inspection.transitions import MODES, Transition
 
 __all__ = [
+    "ARA_ARM_LENGTH_M",
     "ARA_JUMP_REACH_M",
     "MODES",
     "Gap",

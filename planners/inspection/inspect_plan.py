@@ -51,6 +51,8 @@ MAX_SCENE_POINTS = 250_000
 _MODEL_SHARE = 0.85
 #: Infeasible transitions named in the check's message at most (the summary lists all).
 _LISTED = 5
+#: Further transitions named in a few words each (:func:`_short`) at most.
+_NAMED = 40
 #: Coordinates in the summary are rounded to this many decimals of a metre
 #: (10 µm: far below any scan's noise, and short numbers in survey frames).
 _DECIMALS = 5
@@ -301,17 +303,40 @@ def _coverage(model: StructureModel, plan: InspectionPlan, off_main: set[int]) -
     left = sorted(off_main)
     carried = [m for m in left if m in others]
     spanless = [m for m in left if m not in others]
+    unreachable = sorted(set(plan.unreachable_members) - off_main)
     n = len(model.members)
-    if not left:
-        msg = f"the main route drives all {n} members"
-    else:
-        parts = []
+    parts = []
+    if left:
         if carried:
             parts.append(f"{_ids(carried)} only by another route (carry the robot there)")
         if spanless:
             parts.append(f"{_ids(spanless)} on no route (no span in the member graph)")
-        msg = f"{len(left)} of {n} members not on the main route: " + "; ".join(parts)
-    return Check("members_covered", not left, float(len(left)), 0.0, msg)
+        parts = [f"{len(left)} of {n} members not on the main route: " + "; ".join(parts)]
+    if unreachable:
+        onto = "; ".join(_short(t) for t in plan.blocked[:_NAMED])
+        more = f"; and {len(plan.blocked) - _NAMED} more" if len(plan.blocked) > _NAMED else ""
+        parts.append(
+            f"{len(unreachable)} of {n} members not inspected: the ARA cannot get onto "
+            f"{_ids(unreachable)} from the route's first member by transitions it can make "
+            f"(every way onto them fails: {onto}{more})"
+        )
+    bad = len(left) + len(unreachable)
+    if not bad:
+        msg = f"the main route drives all {n} members"
+        if plan.unreachable_members == [] and plan.infeasible:
+            msg += " and the ARA can get onto each by transitions it can make"
+    else:
+        msg = "; ".join(parts)
+    return Check("members_covered", not bad, float(bad), 0.0, msg)
+
+
+def _short(t: Transition) -> str:
+    """A transition in a few words: where, which members, which check fails."""
+    av = t.availability
+    which = "S_pa" if not av["plane"] else "S_am" if not av["area"] else "S_hc"
+    wrist = av.get("wrist_distance_m")
+    extra = f" {wrist:.3f} m > {av['arm_length_m']:.2f} m" if which == "S_hc" and wrist else ""
+    return f"vertex {t.vertex} member {t.from_member}→{t.to_member} ({which}{extra})"
 
 
 def _feasibility(transitions: Sequence[Transition], bad: Sequence[Transition]) -> Check:
@@ -325,7 +350,10 @@ def _feasibility(transitions: Sequence[Transition], bad: Sequence[Transition]) -
             f"({t.mode}): {t.reason}"
             for t in bad[:_LISTED]
         )
-        more = f"; and {len(bad) - _LISTED} more" if len(bad) > _LISTED else ""
+        rest = bad[_LISTED : _LISTED + _NAMED]
+        more = f"; also {'; '.join(_short(t) for t in rest)}" if rest else ""
+        if len(bad) > _LISTED + _NAMED:
+            more += f"; and {len(bad) - _LISTED - _NAMED} more (the summary lists all)"
         msg = f"{len(bad)} of {len(transitions)} transitions infeasible: {named}{more}"
     return Check("transitions_feasible", not bad, float(len(bad)), 0.0, msg)
 
@@ -406,6 +434,7 @@ def _plan_metrics(plan: InspectionPlan) -> dict[str, float]:
         "gap_count": float(len(plan.gaps)),
         "gaps_joined": float(sum(g.joined for g in plan.gaps)),
         "uncovered_members": float(len(plan.uncovered_members)),
+        "unreachable_members": float(len(plan.unreachable_members)),
     }
     if r.lower_bound > 0:  # a route of one zero-length span has no ratio
         out["route_length_ratio"] = float(r.length / r.lower_bound)
@@ -553,6 +582,8 @@ def _summary(
         "components": [],
         "covered_members": [],
         "uncovered_members": [m.id for m in model.members],
+        "unreachable_members": [],
+        "blocked_transitions": [],
         "jumps": 0,
         "length_m": 0.0,
         "lower_bound_m": 0.0,
@@ -569,6 +600,8 @@ def _summary(
         components=[list(c) for c in plan.components],
         covered_members=list(plan.covered_members),
         uncovered_members=list(plan.uncovered_members),
+        unreachable_members=list(plan.unreachable_members),
+        blocked_transitions=[_transition(t) for t in plan.blocked],
         jumps=plan.jumps,
         length_m=plan.length_m,
         lower_bound_m=plan.lower_bound_m,

@@ -11,7 +11,13 @@ from dataclasses import dataclass
 
 from planners.errors import InvalidInputError
 
-__all__ = ["ARA_JUMP_REACH_M", "InspectionParams"]
+__all__ = [
+    "ARA_ARM_LENGTH_M",
+    "ARA_JUMP_REACH_M",
+    "ARA_WRIST_LANDING_M",
+    "ARA_WRIST_STANDING_M",
+    "InspectionParams",
+]
 
 #: The ARA's largest sole-to-sole distance (metres).  ``robots/ara/params.toml``
 #: [arm]: joint 2 sits j1_above_sole + j2_above_j1 = 0.05 + 0.05 = 0.10 m above
@@ -25,6 +31,18 @@ __all__ = ["ARA_JUMP_REACH_M", "InspectionParams"]
 #: inch-worm motion planner's job, :mod:`planners.switching.jump`).
 ARA_JUMP_REACH_M = 0.10 + 0.50 + 0.10
 
+#: The ARA's wrist offsets and arm length (metres, ``robots/ara/params.toml``
+#: [arm]): joint 2 sits ``j1_above_sole_m + j2_above_j1_m`` = 0.10 m along the
+#: standing foot's normal above its sole, joint 5 ``j6_below_j5_m +
+#: sole_below_j6_m`` = 0.10 m along the landing foot's normal off its sole,
+#: and between them the arm is three straight links, ``link2_m + link3_m +
+#: link4_m`` = 0.50 m.  A landing whose two wrist points are further apart
+#: than the arm length is out of reach for every joint value (the exact
+#: bound of :func:`planners.switching.jump.wrist_distance` / ``arm_length``).
+ARA_WRIST_STANDING_M = 0.05 + 0.05
+ARA_WRIST_LANDING_M = 0.05 + 0.05
+ARA_ARM_LENGTH_M = 0.15 + 0.20 + 0.15
+
 
 @dataclass(frozen=True)
 class InspectionParams:
@@ -35,8 +53,18 @@ class InspectionParams:
     - ``foot_length_m`` × ``foot_width_m``: the sole rectangle the area check
       (S_am) must fit on a face (0.18 × 0.12 m);
     - ``jump_reach_m``: the largest sole-to-sole distance of an inch-worm jump
-      (:data:`ARA_JUMP_REACH_M`, 0.70 m); the adapted height check S_hc and
-      the gap joining both use it.
+      (:data:`ARA_JUMP_REACH_M`, 0.70 m): the radius about a vertex within
+      which foot placements are looked for, and the widest gap joined;
+    - ``arm_length_m``, ``wrist_standing_m``, ``wrist_landing_m``: the exact
+      reach bound of the inch-worm height check S_hc
+      (:mod:`planners.inspection.transitions`): the wrist points, the
+      standing sole's centre ``wrist_standing_m`` along its face's normal and
+      the landing sole's ``wrist_landing_m`` along its own, must be at most
+      ``arm_length_m`` apart (ARA: 0.10, 0.10 and 0.50 m,
+      :data:`ARA_ARM_LENGTH_M`);
+    - ``reach_candidates``: at most this many foot placements per face (the
+      ones nearest the vertex) enter that check, so its cost is bounded
+      whatever the placement grid holds.
 
     Transition decision:
 
@@ -67,6 +95,10 @@ class InspectionParams:
     foot_length_m: float = 0.18
     foot_width_m: float = 0.12
     jump_reach_m: float = ARA_JUMP_REACH_M
+    arm_length_m: float = ARA_ARM_LENGTH_M
+    wrist_standing_m: float = ARA_WRIST_STANDING_M
+    wrist_landing_m: float = ARA_WRIST_LANDING_M
+    reach_candidates: int = 2048
     coplanar_angle_deg: float = 10.0
     contact_tolerance_m: float = 0.02
     jump_cost_m: float = 0.5
@@ -82,6 +114,7 @@ class InspectionParams:
             "foot_length_m": self.foot_length_m,
             "foot_width_m": self.foot_width_m,
             "jump_reach_m": self.jump_reach_m,
+            "arm_length_m": self.arm_length_m,
             "placement_spacing_m": self.placement_spacing_m,
         }
         for name, value in positive.items():
@@ -90,6 +123,8 @@ class InspectionParams:
         non_negative = {
             "contact_tolerance_m": self.contact_tolerance_m,
             "jump_cost_m": self.jump_cost_m,
+            "wrist_standing_m": self.wrist_standing_m,
+            "wrist_landing_m": self.wrist_landing_m,
         }
         for name, value in non_negative.items():
             if not (isinstance(value, int | float) and math.isfinite(value) and value >= 0):
@@ -97,6 +132,9 @@ class InspectionParams:
         a = self.coplanar_angle_deg
         if not (isinstance(a, int | float) and math.isfinite(a) and 0 <= a < 90):
             raise InvalidInputError(f"coplanar_angle_deg must be in [0, 90), got {a!r}")
+        rc = self.reach_candidates
+        if not (isinstance(rc, int) and not isinstance(rc, bool) and 1 <= rc <= 100_000):
+            raise InvalidInputError(f"reach_candidates must be an int in [1, 100000], got {rc!r}")
         h = self.placement_headings
         if not (isinstance(h, int) and not isinstance(h, bool) and 1 <= h <= 36):
             raise InvalidInputError(f"placement_headings must be an int in [1, 36], got {h!r}")

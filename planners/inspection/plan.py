@@ -37,11 +37,12 @@ from planners.inspection.close import close_route
 from planners.inspection.faces import placeable
 from planners.inspection.gaps import Gap, component_gaps, join_gaps
 from planners.inspection.params import InspectionParams
-from planners.inspection.transitions import Transition, TransitionContext, route_transitions
+from planners.inspection.route_repair import repair_route
+from planners.inspection.transitions import Transition, TransitionContext
 from planners.structure.model import Member, StructureModel
 from planners.vocpp import Route, plan_route
 
-__all__ = ["InspectionPlan", "plan_inspection"]
+__all__ = ["InspectionPlan", "plan_inspection", "reachable_members"]
 
 
 @dataclass
@@ -68,6 +69,15 @@ class InspectionPlan:
     - ``covered_members``: members the main route drives;
       ``uncovered_members``: every other member of the model (driven only by
       another route, or without any span in the graph).
+    - ``unreachable_members``: members the main route drives that the ARA
+      cannot get onto from the route's first member by any chain of
+      feasible transitions at the vertices of the routing graph
+      (:func:`reachable_members`): no route could inspect them, wherever it
+      went; ``blocked``: the failing transitions onto them from members it
+      can reach.  (The route itself is chosen without the feasibility —
+      :mod:`.transitions` explains why no edge weight can carry it — so it
+      may still pass a transition that fails between two reachable members;
+      ``transitions_feasible`` names those.)
     - ``graph``: the routing graph — the model graph plus ``"split"``
       vertices and ``kind="jump"`` edges; ``timings_s``: seconds per stage.
     """
@@ -85,6 +95,8 @@ class InspectionPlan:
     graph: nx.MultiGraph
     params: InspectionParams
     timings_s: dict[str, float] = field(default_factory=dict)
+    unreachable_members: list[int] = field(default_factory=list)
+    blocked: list[Transition] = field(default_factory=list)
 
     @property
     def infeasible(self) -> list[Transition]:
@@ -192,19 +204,38 @@ def plan_inspection(
                 and int(graph.edges[x]["member"]) == params.close_member
             )
         else:
-            r = plan_route(sub, s, e, weight="route_weight")
+            free_start = start is None and end is None if rank == 0 else True
+            r = _best_route(ctx, sub, s, e, rank, can_start if free_start else None)
             need = steel[i]
         driven = math.fsum(float(graph.edges[x]["steel_m"]) for x in r.edges)
         routes.append(replace(r, length=driven, deadhead=driven - need, lower_bound=need))
     timings["route"] = time.perf_counter() - t
 
     t = time.perf_counter()
-    transitions = [tr for i, r in enumerate(routes) for tr in route_transitions(ctx, r, i)]
+    # The walk's passes through each joint re-paired so that its member changes
+    # are ones the robot can make where the same coverage allows it.
+    transitions = []
+    for i, r in enumerate(routes):
+        routes[i], got = repair_route(ctx, r, i)
+        transitions += got
     timings["transitions"] = time.perf_counter() - t
 
     covered = sorted(
         {int(graph.edges[x]["member"]) for x in routes[0].edges if graph.edges[x]["kind"] == "span"}
     )
+    t = time.perf_counter()
+    first = next(
+        (
+            int(graph.edges[x]["member"])
+            for x in routes[0].edges
+            if graph.edges[x]["kind"] == "span"
+        ),
+        None,
+    )
+    reach, blocked = reachable_members(ctx, first) if first is not None else (set(), [])
+    unreachable = sorted(set(covered) - reach)
+    blocked = [b for b in blocked if b.to_member in set(unreachable)]
+    timings["reach"] = time.perf_counter() - t
     timings["total"] = time.perf_counter() - t0
     return InspectionPlan(
         route=routes[0],
@@ -220,7 +251,106 @@ def plan_inspection(
         graph=graph,
         params=params,
         timings_s=timings,
+        unreachable_members=unreachable,
+        blocked=blocked,
     )
+
+
+def reachable_members(ctx: TransitionContext, first: int) -> tuple[set[int], list[Transition]]:
+    """Members the ARA can get onto from ``first`` by feasible transitions,
+    and the failing transitions from those members onto the others.
+
+    The robot drives all along a member (its spans, mobile), so from a
+    member it can try every member change at every vertex the member's spans
+    meet: each ordered pair of distinct members with spans at a vertex is a
+    transition (:meth:`TransitionContext.transition`, the same checks the
+    route's transitions get), and each jump edge across a gap one either
+    way.  A breadth-first search over the feasible ones.  Costs one
+    transition per ordered pair at each vertex (the faces and foot
+    placements are cached per member and vertex)."""
+    g = ctx.graph
+    out: dict[int, list[tuple[Hashable, Hashable, str, int]]] = {}
+    for v in g.nodes:
+        ms = sorted(
+            {int(d["member"]) for _, _, d in g.edges(v, data=True) if d.get("kind") == "span"}
+        )
+        for a in ms:
+            out.setdefault(a, []).extend((v, v, "member", b) for b in ms if b != a)
+    for u, v, d in g.edges(data=True):
+        if d.get("kind") == "jump":
+            ends = d["ends"]
+            a, b = int(ends[u]), int(ends[v])
+            out.setdefault(a, []).append((u, v, "gap", b))
+            out.setdefault(b, []).append((v, u, "gap", a))
+    seen, todo, failed = {first}, [first], []
+    while todo:
+        a = todo.pop()
+        for v, landing, kind, b in out.get(a, []):
+            if b in seen:
+                continue
+            t = ctx.transition(0, 0, v, landing, kind, a, b)
+            if t.feasible:
+                seen.add(b)
+                todo.append(b)
+            else:
+                failed.append(t)
+    return seen, [t for t in failed if t.to_member not in seen]
+
+
+#: Start vertices a route is tried from when the request names none.
+MAX_START_CANDIDATES = 12
+
+
+def _best_route(
+    ctx: TransitionContext,
+    sub: nx.MultiGraph,
+    s: Hashable,
+    e: Hashable,
+    rank: int,
+    placeable: frozenset[int] | None,
+) -> Route:
+    """The piece's covering walk (Alg. 5) from ``s`` to ``e``; when the start
+    is free (``placeable`` given), also from up to
+    :data:`MAX_START_CANDIDATES` other vertices where the robot can be set
+    down (free ends first; each to the free end farthest from it), keeping the walk with the
+    fewest infeasible transitions after :func:`repair_route`, then the
+    fewest jumps, then the shortest; ties keep the far-apart default."""
+    best = plan_route(sub, s, e, weight="route_weight")
+    if placeable is None:
+        return best
+    _, trans = repair_route(ctx, best, rank)
+    key = (sum(not t.feasible for t in trans), sum(t.mode == "inchworm" for t in trans))
+    if key[0] == 0:
+        return best
+    # Free ends first (where a crew sets a robot down), then joints; far from
+    # the default start first.  Only vertices on a member the foot fits across.
+    here = np.asarray(sub.nodes[s]["pos"], float)
+    order = sorted(
+        (n for n in sub.nodes if n != s and sub.degree(n) > 0),
+        key=lambda n: (
+            sub.nodes[n].get("kind") != "end",
+            -float(np.linalg.norm(np.asarray(sub.nodes[n]["pos"], float) - here)),
+            repr(n),
+        ),
+    )
+    ok = [
+        n
+        for n in order
+        if any(
+            d.get("kind", "span") == "span" and int(d.get("member", -1)) in placeable
+            for _, _, d in sub.edges(n, data=True)
+        )
+    ]
+    for c in ok[: MAX_START_CANDIDATES - 1]:
+        cs, ce = _ends(sub, c, None, placeable)
+        r = plan_route(sub, cs, ce, weight="route_weight")
+        _, trans = repair_route(ctx, r, rank)
+        k = (sum(not t.feasible for t in trans), sum(t.mode == "inchworm" for t in trans))
+        if (k, r.length) < (key, best.length):
+            best, key = r, k
+        if key[0] == 0:
+            break
+    return best
 
 
 def _has_node(g: nx.MultiGraph, v: object) -> bool:

@@ -15,10 +15,20 @@ a camera's RANSAC planes, and each check reads:
   This decides the mode.
 * S_hc, inch-worm (adapted): the seed compares the target plane's centroid
   height with the base (Eq. 3.3 puts it in the base frame); for a jump what
-  matters is that the landing lies within the arm's reach, so the check is
-  "some foot placement on the landing face is within ``jump_reach_m`` of
-  the standing foot" (sole centre to sole centre, metres).  The standing
-  foot is the foot placement on the current face nearest to the vertex.
+  matters is that the landing lies within the arm's reach, and the ARA's arm
+  gives an exact bound for that: joint 2 sits ``wrist_standing_m`` along the
+  standing foot's normal above its sole, joint 5 ``wrist_landing_m`` along
+  the landing foot's normal off its sole, and between them the arm is three
+  straight links, ``arm_length_m`` long at most
+  (:func:`planners.switching.jump.wrist_distance`, ``arm_length``).  So the
+  check is "some standing placement on the current face near the vertex and
+  some landing placement on the landing face have their wrist points at most
+  ``arm_length_m`` apart" (:func:`nearest_wrists`), over the same foot
+  placements S_am enumerates (:func:`.faces.foot_centres`; at most
+  ``reach_candidates`` per face, those nearest the vertex).  It is a
+  necessary condition: a pair within it may still find no collision-free
+  configuration (the program planner's job, :mod:`.jumps`), a pair beyond
+  it is out of reach for every joint value.
 
 ``feasible = plane ∧ area ∧ height`` for either mode: a mobile transition
 with ``feasible`` true is exactly the seed's ``S = true``.
@@ -49,6 +59,7 @@ from dataclasses import dataclass, field
 
 import networkx as nx
 import numpy as np
+from scipy.spatial import cKDTree
 
 from planners.inspection.faces import (
     Continuity,
@@ -61,7 +72,7 @@ from planners.inspection.params import InspectionParams
 from planners.structure.model import Member
 from planners.vocpp import Route
 
-__all__ = ["MODES", "Transition", "TransitionContext", "route_transitions"]
+__all__ = ["MODES", "Transition", "TransitionContext", "nearest_wrists", "route_transitions"]
 
 #: Modes a transition can have.
 MODES: tuple[str, ...] = ("mobile", "inchworm")
@@ -89,8 +100,10 @@ class Transition:
       see the module docstring) and the values behind them:
       ``footholds`` (foot placements found on the landing face),
       ``step_m`` and ``outline_gap_m`` (continuity measures, ``None`` where not
-      measured), ``reach_distance_m`` (standing to nearest landing sole
-      centre, inch-worm only) and ``reach_limit_m``;
+      measured); inch-worm only: ``wrist_distance_m`` (the nearest wrist
+      points of a standing and a landing placement) against
+      ``arm_length_m``, and ``reach_distance_m`` (sole centre to sole centre
+      of that pair) against ``reach_limit_m`` (``jump_reach_m``, shown only);
     - ``feasible``: all three checks pass; ``reason``: a sentence why.
     """
 
@@ -160,20 +173,19 @@ class TransitionContext:
             )
         return self._feet[key]
 
-    def standing(self, v: Hashable, member: int | None) -> np.ndarray:
-        """Where the standing foot is at ``v``: the foot placement on the
-        current face nearest to the vertex; the vertex projected on the face
-        when none fits; the vertex itself without a face."""
+    def standings(self, v: Hashable, member: int | None) -> tuple[np.ndarray, np.ndarray | None]:
+        """Where the standing foot may be at ``v`` and its face's normal: every
+        foot placement on the current face near the vertex; the vertex
+        projected on the face when none fits; the vertex itself, normal
+        ``None``, without a face."""
         p = self.pos(v)
-        if member is None:
-            return p
+        g = self.face(member) if member is not None else None
+        if member is None or g is None:
+            return p[None], None
         feet = self.feet(v, member)
         if len(feet):
-            return np.asarray(feet[int(np.argmin(np.linalg.norm(feet - p, axis=1)))])
-        g = self.face(member)
-        if g is None:
-            return p
-        return p - ((p - g.origin) @ g.normal) * g.normal
+            return feet, g.normal
+        return (p - ((p - g.origin) @ g.normal) * g.normal)[None], g.normal
 
     def forced_jump(self, v: Hashable, member: int) -> bool:
         """Is every way through ``v`` from a span of ``member`` a jump?  (The
@@ -213,6 +225,8 @@ class TransitionContext:
             "footholds": 0,
             "step_m": None,
             "outline_gap_m": None,
+            "wrist_distance_m": None,
+            "arm_length_m": p.arm_length_m,
             "reach_distance_m": None,
             "reach_limit_m": p.jump_reach_m,
         }
@@ -273,12 +287,16 @@ class TransitionContext:
                 f"({cont.angle_deg:.1f}° ≤ {p.coplanar_angle_deg:g}°, step {cont.step_m * 1000:.0f} mm)"
             )
             return make("mobile", why if feet.size else no_room)
-        # Inch-worm: S_hc adapted to the reach of the arm.
-        stand = self.standing(v, a)
+        # Inch-worm: S_hc, the arm's exact reach bound between the wrist points.
         if feet.size:
-            reach = float(np.min(np.linalg.norm(feet - stand, axis=1)))
-            avail["reach_distance_m"] = reach
-            avail["height"] = reach <= p.jump_reach_m
+            stands, n_stand = self.standings(v, a)
+            pv, pl = self.pos(v), self.pos(landing)
+            stands = _nearest_first(stands, pv, p.reach_candidates)
+            lands = _nearest_first(feet, pl, p.reach_candidates)
+            wrist, i, j = nearest_wrists(stands, n_stand, lands, fb.normal, p)
+            avail["wrist_distance_m"] = wrist
+            avail["reach_distance_m"] = float(np.linalg.norm(lands[j] - stands[i]))
+            avail["height"] = wrist <= p.arm_length_m + 1e-9
         if kind == "gap":
             why = f"jump across the gap onto member {b}"
         elif fa is None:
@@ -298,10 +316,59 @@ class TransitionContext:
         if not avail["height"]:
             return make(
                 "inchworm",
-                f"{why}; nearest landing {avail['reach_distance_m']:.2f} m away, beyond the "
-                f"{p.jump_reach_m:.2f} m reach (S_hc false)",
+                f"{why}; out of the arm's reach: the nearest wrist points of a standing and a "
+                f"landing placement are {avail['wrist_distance_m']:.3f} m apart > the "
+                f"{p.arm_length_m:.2f} m arm (S_hc false)",
             )
-        return make("inchworm", f"{why}; landing {avail['reach_distance_m']:.2f} m away")
+        return make(
+            "inchworm",
+            f"{why}; wrist points {avail['wrist_distance_m']:.3f} m apart ≤ the "
+            f"{p.arm_length_m:.2f} m arm (soles {avail['reach_distance_m']:.2f} m apart)",
+        )
+
+
+def _nearest_first(feet: np.ndarray, p: np.ndarray, cap: int) -> np.ndarray:
+    """At most ``cap`` rows of ``feet``: all of them, or the ``cap`` nearest ``p``."""
+    if len(feet) <= cap:
+        return feet
+    d = np.linalg.norm(feet - p, axis=1)
+    return feet[np.argpartition(d, cap - 1)[:cap]]
+
+
+def nearest_wrists(
+    standing: np.ndarray,
+    standing_normal: np.ndarray | None,
+    landing: np.ndarray,
+    landing_normal: np.ndarray,
+    params: InspectionParams,
+) -> tuple[float, int, int]:
+    """The nearest wrist points of a standing and a landing foot placement:
+    ``(distance m, index into standing, index into landing)``.
+
+    ``standing`` (S, 3) and ``landing`` (L, 3) are sole centres on faces with
+    the outward unit normals ``standing_normal`` and ``landing_normal``; a
+    wrist point is the sole centre moved ``wrist_standing_m`` /
+    ``wrist_landing_m`` along its normal.  ``standing_normal=None`` (the
+    standing member has no face): the standing wrist may lie anywhere
+    ``wrist_standing_m`` from the standing point, so the distance is the
+    smallest over those, ``max(|w_l − s| − wrist_standing_m, 0)``.  One
+    KD-tree query, O((S + L) log L); the callers cap S and L
+    (``reach_candidates``).  Empty input: ``(inf, -1, -1)``."""
+    s = np.asarray(standing, float).reshape(-1, 3)
+    land = np.asarray(landing, float).reshape(-1, 3)
+    if len(s) == 0 or len(land) == 0:
+        return math.inf, -1, -1
+    wl = land + params.wrist_landing_m * np.asarray(landing_normal, float)
+    if standing_normal is None:
+        ws = s
+        slack = params.wrist_standing_m
+    else:
+        ws = s + params.wrist_standing_m * np.asarray(standing_normal, float)
+        slack = 0.0
+    d, j = cKDTree(wl).query(ws, k=1)
+    dist, nearest = np.atleast_1d(np.asarray(d, float)), np.atleast_1d(np.asarray(j))
+    i = int(np.argmin(dist))
+    return max(float(dist[i]) - slack, 0.0), i, int(nearest[i])
 
 
 def route_transitions(ctx: TransitionContext, route: Route, route_index: int) -> list[Transition]:

@@ -26,8 +26,9 @@ limits) before the plan is stored; :func:`compile_program` assembles the
 same program for dispatch.  It never plans: it reads what the job stored.
 
 Robot numbers default to the ARA's ``robots/ara/params.toml``: the foot
-rectangle [foot] and the jump reach, the largest sole-to-sole distance of
-the [arm] chain.
+rectangle [foot], the jump reach (the largest sole-to-sole distance of the
+[arm] chain) and the arm's exact reach bound (wrist offsets and arm length,
+the inch-worm check S_hc).
 """
 
 from __future__ import annotations
@@ -87,19 +88,20 @@ class AraInspectParams(StrictParams):
     sample_seed: Seed = Field(
         2,
         description="generator seed of the sample scan (2: the Warren truss's web members are "
-        "UPN 200 channels, whose webs take the ARA's foot, so the default plan passes its "
-        "checks; seed 0's L 80 angles are narrower than the foot and its plan is rejected)",
+        "UPN 200 channels, whose webs take the ARA's foot; 3 of its transitions are beyond the "
+        "arm's reach and are named; seed 0's L 80 angles are narrower than the foot)",
     )
     crop_box_m: Box | None = Field(
         None,
         description="region of interest ((xmin, ymin, zmin), (xmax, ymax, zmax)) in metres of "
         "the cloud's frame, after the units are applied; None: the whole cloud",
     )
-    units: Literal["auto", "m", "mm"] = Field(
+    units: Literal["auto", "m", "mm", "ft", "us-ft"] = Field(
         "auto",
         description="unit of the cloud's numbers: 'auto' decides from the point spacing and "
         "extent as an upload does (a stored cloud is already metres after its upload, see its "
         "survey record, so 'auto' leaves it); 'mm' scales by 0.001 (for a millimetre cloud the "
+        "upload read as metres); 'ft' by 0.3048, 'us-ft' by 1200/3937 (a feet cloud the "
         "upload read as metres); 'm' leaves the numbers",
     )
     start: VertexId | None = Field(
@@ -173,20 +175,31 @@ class AraInspectParams(StrictParams):
 
 
 def ara_robot_numbers() -> dict[str, float]:
-    """The ARA's foot rectangle ([foot]) and jump reach: the largest
+    """The ARA's foot rectangle ([foot]), its jump reach — the largest
     sole-to-sole distance of the [arm] chain, every offset straight in line
-    (the same derivation as ``planners.inspection.params.ARA_JUMP_REACH_M``,
-    read here from the robot's file so that an edit to it reaches plans)."""
+    (the same derivation as ``planners.inspection.params.ARA_JUMP_REACH_M``)
+    — and the exact reach bound of the inch-worm check S_hc: the wrist
+    offsets (joint 2 above foot 2's sole, joint 5 off foot 1's sole) and the
+    arm length between them (link2 + link3 + link4), read here from the
+    robot's file so that an edit to it reaches plans."""
     from robots import load_robot
 
     prm = load_robot("ara").params
     foot, arm = prm["foot"], prm["arm"]
-    chain = ("j1_above_sole_m", "j2_above_j1_m", "link2_m", "link3_m", "link4_m")
-    reach = sum(float(arm[k]) for k in (*chain, "j6_below_j5_m", "sole_below_j6_m"))
+
+    def total(*keys: str) -> float:
+        return sum(float(arm[k]) for k in keys)
+
+    standing = total("j1_above_sole_m", "j2_above_j1_m")
+    landing = total("j6_below_j5_m", "sole_below_j6_m")
+    length = total("link2_m", "link3_m", "link4_m")
     return {
         "foot_length_m": float(foot["length_m"]),
         "foot_width_m": float(foot["width_m"]),
-        "jump_reach_m": reach,
+        "jump_reach_m": standing + length + landing,
+        "arm_length_m": length,
+        "wrist_standing_m": standing,
+        "wrist_landing_m": landing,
     }
 
 
@@ -197,6 +210,9 @@ def inspection_params(p: AraInspectParams) -> InspectionParams:
         foot_length_m=ara["foot_length_m"] if p.foot_length_m is None else p.foot_length_m,
         foot_width_m=ara["foot_width_m"] if p.foot_width_m is None else p.foot_width_m,
         jump_reach_m=ara["jump_reach_m"] if p.jump_reach_m is None else p.jump_reach_m,
+        arm_length_m=ara["arm_length_m"],
+        wrist_standing_m=ara["wrist_standing_m"],
+        wrist_landing_m=ara["wrist_landing_m"],
         coplanar_angle_deg=p.coplanar_angle_deg,
         jump_cost_m=p.jump_cost_m,
         close_member=p.close_member,
@@ -258,6 +274,11 @@ def run(p: AraInspectParams, ctx: JobContext) -> KindOutput:
     validate(p)
     ctx.progress(0.0, "loading cloud")
     points = ctx.load_cloud(p.cloud_id) if p.cloud_id else sample_points(p.sample, p.sample_seed)
+    from server.survey_io import UNIT_TO_M  # feet: scaled here, the planner knows m and mm
+
+    feet = UNIT_TO_M[p.units] if p.units in ("ft", "us-ft") else None
+    if feet is not None:
+        points = np.asarray(points, dtype=np.float64) * feet
     extra = _program_inputs(p) if p.plan_jumps else {}
     r = plan_inspection_result(
         points,
@@ -266,10 +287,13 @@ def run(p: AraInspectParams, ctx: JobContext) -> KindOutput:
         inspection=inspection_params(p),
         start=p.start,
         end=p.end,
-        units=p.units,
+        units="m" if feet is not None else p.units,
         progress=ctx.progress,
         **extra,
     )
+    if feet is not None:
+        reason = f"set by the request ({p.units})"
+        r.summary["units"] = {"unit": p.units, "scale_to_m": feet, "reason": reason}
     if p.plan_jumps:
         program_checks(r)
     else:

@@ -97,7 +97,7 @@ def structure(
     """``chains``: (node ids along one member, i_member keyword arguments); the
     member runs from its first to its last node, one span per consecutive
     pair.  Vertices of degree 1 are ``"end"``, the others ``"joint"``."""
-    g = nx.MultiGraph()
+    g: nx.MultiGraph = nx.MultiGraph()
     members = []
     for mid, (ids, kw) in enumerate(chains):
         m = i_member(mid, nodes[ids[0]], nodes[ids[-1]], **kw)
@@ -105,7 +105,7 @@ def structure(
         for a, b in itertools.pairwise(ids):
             w = float(np.linalg.norm(np.subtract(nodes[b], nodes[a])))
             g.add_edge(a, b, member=mid, weight=w)
-    joints = []
+    joints: list[Joint] = []
     for n in g.nodes:
         pos = np.asarray(nodes[n], float)
         kind = "end" if g.degree(n) == 1 else "joint"

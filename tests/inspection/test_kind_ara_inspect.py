@@ -110,9 +110,16 @@ def test_listed_with_its_params_schema_and_the_ara_numbers(api) -> None:
         "foot_length_m": 0.18,
         "foot_width_m": 0.12,
         "jump_reach_m": pytest.approx(ARA_JUMP_REACH_M),
+        "arm_length_m": pytest.approx(0.5),
+        "wrist_standing_m": pytest.approx(0.1),
+        "wrist_landing_m": pytest.approx(0.1),
     }
+    ara = ara_robot_numbers()
     assert inspection_params(AraInspectParams()) == InspectionParams(
-        jump_reach_m=ara_robot_numbers()["jump_reach_m"]
+        jump_reach_m=ara["jump_reach_m"],
+        arm_length_m=ara["arm_length_m"],
+        wrist_standing_m=ara["wrist_standing_m"],
+        wrist_landing_m=ara["wrist_landing_m"],
     )
 
 
@@ -211,7 +218,11 @@ def test_checks_fail_honestly(api) -> None:
     checks = checks_of(big)
     assert big["state"] == "rejected" and not checks["transitions_feasible"]["passed"]
     assert "S_am false" in checks["transitions_feasible"]["message"]
-    assert checks["members_covered"]["passed"]
+    # The route drives both members, but the ARA cannot get onto the second one.
+    assert big["result"]["uncovered_members"] == []
+    cov = checks["members_covered"]
+    assert not cov["passed"] and cov["value"] == 1 and "not inspected" in cov["message"]
+    assert "(S_am)" in cov["message"] and len(big["result"]["unreachable_members"]) == 1
 
     # A flat plate (ground, a slab) holds no member: nothing to inspect.
     g = np.arange(0.0, 2.0, SPACING)
