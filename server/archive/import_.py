@@ -348,15 +348,15 @@ class _Importer:
             # lacks is dropped from the row rather than named without its file.
             attrs = row.get("attributes") or "{}"
             named = json.loads(attrs) if isinstance(attrs, str) else dict(attrs)
-            kept: dict[str, str] = {}
+            carried: dict[str, str] = {}
             for attr in sorted(named):
                 check_id(attr, "cloud attribute")
                 src = f"cloud/{cid}.{attr}.npy"
                 if src in self.files:
                     self._check_npy(src)
-                    kept[attr] = cloud_attribute_relname(cid, attr)
-                    self.moves.append((self.files[src], self.store.arrays.path(kept[attr])))
-            rows["clouds"].append({**row, "array_file": rel, "attributes": json.dumps(kept)})
+                    carried[attr] = cloud_attribute_relname(cid, attr)
+                    self.moves.append((self.files[src], self.store.arrays.path(carried[attr])))
+            rows["clouds"].append({**row, "array_file": rel, "attributes": json.dumps(carried)})
             new["clouds"] = [cid]
             self.moves.append((self.files[npy], self.store.arrays.path(rel)))
             result.cloud = "imported"
