@@ -549,6 +549,19 @@ def _summary(
             {"id": j.id, "pos": _xyz(j.pos), "members": [int(x) for x in j.members]}
             for j in model.joints
         ],
+        # Decks, slabs, walls and ground set apart from the members (drawn in the scene).
+        "surfaces": [
+            {
+                "id": int(sf.id),
+                "kind": sf.kind,
+                "normal": [round(float(x), 6) for x in sf.normal],
+                "offset_m": round(float(sf.offset), _DECIMALS),
+                "outline": [_xyz(q) for q in sf.outline],
+                "area_m2": float(sf.area_m2),
+                "n_points": int(sf.n_points),
+            }
+            for sf in model.surfaces
+        ],
         "graph": {
             # "split" vertices (gap ends on a span) are routing-only: not a
             # start or end a plan can be asked for

@@ -21,6 +21,7 @@ import numpy as np
 
 if TYPE_CHECKING:
     from planners.blasting.surface import Surface
+    from planners.structure.surfaces import PlanarSurface
 
 #: Section profiles a member can be given.
 PROFILES: tuple[str, ...] = ("I", "channel", "angle", "tee", "box", "tube", "plate", "unknown")
@@ -115,7 +116,7 @@ class StructureModel:
     ``joint`` (the :class:`Joint` id); edges are member spans between
     consecutive nodes along a member with ``member`` (id) and ``weight``
     (length, m).  ``labels`` (N,) gives the member id of each input point or
-    −1 (clutter, ground, unassigned).  ``spacing_m`` is the measured point
+    −1 (clutter, ground, surfaces, unassigned).  ``spacing_m`` is the measured point
     spacing the defaults were derived from; ``timings_s`` the seconds per stage.
     """
 
@@ -127,6 +128,10 @@ class StructureModel:
     timings_s: dict[str, float] = field(default_factory=dict)
     #: parameters actually used (after deriving defaults from the spacing)
     params: dict[str, float] = field(default_factory=dict)
+    #: large planes that are not members (deck soffits, slabs, walls,
+    #: ground; :mod:`planners.structure.surfaces`): their points are
+    #: labelled −1 and were left out of the member search
+    surfaces: list[PlanarSurface] = field(default_factory=list)
 
     @property
     def faces(self) -> list[Face]:

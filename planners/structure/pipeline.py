@@ -4,6 +4,9 @@ Stages (each timed in ``StructureModel.timings_s``):
 
 1. spacing — measured (:func:`planners.pointcloud.spacing.measure_spacing`);
    every default length derives from it (:class:`.params.StructureParams`);
+   surfaces — large planes that are not members (deck soffits, slabs,
+   walls, ground: :mod:`.surfaces`) are found, and their points left out
+   of every later stage (labelled −1);
 2. features — multi-scale linearity on a voxel pyramid (:mod:`.features`);
 3. lines — region growing of linear voxels, PCA lines, occlusion fragments
    and parallel faces joined (:mod:`.lines`);
@@ -43,6 +46,7 @@ import time
 from collections.abc import Callable
 from dataclasses import replace
 
+import networkx as nx
 import numpy as np
 from scipy.spatial import cKDTree
 
@@ -85,6 +89,7 @@ from planners.structure.model import Face, Member, StructureModel
 from planners.structure.params import StructureParams
 from planners.structure.scattered import coarse_scan, scattered_lines, tube_radius
 from planners.structure.sparse import sparse_rows, walk_rows
+from planners.structure.surfaces import LAS_GROUND, PlanarSurface, find_surfaces
 
 #: fewest points a member keeps after assignment
 MIN_MEMBER_POINTS = 8
@@ -249,6 +254,16 @@ STUBBY_JOINTS = 2
 SECTION_PASS = True
 #: that tolerance in noise σ (±1.75 σ holds 92 % of a face's points)
 SECTION_NOISE_TOLS = 1.75
+#: find the large planes that are not members (deck soffits, slabs, walls,
+#: ground: :mod:`.surfaces`) first and leave their points out of the
+#: member search; False: the whole cloud is searched (the baseline)
+SEPARATE_SURFACES = True
+#: a member whose axis lies in a surface's plane (within this angle) with
+#: this share of its points within this many of the surface's point
+#: tolerances of it is a piece of the surface (:func:`_on_surface`)
+ON_SURFACE_DEG = 10.0
+ON_SURFACE_SHARE = 0.5
+ON_SURFACE_TOLS = 2.0
 
 Progress = Callable[[float, str], None]
 
@@ -373,10 +388,13 @@ def model_structure(
     *,
     params: StructureParams | None = None,
     progress: Progress | None = None,
+    classification: np.ndarray | None = None,
 ) -> StructureModel:
     """Members, faces, joints and member graph of a scanned steel structure.
 
     ``points`` (N, 3), any frame, metres (convert millimetre scans first).
+    ``classification`` (N,), optional: the scan's LAS classification codes;
+    class 2 (ground) points are on no member and name a ground surface.
     Raises :class:`planners.errors.InvalidInputError` for a malformed cloud
     and :class:`planners.errors.EmptyInputError` for one too small to measure.
     A cloud with no member in it gives a model with no members (not an error).
@@ -407,6 +425,38 @@ def model_structure(
     prm = prm.resolve(spacing)
     assert prm.scales_m is not None and prm.min_member_length_m is not None
     stage("spacing", 0.05)
+
+    if classification is not None:
+        classification = np.asarray(classification).reshape(-1)
+        if len(classification) != len(raw):
+            raise InvalidInputError(
+                f"classification has {len(classification)} entries for {len(raw)} points"
+            )
+    surfaces: list[PlanarSurface] = []
+    n_all = len(pts)
+    kept = np.arange(n_all)
+    on: np.ndarray | None = None
+    if SEPARATE_SURFACES:
+        surfaces, on = find_surfaces(
+            pts, spacing, prm.max_section_m, seed=prm.seed, classification=classification
+        )
+    elif classification is not None:
+        on = np.asarray(classification == LAS_GROUND, dtype=bool)
+    if on is not None:
+        kept = np.flatnonzero(~on)
+        pts = pts[kept]
+    stage("surfaces", 0.1)
+    if len(pts) < 10:
+        return StructureModel(
+            [],
+            [],
+            nx.MultiGraph(),
+            np.full(n_all, -1, dtype=np.int64),
+            float(spacing),
+            timings,
+            prm.as_dict(),
+            _to_frame(surfaces, origin),
+        )
 
     feat = line_features(pts, spacing, prm.scales_m, prm.k_neighbours, prm.max_voxels)
     stage("features", 0.35)
@@ -492,6 +542,9 @@ def model_structure(
         else:
             plane_like.append((m, big, band, cell))
     not_clutter += _truss_planes(tree, pts, labels, members, not_clutter, plane_like, 2 * tol)
+    not_clutter = [
+        m for m in not_clutter if not _on_surface(pts[labels == m.id], m, surfaces, spacing)
+    ]
     not_clutter.sort(key=lambda m: m.id)
     if len(not_clutter) < len(members):
         labels, members, radii, _ = _renumber(labels, members, radii, not_clutter, spacing)
@@ -539,7 +592,47 @@ def model_structure(
     for _, data in graph.nodes(data=True):
         data["pos"] = data["pos"] + origin
     used = prm.as_dict()
-    return StructureModel(members, joints, graph, labels, float(spacing), timings, used)
+    if len(kept) < n_all:
+        full = np.full(n_all, -1, dtype=np.int64)
+        full[kept] = labels
+        labels = full
+    return StructureModel(
+        members,
+        joints,
+        graph,
+        labels,
+        float(spacing),
+        timings,
+        used,
+        _to_frame(surfaces, origin),
+    )
+
+
+def _to_frame(surfaces: list[PlanarSurface], origin: np.ndarray) -> list[PlanarSurface]:
+    """The surfaces moved from the working frame (relative to ``origin``) to the input's."""
+    for f in surfaces:
+        f.offset = float(f.offset + f.normal @ origin)
+        f.outline = f.outline + origin
+    return surfaces
+
+
+def _on_surface(mp: np.ndarray, m: Member, surfaces: list[PlanarSurface], spacing: float) -> bool:
+    """Whether member ``m`` (points ``mp``) is a piece of a surface's plane
+    that the surface search left (rows of ground far from the scanners, a
+    strip of soffit in a girder's shadow): its axis lies in the plane
+    (``ON_SURFACE_DEG``) and ``ON_SURFACE_SHARE`` of its points within
+    ``ON_SURFACE_TOLS`` of the surface's point tolerance of it.  A beam
+    under a slab has only its top flange's edges there."""
+    if not surfaces or len(mp) == 0:
+        return False
+    tol = ON_SURFACE_TOLS * max(1.5 * spacing, 0.03)
+    sin_in = float(np.sin(np.radians(ON_SURFACE_DEG)))
+    for f in surfaces:
+        if abs(float(m.direction @ f.normal)) > sin_in:
+            continue
+        if float(np.mean(np.abs(mp @ f.normal - f.offset) <= tol)) >= ON_SURFACE_SHARE:
+            return True
+    return False
 
 
 def _truss_planes(

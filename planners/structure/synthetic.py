@@ -84,7 +84,8 @@ from planners.structure.sections import (
     outline_radius,
 )
 
-SCAN_KINDS: tuple[str, ...] = ("warren", "pratt", "frame", "grillage")
+#: new kinds go at the end: a kind's index seeds its random stream
+SCAN_KINDS: tuple[str, ...] = ("warren", "pratt", "frame", "grillage", "deck", "frame_slabs")
 UNITS: dict[str, float] = {"m": 1.0, "mm": 1000.0}
 
 #: Angular step = BIN_CALIBRATION × √(scanners) × spacing / reference range.
@@ -160,6 +161,11 @@ class ScanStructure:
     yaw: float
     ground_z: float
     timings_s: dict[str, float] = field(default_factory=dict)
+    #: the concrete's large faces as built (``deck`` and ``frame_slabs``):
+    #: (kind, (4, 3) rectangle, metres, survey frame): a deck's or slab's
+    #: soffit (``"deck/slab"``), a pier's long faces (``"wall"``) and the
+    #: ground (``"ground"``, when there is clutter)
+    surfaces: list[tuple[str, np.ndarray]] = field(default_factory=list)
 
     def true_axes(self) -> np.ndarray:
         """(T, 2, 3) member axes, metres, survey frame."""
@@ -191,6 +197,9 @@ class _Build:
     rolls: list[float] = field(default_factory=list)
     roles: list[str] = field(default_factory=list)
     joints: list[tuple[np.ndarray, list[int]]] = field(default_factory=list)
+    #: concrete (not members, label −1): axis-aligned boxes (lo (3,), hi (3,))
+    #: and what each is (``"deck/slab"``, ``"wall"`` for a pier, ``"bearing"``)
+    solids: list[tuple[np.ndarray, np.ndarray, str]] = field(default_factory=list)
 
     def add(self, sec: Section, p0: np.ndarray, p1: np.ndarray, roll: float, role: str) -> int:
         self.sections.append(sec)
@@ -262,8 +271,15 @@ def _truss(kind: str, rng: np.random.Generator) -> _Build:
     return b
 
 
-def _frame(rng: np.random.Generator) -> _Build:
-    nx, ny, ns = int(rng.integers(1, 4)), int(rng.integers(1, 3)), int(rng.integers(1, 4))
+def _frame(rng: np.random.Generator, slabs: bool = False) -> _Build:
+    """A frame; with ``slabs``, 2–3 × 2–3 bays, 2–4 storeys and a concrete
+    floor slab 0.15–0.25 m thick on the beams of every floor (the roof's
+    too), 0.1–0.4 m past the columns' outer faces: the columns run on
+    through them."""
+    if slabs:
+        nx, ny, ns = int(rng.integers(2, 4)), int(rng.integers(2, 4)), int(rng.integers(2, 5))
+    else:
+        nx, ny, ns = int(rng.integers(1, 4)), int(rng.integers(1, 3)), int(rng.integers(1, 4))
     xs = np.concatenate([[0.0], np.cumsum(rng.uniform(4.0, 8.0, nx))])
     ys = np.concatenate([[0.0], np.cumsum(rng.uniform(4.0, 7.0, ny))])
     zs = np.concatenate([[0.0], np.cumsum(rng.uniform(3.0, 4.5, ns))])
@@ -313,6 +329,78 @@ def _frame(rng: np.random.Generator) -> _Build:
     for (i, j, k), ids in at.items():
         if len(set(ids)) > 1:
             b.joint(np.array([xs[i], ys[j], zs[k]]), ids)
+    if slabs:
+        thick = float(rng.uniform(0.15, 0.25))
+        over = float(rng.uniform(0.1, 0.4))
+        lo = np.array([xs[0] - half_x - over, ys[0] - half_y - over])
+        hi = np.array([xs[-1] + half_x + over, ys[-1] + half_y + over])
+        for k in range(1, ns + 1):
+            b.solids.append((np.array([*lo, zs[k]]), np.array([*hi, zs[k] + thick]), "deck/slab"))
+    return b
+
+
+_GIRDERS = ("IPE 400", "IPE 500", "HEB 400")
+_DIAPHRAGMS = ("UPN 200", "UPN 300", "IPE 300")
+
+
+def _deck(rng: np.random.Generator) -> _Build:
+    """A composite deck: 3–5 I-girders 2–3 m apart, continuous over 1–2
+    spans of 10–18 m, on bearings (0.3 m boxes) on concrete piers (1 m
+    thick walls) with a 3.5–5.5 m clearance; diaphragm cross frames
+    between the girders' webs at every pier and 3–6 m apart in the spans;
+    a concrete deck 0.2–0.3 m thick on the top flanges (which it hides),
+    overhanging the outer girders by 0.8–1.2 m."""
+    n_g = int(rng.integers(3, 6))
+    ys = np.concatenate([[0.0], np.cumsum(rng.uniform(2.0, 3.0, n_g - 1))])
+    n_span = int(rng.integers(1, 3))
+    piers = np.concatenate([[0.0], np.cumsum(rng.uniform(10.0, 18.0, n_span))])
+    girder = _pick(rng, _GIRDERS)
+    dia = _pick(rng, _DIAPHRAGMS)
+    z_b = float(rng.uniform(3.5, 5.5))
+    thick = float(rng.uniform(0.2, 0.3))
+    over = float(rng.uniform(0.8, 1.2))
+    end = 0.4
+    x0, x1 = piers[0] - end, piers[-1] + end
+    b = _Build()
+    zg = z_b + girder.h / 2
+    mains = [b.add(girder, np.array([x0, y, zg]), np.array([x1, y, zg]), 0.0, "main") for y in ys]
+    stations: list[float] = []
+    for a, c in itertools.pairwise(piers):
+        n_in = max(1, round((c - a) / float(rng.uniform(3.0, 6.0))))
+        stations += list(a + (c - a) * np.arange(n_in) / n_in)
+    stations.append(float(piers[-1]))
+    zc = z_b + girder.h / 2
+    for x in stations:
+        ids: dict[int, list[int]] = {g: [mains[g]] for g in range(n_g)}
+        for g in range(n_g - 1):
+            a0 = np.array([x, ys[g] + girder.tw / 2, zc])
+            a1 = np.array([x, ys[g + 1] - girder.tw / 2, zc])
+            m = b.add(dia, a0, a1, float(g % 2) * np.pi, "cross")
+            ids[g].append(m)
+            ids[g + 1].append(m)
+        for g, jm in ids.items():
+            b.joint(np.array([x, ys[g], zc]), jm)
+    top = z_b + girder.h
+    b.solids.append(
+        (np.array([x0, ys[0] - over, top]), np.array([x1, ys[-1] + over, top + thick]), "deck/slab")
+    )
+    bearing = 0.3
+    for xp in piers:
+        b.solids.append(
+            (
+                np.array([xp - 0.5, ys[0] - 0.8, 0.0]),
+                np.array([xp + 0.5, ys[-1] + 0.8, z_b - bearing]),
+                "wall",
+            )
+        )
+        for y in ys:
+            b.solids.append(
+                (
+                    np.array([xp - 0.2, y - 0.2, z_b - bearing]),
+                    np.array([xp + 0.2, y + 0.2, z_b]),
+                    "bearing",
+                )
+            )
     return b
 
 
@@ -348,6 +436,10 @@ def _build(kind: str, rng: np.random.Generator) -> _Build:
         return _truss(kind, rng)
     if kind == "frame":
         return _frame(rng)
+    if kind == "frame_slabs":
+        return _frame(rng, slabs=True)
+    if kind == "deck":
+        return _deck(rng)
     return _grillage(rng)
 
 
@@ -371,6 +463,37 @@ class _Scene:
     ground: tuple[float, float, float, float] | None  # x0, x1, y0, y1 at z = 0
     blobs: list[tuple[np.ndarray, np.ndarray]]  # centre, semi-axes
     centre: np.ndarray
+    #: faces of the concrete solids (deck, slabs, piers, bearings)
+    rects: list[_Rect] = field(default_factory=list)
+
+
+@dataclass(frozen=True)
+class _Rect:
+    """A planar rectangle ``o + s a + t b`` (s, t in [0, 1]) with outward unit ``normal``."""
+
+    o: np.ndarray
+    a: np.ndarray
+    b: np.ndarray
+    normal: np.ndarray
+
+
+def _box_rects(lo: np.ndarray, hi: np.ndarray) -> list[_Rect]:
+    """The six faces of the axis-aligned box ``lo``–``hi``."""
+    out = []
+    size = hi - lo
+    for ax in range(3):
+        u, v = [k for k in range(3) if k != ax]
+        a = np.zeros(3)
+        a[u] = size[u]
+        b = np.zeros(3)
+        b[v] = size[v]
+        for side, base in ((-1.0, lo), (1.0, hi)):
+            o = lo.copy()
+            o[ax] = base[ax]
+            nrm = np.zeros(3)
+            nrm[ax] = side
+            out.append(_Rect(o, a, b, nrm))
+    return out
 
 
 def _centre_build(build: _Build) -> None:
@@ -381,6 +504,7 @@ def _centre_build(build: _Build) -> None:
     )
     build.axes = [a - c for a in build.axes]
     build.joints = [(p - c, ids) for p, ids in build.joints]
+    build.solids = [(lo - c, hi - c, what) for lo, hi, what in build.solids]
 
 
 def _footprint(build: _Build) -> np.ndarray:
@@ -399,6 +523,9 @@ def _footprint(build: _Build) -> np.ndarray:
         ],
         0,
     )
+    for s_lo, s_hi, _ in build.solids:
+        lo = np.minimum(lo, s_lo[:2])
+        hi = np.maximum(hi, s_hi[:2])
     return np.stack([lo, hi])
 
 
@@ -422,7 +549,57 @@ def _scene(build: _Build, clutter: bool, rng: np.random.Generator) -> tuple[_Sce
         c = _on_rim(g, 0.5, rng)
         prisms.append(_Prism(_PERSON, np.array([c[0], c[1], 0.0]), np.array([c[0], c[1], 1.75]),
                              float(rng.uniform(0, np.pi)), -1))  # fmt: skip
-    return _Scene(prisms, ground, blobs, centre), fp
+        if build.solids:
+            blobs += _shrubs(build, g, rng)
+    rects = [r for lo, hi, _ in build.solids for r in _box_rects(lo, hi)]
+    return _Scene(prisms, ground, blobs, centre, rects), fp
+
+
+def _shrubs(
+    build: _Build, g: np.ndarray, rng: np.random.Generator
+) -> list[tuple[np.ndarray, np.ndarray]]:
+    """2–5 more blobs of vegetation anywhere on the ground (the scenes with
+    concrete), kept 0.3 m clear of every member that reaches the ground."""
+    feet = np.array([a[0, :2] for a in build.axes if min(a[0, 2], a[1, 2]) < 0.5]).reshape(-1, 2)
+    out = []
+    for _ in range(int(rng.integers(2, 6))):
+        r = rng.uniform(0.3, 0.9) * np.array([1.0, rng.uniform(0.6, 1.0), rng.uniform(0.4, 0.9)])
+        for _ in range(20):
+            c = rng.uniform(g[0] + 0.5, g[1] - 0.5)
+            if not len(feet) or float(np.min(np.linalg.norm(feet - c, axis=1))) > r[0] + 0.5:
+                out.append((np.array([c[0], c[1], r[2]]), r))
+                break
+    return out
+
+
+def _deck_scanners(
+    fp: np.ndarray,
+    build: _Build,
+    n: int,
+    rng: np.random.Generator,
+    blobs: list[tuple[np.ndarray, np.ndarray]],
+) -> np.ndarray:
+    """One scanner under the deck (between the girders, clear of the piers
+    and of the vegetation) and the others on both sides, 5–12 m clear of
+    the deck, 1.5–2 m high."""
+    piers = [0.5 * (lo[0] + hi[0]) for lo, hi, what in build.solids if what == "wall"]
+    y_g = [
+        float(a[0, 1]) for a, role in zip(build.axes, build.roles, strict=True) if role == "main"
+    ]
+    out = []
+    for _ in range(50):
+        x = float(rng.uniform(fp[0, 0] + 1.5, fp[1, 0] - 1.5))
+        y = float(rng.uniform(min(y_g), max(y_g)))
+        clear = all(np.hypot(x - c[0], y - c[1]) > float(r.max()) + 1.0 for c, r in blobs)
+        if clear and all(abs(x - p) > 2.0 for p in piers):
+            break
+    out.append([x, y, float(rng.uniform(1.5, 2.0))])
+    for k in range(1, n):
+        side = 1.0 if k % 2 else -1.0
+        y = (fp[1, 1] if side > 0 else fp[0, 1]) + side * float(rng.uniform(5.0, 12.0))
+        x = float(rng.uniform(fp[0, 0], fp[1, 0]))
+        out.append([x, y, float(rng.uniform(1.5, 2.0))])
+    return np.asarray(out)
 
 
 def _on_rim(g: np.ndarray, inset: float, rng: np.random.Generator) -> np.ndarray:
@@ -567,6 +744,58 @@ def _ground_candidates(
         yield _Candidates(pts, nrm, np.full(len(pts), -1))
 
 
+def _rect_candidates(rect: _Rect, grid: _Grid, rng: np.random.Generator) -> Iterator[_Candidates]:
+    """One ray per bin that can reach a rectangle facing the scanner, jittered within the bin."""
+    s = grid.origin
+    if float(rect.normal @ (s - rect.o)) <= 0:  # its back: the solid hides it
+        return
+    t = np.linspace(0.0, 1.0, 129)[:, None]
+    edge = np.concatenate(
+        [rect.o + t * rect.a, rect.o + rect.a + t * rect.b, rect.o + t * rect.b,
+         rect.o + rect.b + t * rect.a]
+    ) - s  # fmt: skip
+    el_b = np.arcsin(np.clip(edge[:, 2] / np.linalg.norm(edge, axis=1), -1.0, 1.0))
+    az_b = np.arctan2(edge[:, 1], edge[:, 0])
+    el_lo, el_hi = float(el_b.min()), float(el_b.max())
+    aa, bb = float(rect.a @ rect.a), float(rect.b @ rect.b)
+    nz = float(rect.normal[2])
+    overhead = False
+    if abs(nz) > 1e-9:
+        # the vertical through the scanner meets the rectangle: every azimuth
+        lam = float(rect.normal @ (rect.o - s)) / nz
+        q = s + np.array([0.0, 0.0, lam]) - rect.o
+        overhead = 0 <= q @ rect.a <= aa and 0 <= q @ rect.b <= bb
+        if overhead:
+            el_lo, el_hi = (el_lo, np.pi / 2) if lam > 0 else (-np.pi / 2, el_hi)
+    dt = grid.dtheta
+    if overhead:
+        ia = np.arange(grid.n_az)
+    else:
+        rel = (az_b - az_b[0] + np.pi) % (2 * np.pi) - np.pi
+        lo_a, hi_a = az_b[0] + rel.min(), az_b[0] + rel.max()
+        ia = np.arange(int(np.floor((lo_a + np.pi) / dt)), int(np.floor((hi_a + np.pi) / dt)) + 1)
+    ie = np.arange(
+        int(np.floor((el_lo + np.pi / 2) / dt)), int(np.floor((el_hi + np.pi / 2) / dt)) + 1
+    )
+    rows = max(1, _MERGE_AT // max(len(ia), 1))
+    for k in range(0, len(ie), rows):
+        e_idx = np.repeat(ie[k : k + rows], len(ia))
+        a_idx = np.tile(ia, len(ie[k : k + rows]))
+        el = np.clip((e_idx + rng.random(len(e_idx))) * dt - np.pi / 2, -np.pi / 2, np.pi / 2)
+        az = (a_idx + rng.random(len(a_idx))) * dt - np.pi
+        u = np.column_stack([np.cos(el) * np.cos(az), np.cos(el) * np.sin(az), np.sin(el)])
+        den = u @ rect.normal
+        with np.errstate(divide="ignore", invalid="ignore"):
+            r = float(rect.normal @ (rect.o - s)) / den
+        ok = np.isfinite(r) & (r > 0)
+        p = s + r[ok, None] * u[ok]
+        q = p - rect.o
+        qa, qb = q @ rect.a, q @ rect.b
+        inside = (qa >= 0) & (qa <= aa) & (qb >= 0) & (qb <= bb)
+        pts = p[inside]
+        yield _Candidates(pts, np.tile(rect.normal, (len(pts), 1)), np.full(len(pts), -1))
+
+
 def _blob_candidates(
     blob: tuple[np.ndarray, np.ndarray], grid: _Grid, rng: np.random.Generator
 ) -> Iterator[_Candidates]:
@@ -592,6 +821,8 @@ def _scene_candidates(
         yield from _prism_candidates(pr, grid, rng)
     if scene.ground is not None:
         yield from _ground_candidates(scene.ground, grid, rng)
+    for rect in scene.rects:
+        yield from _rect_candidates(rect, grid, rng)
     for blob in scene.blobs:
         yield from _blob_candidates(blob, grid, rng)
 
@@ -705,7 +936,12 @@ def make_scan(
     _centre_build(build)
     scene, fp = _scene(build, clutter, rng)
     n_sc = int(rng.integers(2, 5)) if n_scanners is None else n_scanners
-    scanners = _scanners(fp, n_sc, rng)
+    if kind == "deck":
+        # under the deck and both sides: one more than the others get
+        n_sc = n_sc + 1 if n_scanners is None else n_sc
+        scanners = _deck_scanners(fp, build, n_sc, rng, scene.blobs)
+    else:
+        scanners = _scanners(fp, n_sc, rng)
     t1 = time.perf_counter()
     parts: list[_Candidates] = []
     which: list[np.ndarray] = []
@@ -732,7 +968,7 @@ def make_scan(
         pts, nrm, lab, idx = pts[keep], nrm[keep], lab[keep], idx[keep]
     t2 = time.perf_counter()
     return _to_survey(kind, int(seed), build, pts, nrm, lab, idx, scanners, spacing_m, units, rng,
-                      {"layout": t1 - t0, "scan": t2 - t1})  # fmt: skip
+                      {"layout": t1 - t0, "scan": t2 - t1}, scene.ground)  # fmt: skip
 
 
 def _to_survey(
@@ -748,6 +984,7 @@ def _to_survey(
     units: str,
     rng: np.random.Generator,
     timings: dict[str, float],
+    ground: tuple[float, float, float, float] | None = None,
 ) -> ScanStructure:
     """Turn the local scene by a random yaw and move it to UTM-like coordinates."""
     yaw = float(rng.uniform(0, 2 * np.pi))
@@ -766,6 +1003,25 @@ def _to_survey(
         axis = fwd(ax)
         members.append(TrueMember(i, axis, sec, _roll_in(frame, axis[0], axis[1]), role))
     joints = [TrueJoint(fwd(p[None])[0], tuple(ids)) for p, ids in build.joints]
+    surfaces = []
+    for lo, hi, what in build.solids:
+        if what == "deck/slab":
+            z = lo[2]
+            rect = np.array(
+                [[lo[0], lo[1], z], [hi[0], lo[1], z], [hi[0], hi[1], z], [lo[0], hi[1], z]]
+            )
+            surfaces.append((what, fwd(rect)))
+        elif what == "wall":
+            for x in (lo[0], hi[0]):
+                rect = np.array(
+                    [[x, lo[1], lo[2]], [x, hi[1], lo[2]], [x, hi[1], hi[2]], [x, lo[1], hi[2]]]
+                )
+                surfaces.append((what, fwd(rect)))
+    if ground is not None and build.solids:
+        x0, x1, y0, y1 = ground
+        surfaces.append(
+            ("ground", fwd(np.array([[x0, y0, 0.0], [x1, y0, 0.0], [x1, y1, 0.0], [x0, y1, 0.0]])))
+        )
     scale = UNITS[units]
     survey = fwd(pts)
     return ScanStructure(
@@ -785,6 +1041,7 @@ def _to_survey(
         yaw=yaw,
         ground_z=float(offset[2]),
         timings_s=timings,
+        surfaces=surfaces,
     )
 
 

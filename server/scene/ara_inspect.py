@@ -1,6 +1,8 @@
 """Scene drawer of ``ara.inspect``: the scan coloured by member (unlabelled
 points grey), member axes labelled with their profile, face outlines, the
-member-graph vertices (click: start, then end → a proposed plan), the routes
+member-graph vertices (click: start, then end → a proposed plan), the
+outlines of the large planes set apart from the members (deck soffits,
+slabs, walls, ground; when the summary carries ``surfaces``), the routes
 as numbered arrows, the transitions by mode (mobile / inch-worm, infeasible
 ones red and larger) and the gaps between pieces of the structure.
 
@@ -34,6 +36,8 @@ MOBILE_RGB = (40, 140, 255)
 INCHWORM_RGB = (200, 60, 230)
 #: Routes after the main one (the robot is carried to each).
 OTHER_ROUTE_RGB = (250, 200, 60)
+#: Large planes that are not members (deck soffits, slabs, walls, ground): muted.
+SURFACE_RGB = (120, 125, 135)
 #: Gap-jump edges of a route.
 JUMP_RGB = (200, 60, 230)
 GAP_RGB = FAIL_RGB
@@ -79,6 +83,7 @@ def draw(ctx: DrawContext, plan: PlanView) -> None:
             precision="float32",
         )
 
+    _draw_surfaces(ctx, root, res, local)
     _draw_members(ctx, root, res, local)
     _draw_vertices(ctx, root, res, local)
     _draw_routes(ctx, root, res, local)
@@ -113,6 +118,27 @@ def _draw_members(ctx: DrawContext, root: str, res: dict[str, Any], local: Any) 
             fcols.append(np.tile(np.array(rgb, np.uint8), (len(ring), 2, 1)))
     if segs:
         _segments(f"{root}/faces", ctx, np.concatenate(segs), np.concatenate(fcols), 1.5)
+
+
+def _draw_surfaces(ctx: DrawContext, root: str, res: dict[str, Any], local: Any) -> None:
+    """The outline of every large plane the model set apart (deck soffits,
+    slabs, walls, ground) as thin muted segments, labelled with its kind;
+    nothing when the summary carries none."""
+    surfaces = res.get("surfaces") or []
+    segs = []
+    for i, f in enumerate(surfaces):
+        ring = local(f["outline"])
+        if len(ring) < 2:
+            continue
+        closed = np.vstack([ring, ring[:1]])
+        segs.append(np.stack([closed[:-1], closed[1:]], axis=1))
+        ctx.scene.add_label(
+            f"{root}/surface_labels/{i}",
+            text=str(f.get("kind", "surface")),
+            position=tuple(float(x) for x in ring.mean(axis=0)),
+        )
+    if segs:
+        _segments(f"{root}/surfaces", ctx, np.concatenate(segs), SURFACE_RGB, 1.0)
 
 
 def _draw_vertices(ctx: DrawContext, root: str, res: dict[str, Any], local: Any) -> None:

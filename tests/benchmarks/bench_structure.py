@@ -2,7 +2,8 @@
 
 Run on demand::
 
-    .venv/bin/python tests/benchmarks/bench_structure.py [--kinds warren,pratt,frame,grillage]
+    .venv/bin/python tests/benchmarks/bench_structure.py
+        [--kinds warren,pratt,frame,grillage,deck,frame_slabs]
         [--seeds 20] [--spacings 0.005,0.02,0.1] [--scaling] [--no-accuracy]
 
 Accuracy: for every structure type, spacing and seed, a scan from
@@ -22,7 +23,11 @@ recall ≥ 95 %, precision ≥ 90 %.
 
 ``--first-pass-sections`` turns the final sections stage off: the same
 members, with the faces and profiles of the first passes (the baseline of
-the profile column).  ``--no-chains`` leaves members seen as collinear
+the profile column).  ``--no-surfaces`` searches the whole cloud for members, deck soffits,
+slabs, walls and ground included (:mod:`planners.structure.surfaces`;
+the baseline of the surfaces stage).  ``deck`` and ``frame_slabs`` are
+the scans with concrete (a deck on girders, a frame with floor slabs).
+``--no-chains`` leaves members seen as collinear
 pieces across occlusion shadows apart (:mod:`planners.structure.chains`;
 the baseline of those joins).
 
@@ -198,8 +203,17 @@ def main() -> None:
         help="leave the members seen in collinear pieces apart (the baseline of the "
         "chains: pipeline.CHAIN_PIECES off)",
     )
+    ap.add_argument(
+        "--no-surfaces",
+        action="store_true",
+        help="search the whole cloud for members, large planes included (the baseline "
+        "of the surfaces stage: pipeline.SEPARATE_SURFACES off)",
+    )
     args = ap.parse_args()
     from planners.structure import pipeline
+
+    if args.no_surfaces:
+        pipeline.SEPARATE_SURFACES = False
 
     if args.first_pass_sections:
         pipeline.SECTION_PASS = False

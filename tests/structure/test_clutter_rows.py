@@ -130,6 +130,9 @@ def _ground_members(monkeypatch: pytest.MonkeyPatch, parallel_max: float) -> int
 
     monkeypatch.setattr(pipeline, "PARALLEL_MAX", parallel_max)
     monkeypatch.setattr(pipeline, "STUBBY_SLENDERNESS", 0.0)
+    # the lanes alone: the surfaces stage drops members lying in the ground's
+    # plane before them (``pipeline._on_surface``), with and without the lanes
+    monkeypatch.setattr(pipeline, "SEPARATE_SURFACES", False)
     count = 0
     for seed in (4, 14):
         scan = make_scan("frame", seed, spacing_m=0.1)

@@ -247,7 +247,7 @@ def test_progress_is_reported_in_order() -> None:
     model_structure(pts, progress=lambda f, s: seen.append((f, s)))
     fractions = [f for f, _ in seen]
     assert fractions == sorted(fractions) and fractions[-1] == 1.0
-    assert [s for _, s in seen][:2] == ["spacing", "features"]
+    assert [s for _, s in seen][:3] == ["spacing", "surfaces", "features"]
 
 
 @pytest.mark.skipif(not PC2BEAM.exists(), reason="shared data not present")

@@ -215,11 +215,16 @@ def test_front_faces_only_and_scanners_placed(kind: str) -> None:
     pts = sc.points / sc.scale
     s = sc.scanners[sc.scanner_index]
     assert (np.einsum("ij,ij->i", sc.normals, s - pts) > 0).all()
-    assert 2 <= len(sc.scanners) <= 4
     h = sc.scanners[:, 2] - sc.ground_z
     assert ((h >= 1.5) & (h <= 2.0)).all()
     axes = sc.true_axes().reshape(-1, 3)
     horiz = np.linalg.norm(sc.scanners[:, None, :2] - axes[None, :, :2], axis=2).min(axis=1)
+    if kind == "deck":
+        # one scanner under the deck, the others on both sides of it
+        assert 3 <= len(sc.scanners) <= 5
+        assert (horiz[1:] >= 4.5).all() and (horiz <= 26).all()
+        return
+    assert 2 <= len(sc.scanners) <= 4
     assert (horiz >= 4.5).all() and (horiz <= 26).all()
 
 
