@@ -237,18 +237,22 @@ def sampled_joints_with_events(
 
     ``t_s`` (T,) increasing times, ``q_rad`` (T,J).  The first way-point has
     duration 0 (move there before the run's clock starts), each later one the
-    time since the previous way-point; the last sample is always kept.  An
-    event at time t goes after the last way-point reached by t (never before
-    it), so e.g. a magnet lets go only once the way-point where the other
-    foot holds has been reached.
+    time since the previous way-point; the last sample is always kept, and so
+    is the last sample at or before each event's time.  An event at time t
+    goes right after that way-point (never before it), so e.g. a magnet lets
+    go only once the way-point where the other foot holds has been reached.
     """
     t = np.asarray(t_s, dtype=float).reshape(-1)
     q = np.asarray(q_rad, dtype=float)
     if len(t) == 0 or q.shape[0] != len(t):
         raise ValueError(f"trajectory needs matching times and joints, got {len(t)} and {q.shape}")
     step = max(1, round(sample_s / max(float(np.median(np.diff(t))), 1e-6))) if len(t) > 1 else 1
-    idx = np.unique(np.r_[np.arange(0, len(t), step), len(t) - 1])
     ev = sorted(events, key=lambda e: e[0])
+    # The sample each event belongs to is always a way-point: without it an
+    # event between two kept samples (foot 1's magnet on at its landing, foot 2's
+    # release) went out after the earlier one, with the foot still above the steel.
+    at_events = [max(0, int(np.searchsorted(t, te, side="right")) - 1) for te, _ in ev]
+    idx = np.unique(np.r_[np.arange(0, len(t), step), len(t) - 1, at_events].astype(int))
     cmds: list[Command] = []
     k_ev = 0
     prev = float(t[idx[0]])
