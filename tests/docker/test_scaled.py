@@ -196,8 +196,18 @@ def test_estop_through_the_proxy_latches_every_robot(scaled: Scaled) -> None:
     ms = (time.monotonic() - t0) * 1e3
     print(f"\nscaled: E-stop through the proxy answered in {ms:.0f} ms")
     assert set(body["robots"]) == set(ROBOT_NAMES) and body["unreached"] == [], body
-    latched = {r["name"]: r["estop_latched"] for r in api.get("/robots")}
-    assert latched == dict.fromkeys(ROBOT_NAMES, True), latched
+    # The answer comes once every robot was sent its stop; the robots' states
+    # reach this server's list from the link service a moment later.
+    every = dict.fromkeys(ROBOT_NAMES, True)
+    latched = wait_for(
+        lambda: (
+            (got := {r["name"]: r["estop_latched"] for r in api.get("/robots")}) == every and got
+        ),
+        10,
+        "every robot's latch in /robots",
+        poll_s=0.1,
+    )
+    assert latched == every, latched
     for robot in ROBOT_NAMES:
         api.post(f"/robots/{robot}/clear-estop")
     wait_for(lambda: not any(r["estop_latched"] for r in api.get("/robots")), 20, "latches cleared")
