@@ -37,7 +37,7 @@ from planners.inspection.close import close_route
 from planners.inspection.faces import placeable
 from planners.inspection.gaps import Gap, component_gaps, join_gaps
 from planners.inspection.params import InspectionParams
-from planners.inspection.route_repair import repair_route
+from planners.inspection.route_repair import repair_route, transition_cost
 from planners.inspection.transitions import Transition, TransitionContext
 from planners.structure.model import Member, StructureModel
 from planners.vocpp import Route, plan_route
@@ -318,8 +318,7 @@ def _best_route(
     best = plan_route(sub, s, e, weight="route_weight")
     if placeable is None:
         return best
-    _, trans = repair_route(ctx, best, rank)
-    key = (sum(not t.feasible for t in trans), sum(t.mode == "inchworm" for t in trans))
+    key = transition_cost(repair_route(ctx, best, rank)[1])
     if key[0] == 0:
         return best
     # Free ends first (where a crew sets a robot down), then joints; far from
@@ -333,24 +332,24 @@ def _best_route(
             repr(n),
         ),
     )
-    ok = [
-        n
-        for n in order
-        if any(
-            d.get("kind", "span") == "span" and int(d.get("member", -1)) in placeable
-            for _, _, d in sub.edges(n, data=True)
-        )
-    ]
+    ok = [n for n in order if _on_placeable(sub, n, placeable)]
     for c in ok[: MAX_START_CANDIDATES - 1]:
         cs, ce = _ends(sub, c, None, placeable)
         r = plan_route(sub, cs, ce, weight="route_weight")
-        _, trans = repair_route(ctx, r, rank)
-        k = (sum(not t.feasible for t in trans), sum(t.mode == "inchworm" for t in trans))
+        k = transition_cost(repair_route(ctx, r, rank)[1])
         if (k, r.length) < (key, best.length):
             best, key = r, k
         if key[0] == 0:
             break
     return best
+
+
+def _on_placeable(g: nx.MultiGraph, n: Hashable, placeable: frozenset[int]) -> bool:
+    """Whether vertex ``n`` ends a span of a member the robot can be set down on."""
+    return any(
+        d.get("kind", "span") == "span" and int(d.get("member", -1)) in placeable
+        for _, _, d in g.edges(n, data=True)
+    )
 
 
 def _has_node(g: nx.MultiGraph, v: object) -> bool:
@@ -470,16 +469,7 @@ def _ends(
             return start, start
         dist = np.linalg.norm(pos[others] - np.asarray(g.nodes[start]["pos"], float), axis=1)
         return start, pool[others[int(np.argmax(dist))]]
-    ok = np.array(
-        [
-            any(
-                d.get("kind", "span") == "span" and int(d.get("member", -1)) in placeable
-                for _, _, d in g.edges(n, data=True)
-            )
-            for n in pool
-        ],
-        dtype=bool,
-    )
+    ok = np.array([_on_placeable(g, n, placeable) for n in pool], dtype=bool)
     if end is not None:
         others = [i for i, n in enumerate(pool) if n != end]
         if not others:

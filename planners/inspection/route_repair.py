@@ -24,7 +24,7 @@ from typing import Any
 from planners.inspection.transitions import Transition, TransitionContext, route_transitions
 from planners.vocpp import Route
 
-__all__ = ["repair_route"]
+__all__ = ["repair_route", "transition_cost"]
 
 #: Reversals tried at most per route (each one a transitions pass over the walk).
 MAX_TRIES = 400
@@ -57,7 +57,7 @@ class _Memo:
         return replace(got, route=route, index_in_route=index)
 
 
-def _cost(transitions: list[Transition]) -> tuple[int, int]:
+def transition_cost(transitions: list[Transition]) -> tuple[int, int]:
     bad = sum(not t.feasible for t in transitions)
     return bad, sum(t.mode == "inchworm" for t in transitions)
 
@@ -78,7 +78,7 @@ def repair_route(
     :data:`MAX_TRIES` in all; deterministic (positions in order)."""
     memo = _Memo(ctx)
     trans = route_transitions(memo, route, route_index)  # type: ignore[arg-type]
-    best = _cost(trans)
+    best = transition_cost(trans)
     tries = 0
     improved = True
     while improved and best[0] > 0 and tries < MAX_TRIES:
@@ -103,7 +103,7 @@ def repair_route(
             tries += 1
             cand = _reversed(route, i, j)
             got = route_transitions(memo, cand, route_index)  # type: ignore[arg-type]
-            cost = _cost(got)
+            cost = transition_cost(got)
             if cost < best:
                 route, trans, best, improved = cand, got, cost, True
                 break

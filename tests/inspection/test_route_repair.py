@@ -13,7 +13,7 @@ import networkx as nx
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from planners.inspection.route_repair import _cost, _reversed, repair_route
+from planners.inspection.route_repair import _reversed, repair_route, transition_cost
 from planners.inspection.transitions import Transition, route_transitions
 from planners.vocpp import Route, plan_route
 
@@ -85,16 +85,16 @@ def test_the_repair_is_never_worse_nor_worse_than_the_best_single_reversal(g, da
     forbidden = set(data.draw(st.lists(st.sampled_from(pairs), max_size=8))) if pairs else set()
     ctx = PairCtx(g, forbidden)
     r = plan_route(g, 0, 0, weight="route_weight")
-    before = _cost(route_transitions(ctx, r, 0))  # type: ignore[arg-type]
+    before = transition_cost(route_transitions(ctx, r, 0))  # type: ignore[arg-type]
     fixed, trans = repair_route(ctx, r, 0)  # type: ignore[arg-type]
-    after = _cost(trans)
+    after = transition_cost(trans)
     assert after <= before
     assert _is_walk(g, fixed, Counter(frozenset((u, v)) | {k} for u, v, k in r.edges))
-    assert after == _cost(route_transitions(ctx, fixed, 0))  # type: ignore[arg-type]
+    assert after == transition_cost(route_transitions(ctx, fixed, 0))  # type: ignore[arg-type]
     # Brute force: the best of every single reversal of the original walk.
     best = before
     for i, j in combinations(range(len(r.vertices)), 2):
         if r.vertices[i] == r.vertices[j]:
-            best = min(best, _cost(route_transitions(ctx, _reversed(r, i, j), 0)))  # type: ignore[arg-type]
+            best = min(best, transition_cost(route_transitions(ctx, _reversed(r, i, j), 0)))  # type: ignore[arg-type]
     if best[0] < before[0]:
         assert after[0] < before[0]
