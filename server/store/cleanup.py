@@ -5,13 +5,18 @@ A ``kill -9`` can leave, in the data directory:
 * temporary files, which the server writes under a temporary name and
   renames into place only once finished: ``.tmp-*`` under ``arrays/`` (a
   half-written array, :class:`~server.store.arrays.ArrayStore` and the cloud
-  parser) and ``uploads/`` (a spooled upload), ``photos/*.part`` (a finding's
+  parser), ``captures/`` (a robot's capture being stored) and ``uploads/``
+  (a spooled upload), ``photos/*.part`` (a finding's
   photo) and ``robots/.*.tmp`` (a robot's link secret being replaced);
 * ``uploads/import-*/``: a plan archive being unpacked (``POST /imports``);
 * files written *before* the row that refers to them is committed, so that a
   crash in between leaves an orphan (never a row without its file): ``.npy``
   arrays under ``arrays/`` that no ``clouds.array_file`` or ``plans.arrays``
-  names, and photos under ``photos/`` that no ``finding_photos`` row names;
+  names, capture arrays under ``captures/`` that no ``execution_captures``
+  row names, and photos under ``photos/`` that no ``finding_photos`` row names;
+* ``emulators/.*.tmp``: a built-in emulator's world or saved state being
+  replaced (only once untouched for :data:`EMULATOR_TMP_MIN_AGE_S`: an
+  emulator outlives a crashed server and may be writing it still);
 
 and in the system's temporary directory (``tempfile.gettempdir()``): a plan
 export being zipped (``steelpath-export-*.zip``), a rosbag2 being written
@@ -59,7 +64,13 @@ STALE_S = 6 * 3600.0
 LOCK_NAME = ".steelpath-server.lock"
 
 #: Directories (relative to the data directory) that hold arrays and spools.
-SCANNED = ("arrays", "uploads")
+SCANNED = ("arrays", "captures", "uploads")
+#: Directories (relative to the data directory) whose ``.*.tmp`` files are temporaries.
+HIDDEN_TMP_DIRS = ("robots", "emulators")
+#: Built-in emulators outlive a crashed server (they are reused by the next
+#: one), so a temporary of theirs is removed only once untouched this long
+#: (seconds), even by a server alone: each of their writes takes milliseconds.
+EMULATOR_TMP_MIN_AGE_S = 60.0
 #: Name patterns of the server's own entries in the system temporary directory.
 SYSTEM_TEMP_PATTERNS = ("steelpath-export-*.zip", "steelpath-bag-*", ".tmp-e57-*.e57")
 
@@ -85,6 +96,14 @@ def referenced_arrays(store: Any) -> set[str]:
     return {str(Path(r)) for r in refs if r}
 
 
+def referenced_captures(store: Any) -> set[str]:
+    """Relative names (under ``captures/``) of every capture array a row refers to."""
+    refs: set[str] = set()
+    for row in store.db.query("SELECT points_file, intensity_file FROM execution_captures"):
+        refs.update(str(Path(v)) for v in (row["points_file"], row["intensity_file"]) if v)
+    return refs
+
+
 def referenced_photos(store: Any) -> set[str]:
     """Ids (file names under ``photos/``) of every photo a row refers to."""
     return {str(r["id"]) for r in store.db.query("SELECT id FROM finding_photos")}
@@ -105,7 +124,11 @@ def _data_leftovers(store: Any) -> Iterator[tuple[Path, str]]:
     """Every leftover in the data directory, with what it is."""
     data = Path(store.data_dir)
     arrays_root = Path(store.arrays.root)
-    keep = referenced_arrays(store)
+    # What rows name, and how an unnamed array is described, per directory.
+    named: dict[Path, tuple[set[str], str]] = {
+        arrays_root: (referenced_arrays(store), "unreferenced array"),
+        data / "captures": (referenced_captures(store), "unreferenced capture"),
+    }
     for top in SCANNED:
         root = data / top
         if not root.is_dir():
@@ -114,6 +137,7 @@ def _data_leftovers(store: Any) -> Iterator[tuple[Path, str]]:
             for d in sorted(root.glob("import-*")):
                 if d.is_dir() and not d.is_symlink():
                     yield d, "unfinished import"
+        keep, orphan = named.get(root, (None, ""))
         for path in sorted(root.rglob("*")):
             if not path.is_file() or path.is_symlink():
                 continue
@@ -123,10 +147,10 @@ def _data_leftovers(store: Any) -> Iterator[tuple[Path, str]]:
                 yield path, "temporary file"
             elif (
                 path.suffix == ".npy"
-                and root == arrays_root
-                and str(path.relative_to(arrays_root)) not in keep
+                and keep is not None
+                and (str(path.relative_to(root)) not in keep)
             ):
-                yield path, "unreferenced array"
+                yield path, orphan
     photos = data / "photos"
     if photos.is_dir():
         photo_ids = referenced_photos(store)
@@ -137,11 +161,12 @@ def _data_leftovers(store: Any) -> Iterator[tuple[Path, str]]:
                 yield path, "temporary file"
             elif path.name.startswith("ph_") and not path.suffix and path.name not in photo_ids:
                 yield path, "unreferenced photo"
-    robots = data / "robots"
-    if robots.is_dir():
-        for path in sorted(robots.glob(".*.tmp")):
-            if path.is_file() and not path.is_symlink():
-                yield path, "temporary file"
+    for top in HIDDEN_TMP_DIRS:
+        d = data / top
+        if d.is_dir():
+            for path in sorted(d.glob(".*.tmp")):
+                if path.is_file() and not path.is_symlink():
+                    yield path, "temporary file"
 
 
 def _system_temp_leftovers(temp_dir: Path) -> Iterator[tuple[Path, str]]:
@@ -191,18 +216,22 @@ def cleanup_leftovers(
     removed: list[str] = []
     for path, what in list(_data_leftovers(store)):
         rel = str(path.relative_to(data))
-        if _remove(path, what, rel, min_age_s, now):
+        age = min_age_s
+        if path.parent == data / "emulators":
+            age = max(age, EMULATOR_TMP_MIN_AGE_S)
+        if _remove(path, what, rel, age, now):
             removed.append(rel)
     if temp_dir is not None and temp_dir.is_dir():
         for path, what in list(_system_temp_leftovers(temp_dir)):
             if _remove(path, what, str(path), temp_min_age_s, now):
                 removed.append(str(path))
-    plans_dir = Path(store.arrays.root) / "plans"
-    if plans_dir.is_dir():
-        for d in sorted(plans_dir.iterdir()):
+    for holder in (Path(store.arrays.root) / "plans", data / "captures"):
+        if not holder.is_dir():
+            continue
+        for d in sorted(holder.iterdir()):
             if d.is_dir() and not d.is_symlink() and not any(d.iterdir()):
                 with contextlib.suppress(OSError):  # another server may be filling it now
-                    d.rmdir()  # a deleted or never-finished plan's directory
+                    d.rmdir()  # a deleted or never-finished plan's (execution's) directory
     return sorted(removed)
 
 

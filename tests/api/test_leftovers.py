@@ -1,4 +1,4 @@
-"""Leftovers after a crash (issue #12 §6): temporaries and unreferenced files go,
+"""Leftovers after a crash: temporaries and unreferenced files go,
 referenced data stays, and a server starting beside a running one leaves its
 writes in progress alone."""
 
@@ -20,8 +20,16 @@ import numpy as np
 import pytest
 from PIL import Image
 
+from server.captures.service import record_capture
 from server.store import Store
-from server.store.cleanup import LOCK_NAME, STALE_S, RunLock, cleanup_leftovers
+from server.store.cleanup import (
+    EMULATOR_TMP_MIN_AGE_S,
+    LOCK_NAME,
+    STALE_S,
+    RunLock,
+    cleanup_leftovers,
+)
+from tests.api.test_captures import make_capture, make_execution
 from tests.conftest import Api
 from tests.support.serve import ServeProcess
 from tests.support.waiting import wait_for
@@ -34,6 +42,8 @@ def _plant(data: Path) -> dict[str, Path]:
         "orphan_cloud": data / "arrays" / "clouds" / "cl_000000000000.npy",
         "orphan_plan": data / "arrays" / "plans" / "pl_000000000000" / "route.npy",
         "spool": data / "uploads" / ".tmp-upload-xyz.part",
+        "tmp_capture": data / "captures" / "ex_gone" / ".tmp-c.npy",
+        "orphan_capture": data / "captures" / "ex_000000000000" / "7.points.npy",
     }
     for p in planted.values():
         p.parent.mkdir(parents=True, exist_ok=True)
@@ -52,6 +62,11 @@ def test_cleanup_removes_leftovers_and_keeps_referenced_arrays(api, tmp_path, ca
     data = store.data_dir
     kept = [store.arrays.path(store.get_cloud(cloud["id"]).array_file)]
     kept += [store.arrays.path(rel) for rel in store.get_plan(plan["id"]).arrays.values()]
+    # A capture a robot sent during an execution: its points and intensities stay.
+    _plan, ex = make_execution(api)
+    cap = record_capture(store, ex.id, make_capture(7, 50))
+    assert cap is not None and cap.intensity_file is not None
+    kept += [data / "captures" / cap.points_file, data / "captures" / cap.intensity_file]
     before = {p: p.read_bytes() for p in kept}
     planted = _plant(data)
     with caplog.at_level(logging.WARNING, logger="server.store.cleanup"):
@@ -61,6 +76,9 @@ def test_cleanup_removes_leftovers_and_keeps_referenced_arrays(api, tmp_path, ca
     assert {p: p.read_bytes() for p in kept} == before  # referenced arrays untouched
     assert (data / "arrays" / "README.txt").read_text() == "keep me"
     assert not (data / "arrays" / "plans" / "pl_gone").exists()  # emptied plan dirs go
+    assert not (data / "captures" / "ex_gone").exists()  # and emptied execution dirs
+    got = api.get(f"/api/v1/executions/{ex.id}/captures/7", "viewer")
+    assert got.status_code == 200 and got.json()["returned_points"] == 50
     for rel in removed:
         assert rel in caplog.text
     # The stored cloud and plan still read back through the API.
@@ -79,7 +97,7 @@ def test_app_start_cleans_the_data_directory(make_api, tmp_path) -> None:
     assert not any(p.exists() for p in planted.values())
 
 
-# ------------------------------------------------- every kind of temporary (issue: crash leftovers)
+# ------------------------------------------------- every kind of temporary
 def _image() -> bytes:
     buf = io.BytesIO()
     Image.new("RGB", (4, 3), (180, 90, 40)).save(buf, format="PNG")
@@ -103,7 +121,14 @@ def _plant_every_kind(data: Path, temp: Path, tag: str) -> dict[str, Path]:
     _write(imp_half / ".tmp-1", 4096)
     bag = temp / f"steelpath-bag-{tag}"
     _write(bag / "ex_1" / "ex_1_0.db3")
-    return {
+    # An emulator (it outlives a crashed server) writes its temporaries in
+    # milliseconds: a leftover of one is at least a minute old.
+    emulator = {
+        "world_tmp": _write(data / "emulators" / f".ara.world.{tag}.tmp", 4096),
+        "emulator_state_tmp": _write(data / "emulators" / f".ara.state.json.{tag}.tmp", 64),
+    }
+    _age(emulator, EMULATOR_TMP_MIN_AGE_S + 60)
+    return emulator | {
         "photo_part": _write(data / "photos" / f"ph_{hexes}.part", 2 * 1024 * 1024),
         "orphan_photo": _write(data / "photos" / f"ph_{hexes[::-1]}"),
         "import_empty": imp_empty,
@@ -111,6 +136,8 @@ def _plant_every_kind(data: Path, temp: Path, tag: str) -> dict[str, Path]:
         "array_tmp": _write(data / "arrays" / "clouds" / f".tmp-{tag}.npy"),
         "spool": _write(data / "uploads" / f".tmp-upload-{tag}.part"),
         "secret_tmp": _write(data / "robots" / f".ara.key.{len(tag)}4242.tmp", 65),
+        "capture_tmp": _write(data / "captures" / f"ex_{hexes}" / f".tmp-{tag}.npy"),
+        "orphan_capture": _write(data / "captures" / f"ex_{hexes}" / "3.points.npy"),
         "export": _write(temp / f"steelpath-export-{tag}.zip"),
         "bag": bag,
         "e57": _write(temp / f".tmp-e57-{tag}.e57"),
@@ -221,6 +248,20 @@ def test_beside_a_running_server_only_stale_leftovers_go(
     make_api(data=data)  # alone now
     left = {k: p for k, p in writing.items() if p.exists()}
     assert not left, left
+
+
+def test_an_emulators_fresh_temporary_survives_a_lone_start(make_api: Any, tmp_path: Path) -> None:
+    """A built-in emulator outlives a crashed server and is reused by the next:
+    the state file it is replacing right now is not a leftover."""
+    data = tmp_path / "var"
+    Store(data).close()
+    fresh = _write(data / "emulators" / ".ara.state.json.abc123.tmp", 64)
+    old = _write(data / "emulators" / ".ara.state.json.def456.tmp", 64)
+    _age({"old": old}, EMULATOR_TMP_MIN_AGE_S + 1)
+    state = _write(data / "emulators" / "ara.state.json", 64)
+    make_api(data=data)
+    assert fresh.exists() and state.exists()
+    assert not old.exists()
 
 
 def test_the_lock_says_whether_another_server_runs(tmp_path: Path) -> None:
