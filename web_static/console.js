@@ -551,6 +551,9 @@ function renderPlans() {
 }
 
 async function select(id) {
+  // A message about the plan shown before ("dispatched as ex_…") must not
+  // read as if it were about this one.
+  if (state.selected !== id) { $("#action-msg").textContent = ""; $("#action-msg").className = "muted small"; }
   state.selected = id;
   renderPlans();
   const p = await api("GET", `/plans/${id}`);
@@ -910,7 +913,8 @@ async function showExecution(ex) {
   $("#x-progress span").textContent = `${full.acked}/${full.total} commands`
     + (tl ? ` · ${tDone.toFixed(1)} of ${tAll.toFixed(1)} s planned` : "");
   $("#x-current").textContent = full.current_command ? describeCommand(full.current_command) : "–";
-  $("#x-fault").textContent = NEXT_ACTION[full.state] ? `${full.state}: ${full.fault || full.error || "no reason given"} — ${NEXT_ACTION[full.state]}` : "";
+  $("#x-fault").textContent = NEXT_ACTION[full.state]
+    ? `${full.state}${stoppedAt(full)}: ${full.fault || full.error || "no reason given"} — ${NEXT_ACTION[full.state]}` : "";
   const allowed = new Set(full.allowed_actions || []);
   $("#x-pause").disabled = !allowed.has("pause");
   $("#x-resume").disabled = !allowed.has("resume");
@@ -918,9 +922,17 @@ async function showExecution(ex) {
   applyRole();
 }
 
+// " at <time> by <actor>" of the transition that left the execution in its state.
+function stoppedAt(ex) {
+  const last = (ex.audit || []).find((e) => e.to_state === ex.state);
+  if (!last) return "";
+  const when = new Date(last.ts).toLocaleTimeString();
+  return ` at ${when}` + (last.actor ? ` (${last.actor})` : "");
+}
+
 // What the operator does next, shown with the reason while an execution waits.
 const NEXT_ACTION = {
-  interrupted: "Resume once the robot is safe: it continues from the last acknowledged command",
+  interrupted: "once the robot is safe (its E-stop cleared, if one was pressed), Resume: it continues from the last acknowledged command; or Abort to end the run",
   faulted: "fix the fault's cause, then Resume (it clears the robot's fault) or Abort",
 };
 
@@ -944,7 +956,8 @@ for (const action of ["pause", "resume", "abort"]) {
   $(`#x-${action}`).addEventListener("click", async () => {
     if (!state.execution) return;
     if (action === "abort" && !window.confirm(
-      `Abort execution ${state.execution.id}? The robot stops where it is; the plan must be dispatched again to finish.`)) return;
+      `Abort execution ${state.execution.id}? The run ends for good: the robot stops where it is and the rest of its program is not run. `
+      + "An aborted plan cannot be resumed or dispatched again; Revise it to plan anew.")) return;
     try {
       const ex = await api("POST", `/executions/${state.execution.id}/${action}`, action === "resume" ? {} : undefined);
       showExecution(ex);

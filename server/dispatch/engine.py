@@ -124,6 +124,7 @@ class DispatchEngine:
         self.leased = False
         self.server_id: str | None = None
         self._streamer_robot: dict[str, str] = {}
+        self._estop_reasons: dict[str, str] = {}  # robot → the reason of its latest E-stop
         self._detached: set[str] = set()
         self._store_emulated: dict[str, str] = {}
         # Set by :meth:`shutdown` before it closes the links: the link losses
@@ -583,15 +584,17 @@ class DispatchEngine:
 
     def estop(self, robot: str | None, reason: str) -> list[str]:
         """Stop every robot (or one) now, then record it; returns the robots reached."""
-        reached = self.estop_links(robot)
+        reached = self.estop_links(robot, reason)
         self.estop_bookkeeping(robot, reason)
         return reached
 
-    def estop_links(self, robot: str | None) -> list[str]:
+    def estop_links(self, robot: str | None, reason: str = "E-stop") -> list[str]:
         """The first-priority part: write ESTOP to every target link from this thread.
 
         ``link.estop()`` writes the frame at once and latches it for
         reconnects, so this never waits on a busy link, a streamer or SQLite.
+        ``reason`` is kept per robot for the run it interrupts: the streamer may
+        see the robot's stop before the bookkeeping runs.
         """
         if robot is None:
             targets = list(self._robots.values())
@@ -603,6 +606,7 @@ class DispatchEngine:
             targets = [self._robot(robot)]
         reached = []
         for r in targets:
+            self._estop_reasons[r.name] = reason
             try:
                 r.link.estop()
                 reached.append(r.name)
@@ -611,13 +615,30 @@ class DispatchEngine:
         return reached
 
     def estop_bookkeeping(self, robot: str | None, reason: str) -> None:
-        """Stop the streamers and abort the executions of the E-stopped robots."""
+        """Stop the streamers and interrupt the executions of the E-stopped robots.
+
+        An E-stop is a stop an operator recovers from, as from a link loss: the
+        run is ``interrupted`` with the reason (its ``fault``), and once the
+        E-stop is cleared *resume* continues from the last completed command
+        (the robot keeps the remainder of the one it was in, docs/protocol.md
+        §8.2).  Ending the run is the operator's explicit *abort*.
+        """
         for eid, s in list(self._streamers.items()):
             ex = self.store.get_execution(eid)
             if robot is None or ex.robot == robot:
                 s.estopped()  # estop_links already latched the link: never latch it again
                 if ex.state in ACTIVE:
-                    self._transition(eid, "abort", "estop", reason)
+                    self._estop_interrupt(eid, reason)
+
+    def _estop_interrupt(self, execution_id: str, reason: str) -> None:
+        why = f"E-stop: {reason}" if reason else "E-stop"
+        self._transition(
+            execution_id,
+            "interrupt",
+            "estop",
+            f"{why}; clear the E-stop, then resume (or abort)",
+            fault=why,
+        )
 
     # ------------------------------------------------------------- callbacks
     def _on_acks(self, execution_id: str, first: int, last: int) -> None:
@@ -640,9 +661,15 @@ class DispatchEngine:
     def _on_done(self, execution_id: str, outcome: Outcome) -> None:
         if execution_id in self._detached:
             return
-        action = {"completed": "complete", "aborted": "abort", "estopped": "abort"}[str(outcome)]
-        reason = "E-stop" if outcome == Outcome.ESTOPPED else f"robot reported {outcome}"
-        self._transition(execution_id, action, "robot", reason)
+        if outcome == Outcome.ESTOPPED:  # recoverable, whoever pressed it
+            name = self._streamer_robot.get(execution_id)
+            r = self._robots.get(name) if name is not None else None
+            host = r is not None and r.link.estop_latched and name in self._estop_reasons
+            why = self._estop_reasons[name] if host and name else "reported by the robot"
+            self._estop_interrupt(execution_id, why)
+        else:
+            action = {"completed": "complete", "aborted": "abort"}[str(outcome)]
+            self._transition(execution_id, action, "robot", f"robot reported {outcome}")
         with self._lock:
             s = self._streamers.pop(execution_id, None)
             self._streamer_robot.pop(execution_id, None)

@@ -189,7 +189,7 @@ class LinkService:
             robot = req.get("robot")
             t0 = time.monotonic()
             try:
-                reached = self.engine.estop_links(robot)
+                reached = self.engine.estop_links(robot, str(req.get("reason") or "E-stop"))
                 reply: dict[str, Any] = {"id": req.get("id"), "ok": True, "result": reached}
             except Exception as exc:
                 reply = {"id": req.get("id"), "ok": False, "error": _error(exc)}

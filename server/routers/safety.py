@@ -60,7 +60,7 @@ def trigger_estop(
     local: list[str] = []
     for handler in list(services.estop_handlers):
         try:
-            got = handler(robot, reason)
+            got = handler(robot, f"{reason} (by {actor})")
             reached.append(getattr(handler, "__name__", repr(handler)))
             if isinstance(got, list):
                 local.extend(str(name) for name in got)

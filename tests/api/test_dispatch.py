@@ -112,7 +112,10 @@ def test_pause_resume_abort(dapi) -> None:
     assert dapi.post(f"/api/v1/executions/{eid}/resume").status_code == 409
 
 
-def test_estop_stops_the_emulator_and_blocks_until_cleared(dapi) -> None:
+def test_estop_stops_the_run_and_it_resumes_once_cleared(dapi) -> None:
+    """An E-stop stops the robot and leaves its run ``interrupted`` with the reason
+    and who pressed it; nothing moves until the E-stop is cleared; then *resume*
+    finishes the run from where it stopped, every command exactly once."""
     plan = approved_demo(dapi)
     eid = dapi.post(f"/api/v1/plans/{plan['id']}/dispatch", json={"robot": "ara"}).json()["id"]
     wait_execution(dapi, eid, ("running",))
@@ -120,18 +123,49 @@ def test_estop_stops_the_emulator_and_blocks_until_cleared(dapi) -> None:
     r = dapi.post("/api/v1/estop", json={"reason": "person on the girder"})
     assert r.status_code == 200 and r.json()["errors"] == []
     _wait(lambda: emulator.stop_events(), 5, "emulator stop event")
-    ex = wait_execution(dapi, eid, ("aborted",))
+    ex = wait_execution(dapi, eid, ("interrupted",))
     assert ex["acked"] < ex["total"]
+    assert "E-stop: person on the girder" in ex["fault"] and "operator" in ex["fault"], ex
+    assert dapi.get(f"/api/v1/plans/{plan['id']}").json()["state"] == "interrupted"
+    stop = [e for e in ex["audit"] if e["action"] == "interrupt"]
+    assert len(stop) == 1 and stop[0]["actor"] == "estop" and stop[0]["ts"], ex["audit"]
+    assert "clear the E-stop, then resume" in stop[0]["reason"]
     assert dapi.get("/api/v1/robots/ara/state").json()["estop_latched"]
+    # Nothing moves while it is latched: no resume, no other run on the robot.
+    r = dapi.post(f"/api/v1/executions/{eid}/resume")
+    assert r.status_code == 409 and "clear the E-stop" in r.json()["detail"]
     plan2 = approved_demo(dapi)
     r = dapi.post(f"/api/v1/plans/{plan2['id']}/dispatch", json={"robot": "ara"})
-    assert r.status_code == 409 and "E-stop" in r.json()["detail"]
+    assert r.status_code == 409, r.text
     dapi.post("/api/v1/robots/ara/clear-estop")
     _wait(lambda: dapi.services.dispatch.wait_connected("ara", 0.1), 10, "reconnect")
+    # The interrupted run still holds the robot: resumed, it completes once.
+    r = dapi.post(f"/api/v1/plans/{plan2['id']}/dispatch", json={"robot": "ara"})
+    assert r.status_code == 409 and eid in r.json()["detail"], r.text
+    r = _wait(
+        lambda: (x := dapi.post(f"/api/v1/executions/{eid}/resume")).status_code == 200 and x,
+        10,
+        "resume accepted once the robot reports the E-stop cleared",
+    )
+    done = wait_execution(dapi, eid, ("completed",), timeout=120)
+    assert check_exactly_once(emulator.execution_log(), done["run_id"], done["total"]) == []
+    assert dapi.services.store.list_acks(eid) == list(range(done["total"]))
+    # Then the robot is free for the next plan.
     r = dapi.post(f"/api/v1/plans/{plan2['id']}/dispatch", json={"robot": "ara"})
     assert r.status_code == 201, r.text
     wait_execution(dapi, r.json()["id"], ("completed",))
     assert dapi.post("/api/v1/robots/nope/estop").status_code == 404
+
+
+def test_an_estopped_run_can_be_aborted(dapi) -> None:
+    plan = approved_demo(dapi)
+    eid = dapi.post(f"/api/v1/plans/{plan['id']}/dispatch", json={"robot": "ara"}).json()["id"]
+    wait_execution(dapi, eid, ("running",))
+    assert dapi.post("/api/v1/robots/ara/estop").status_code == 200
+    wait_execution(dapi, eid, ("interrupted",))
+    ex = dapi.post(f"/api/v1/executions/{eid}/abort").json()
+    assert ex["state"] == "aborted" and ex["acked"] < ex["total"]
+    assert dapi.post(f"/api/v1/executions/{eid}/resume").status_code == 409
 
 
 def test_server_restart_mid_run_resumes_without_loss(make_api, tmp_path) -> None:

@@ -30,6 +30,7 @@ import contextlib
 import json
 import math
 import random
+import re
 import time
 from collections.abc import Sequence
 from pathlib import Path
@@ -38,6 +39,8 @@ from typing import Any
 import httpx
 
 TERMINAL_PLAN_STATES = frozenset({"planned", "rejected", "failed", "cancelled"})
+#: A dispatch refused because a run (e.g. one an E-stop interrupted) holds the robot.
+BUSY = re.compile(r"busy with execution (ex_[0-9a-z]+)")
 
 
 def percentile(values: Sequence[float], q: float) -> float:
@@ -337,7 +340,12 @@ async def _writer(
             st = await call("robot", "GET", f"/api/v1/robots/{robot}/state")
             if st is not None and st.status_code == 200 and st.json().get("state") != "ready":
                 await call("clear", "POST", f"/api/v1/robots/{robot}/clear-estop")
-            await call("dispatch", "POST", f"/api/v1/plans/{plan_id}/dispatch", {"robot": robot})
+            r = await call(
+                "dispatch", "POST", f"/api/v1/plans/{plan_id}/dispatch", {"robot": robot}
+            )
+            busy = BUSY.search(r.text) if r is not None and r.status_code == 409 else None
+            if busy:  # a run an E-stop interrupted holds the robot: resume it, as an operator
+                await call("resume", "POST", f"/api/v1/executions/{busy.group(1)}/resume", {})
 
 
 async def _stream(

@@ -740,7 +740,7 @@ def estop_trials(
             latency = (wait_for("mode ESTOP in the state report", host_sees, 30, 0.0) - t0) * 1e3
             moving = True
         run.trials.append(Trial(latency, http_ms, moving, upload, planning, ex["id"], server_ms))
-        # Clear only once the robot reported its E-stop and the execution is aborted:
+        # Clear only once the robot reported its E-stop and the execution stopped:
         # the link service finishes an E-stop's bookkeeping after it has answered, and
         # that bookkeeping latches the link again (Streamer.estop), undoing a clear
         # that overtook it.
@@ -756,6 +756,10 @@ def estop_trials(
             return api.get(f"/executions/{ex_id}")["state"] in TERMINAL_EXEC_STATES
 
         wait_for(f"E-stopped execution {ex_id} to end", ended, 60, 0.02)
+        # An E-stop interrupts the run (resumable); end it, so the next trial's
+        # dispatch finds the robot free.
+        if api.get(f"/executions/{ex_id}")["state"] == "interrupted":
+            api.post(f"/executions/{ex_id}/abort")
         api.post(f"/robots/{ESTOP_ROBOT}/clear-estop")
     log(f"{label}: {n} E-stop trials done" + (f", {run.skipped} skipped" if run.skipped else ""))
 

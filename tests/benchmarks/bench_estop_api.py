@@ -44,7 +44,7 @@ def main() -> int:
     with live_server(settings) as (url, tokens, app):
         eng = app.state.services.dispatch
         assert eng.wait_connected("ara", 30)
-        emulator = eng._robots["ara"].emulator
+        emulator = app.state.services.emulators["ara"]  # its own process
         h = {"Authorization": f"Bearer {tokens['operator']}"}
         c = httpx.Client(base_url=url, headers=h, timeout=30)
         for trial in range(args.trials):
@@ -57,7 +57,9 @@ def main() -> int:
                 pass
             r = c.post(f"/api/v1/plans/{pid}/dispatch", json={"robot": "ara"})
             assert r.status_code == 201, r.text
-            while emulator.snapshot().executing < 0:
+            while (c.get("/api/v1/robots/ara/state").json().get("report") or {}).get(
+                "executing", -1
+            ) < 0:
                 time.sleep(0.005)
             time.sleep(rng.uniform(0, 0.05))
             n_before = len(emulator.stop_events())
@@ -65,11 +67,13 @@ def main() -> int:
             c.post("/api/v1/estop", json={"reason": f"bench trial {trial}"})
             while len(emulator.stop_events()) == n_before:
                 time.sleep(0.0005)
-            stop = next(e for e in emulator.stop_events()[n_before:] if e.reason == "estop")
-            lat.append((stop.t - t0) * 1e3)
+            stop = next(e for e in emulator.stop_events()[n_before:] if e["reason"] == "estop")
+            lat.append((float(stop["t"]) - t0) * 1e3)  # the emulator's CLOCK_MONOTONIC
             t1 = time.monotonic()
             c.get("/api/v1/robots/ara/state")
             base.append((time.monotonic() - t1) * 1e3)
+            # The E-stop interrupted the run (resumable); end it so the robot is free.
+            c.post(f"/api/v1/executions/{r.json()['id']}/abort")
     med, worst = statistics.median(lat), max(lat)
     bmed = statistics.median(base)
     print(f"E-stop via REST → emulator motion stop, {len(lat)} trials (ms):")

@@ -11,7 +11,9 @@ from pathlib import Path
 
 import httpx
 import pytest
+from playwright.sync_api import TimeoutError as PlaywrightTimeout
 
+from robots.emulator.robot import check_exactly_once
 from tests.conftest import make_settings
 from tests.support.live import free_port, live_server
 
@@ -346,7 +348,10 @@ def test_dispatch_to_emulator_then_estop(browser, tmp_path: Path) -> None:
         assert "commands" in page.inner_text("#x-progress")
 
         # Run 2: stopped with the E-stop button while the robot moves.
+        assert "dispatched as" in page.inner_text("#action-msg")
         plan2 = _plan_and_approve(page, '{"end": "c2"}')
+        # The first run's "dispatched as ex_…" is not shown on the new plan.
+        assert "dispatched as" not in page.inner_text("#action-msg")
         page.click("#dispatch")
         page.click("#dispatch-confirm")
         page.wait_for_function(
@@ -376,9 +381,16 @@ def test_dispatch_to_emulator_then_estop(browser, tmp_path: Path) -> None:
         )
         assert not page.is_visible("#audit")  # the audit log is folded by default
         page.click("#estop")
+        # The run is interrupted, not ended: the panel says why, when and what next.
         page.wait_for_function(
-            "document.querySelector('#x-state').textContent === 'aborted'", timeout=30_000
+            "document.querySelector('#x-state').textContent === 'interrupted'", timeout=30_000
         )
+        page.wait_for_function(
+            "document.querySelector('#x-fault').textContent.includes('E-stop')", timeout=30_000
+        )
+        why = page.inner_text("#x-fault")
+        assert "console E-stop button" in why and " at " in why and "Resume" in why, why
+        assert page.is_enabled("#x-resume") and page.is_enabled("#x-abort")
         page.wait_for_function(
             "document.querySelector('#robots tr[data-robot=ara]').textContent.includes('E-STOP latched')",
             timeout=30_000,
@@ -399,6 +411,22 @@ def test_dispatch_to_emulator_then_estop(browser, tmp_path: Path) -> None:
         page.once("dialog", lambda d: d.accept())
         page.click("#estop-clear-all")
         page.wait_for_selector("#estop-banner", state="hidden", timeout=30_000)
+        # Cleared: Resume finishes the run from where the E-stop caught it.
+        stopped_at = app.state.services.store.list_executions(plan_id=plan2)[0].acked
+        page.wait_for_selector("#robots tr[data-robot=ara][data-link=ready]", timeout=30_000)
+        for _ in range(5):  # the robot's own report of the clear may trail the host's by a beat
+            page.click("#x-resume")
+            try:
+                page.wait_for_function(
+                    "document.querySelector('#x-state').textContent !== 'interrupted'",
+                    timeout=3000,
+                )
+                break
+            except PlaywrightTimeout:
+                continue
+        page.wait_for_function(
+            "document.querySelector('#x-state').textContent === 'completed'", timeout=90_000
+        )
 
         # Run 3: Abort, confirmed, stops the run (no E-stop latched).
         plan3 = _plan_and_approve(page, '{"end": "c1"}')
@@ -422,7 +450,10 @@ def test_dispatch_to_emulator_then_estop(browser, tmp_path: Path) -> None:
         store = app.state.services.store
         ex1, ex2 = (store.list_executions(plan_id=p)[0] for p in (plan1, plan2))
         assert (ex1.state, ex1.acked == ex1.total) == ("completed", True)
-        assert ex2.state == "aborted" and ex2.acked < ex2.total
+        assert (ex2.state, ex2.acked == ex2.total) == ("completed", True)
+        assert stopped_at < ex2.total
+        log = emulator.execution_log()
+        assert check_exactly_once(log, ex2.run_id, ex2.total) == []
 
 
 def test_plots_have_axes_legend_hover_and_survive_200k_points(browser, tmp_path: Path) -> None:
