@@ -69,7 +69,12 @@ def cmd_serve(args: argparse.Namespace) -> int:
         # instant failed "server disconnected" (1 of 15,709 bench reads).
         timeout_keep_alive=75,
     )
-    return 0
+    # uvicorn returned after the app's shutdown (links, workers, store closed):
+    # end here, without the bindings' teardown report (server.lifetime).
+    from server.lifetime import exit_without_teardown
+
+    exit_without_teardown(0)
+    return 0  # pragma: no cover
 
 
 # ----------------------------------------------------------------------- token
@@ -83,12 +88,53 @@ def _duration(text: str) -> float:
         raise argparse.ArgumentTypeError(str(exc)) from None
 
 
+def _server_runs_on(data: Path) -> bool:
+    """Whether a server holds its run lock on ``data`` (server.store.cleanup.RunLock)."""
+    import fcntl
+
+    from server.store.cleanup import LOCK_NAME
+
+    path = Path(data) / LOCK_NAME
+    if not path.exists():
+        return False
+    with open(path, "rb") as fh:
+        # A running server holds it shared, so an exclusive try fails; held for
+        # an instant, it can at worst make a server starting then clean only
+        # stale leftovers.
+        try:
+            fcntl.flock(fh.fileno(), fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            return True
+        fcntl.flock(fh.fileno(), fcntl.LOCK_UN)
+        return False
+
+
 def cmd_token(args: argparse.Namespace) -> int:
     from server.auth import create_token
     from server.store import NotFoundError, Store
 
     settings = _settings_from(args)
+    fresh = settings.database_url is None and not settings.db_path.exists()
+    if fresh and (args.token_cmd != "create" or not args.new_data):
+        # A token written where no server looks is refused by the server (401).
+        print(
+            f"error: no SteelPath database in {settings.data.resolve()} (no server has used "
+            "this data directory). Name the server's data directory with --data or "
+            "STEELPATH_DATA, or add --new-data to create one here for a server to come.",
+            file=sys.stderr,
+        )
+        return 2
     store = Store(settings.data, database_url=settings.database_url)
+    if (
+        args.token_cmd == "create"
+        and settings.database_url is None
+        and not _server_runs_on(settings.data)
+    ):
+        print(
+            f"note: no server runs on {settings.data.resolve()} now; the token works once one "
+            "is started with this data directory",
+            file=sys.stderr,
+        )
     try:
         if args.token_cmd == "create":
             name = args.name or f"{args.role} token"
@@ -316,12 +362,20 @@ def cmd_estop(args: argparse.Namespace) -> int:
     if args.estop_cmd == "clear":
         if bool(args.all) == bool(args.robot):
             raise SystemExit("error: name a robot, or --all to clear every latched robot")
-        names = (
-            [args.robot] if args.robot else [r["name"] for r in _request(args, "GET", "/robots")]
-        )
-        for name in names:
-            _request(args, "POST", f"/robots/{name}/clear-estop")
-            print(f"E-stop cleared on {name}")
+        robots = _request(args, "GET", "/robots")
+        known = {r["name"]: r for r in robots}
+        if args.robot and args.robot not in known:
+            print(f"error: no robot {args.robot!r}; robots: {', '.join(known)}", file=sys.stderr)
+            return 2
+        for name in [args.robot] if args.robot else list(known):
+            if not known[name].get("estop_latched"):
+                print(f"{name}: not E-stopped, nothing to clear")
+                continue
+            after = _request(args, "POST", f"/robots/{name}/clear-estop")
+            if after.get("estop_latched"):
+                print(f"{name}: clear sent, but the robot still reports its E-stop latched")
+            else:
+                print(f"{name}: E-stop cleared ({after.get('state', 'state unknown')})")
         return 0
     body: dict[str, Any] = {"reason": args.reason}
     if args.robot:
@@ -379,7 +433,14 @@ def build_parser() -> argparse.ArgumentParser:
         metavar="DURATION",
         help="lifetime, a number with a unit s, m, h or d (e.g. 30d); default: never expires",
     )
-    tc.add_argument("--data", type=Path, help="data directory (default ./var)")
+    tc.add_argument(
+        "--data", type=Path, help="the server's data directory (default: STEELPATH_DATA or ./var)"
+    )
+    tc.add_argument(
+        "--new-data",
+        action="store_true",
+        help="create the data directory's database if no server has used it yet",
+    )
     tl = tsub.add_parser("list", help="list tokens (never their secrets)")
     tl.add_argument("--data", type=Path)
     tr = tsub.add_parser("revoke", help="revoke a token by id")

@@ -18,6 +18,7 @@ one long-lived spawner thread, never on a short-lived request thread.
 
 from __future__ import annotations
 
+import atexit
 import contextlib
 import functools
 import gc
@@ -43,7 +44,7 @@ from planners.errors import CancelledError, InvalidInputError
 from server.diskspace import describe, is_disk_full
 from server.events import EventBus
 from server.lifecycle import IllegalTransitionError, PlanState
-from server.lifetime import die_with_parent
+from server.lifetime import die_with_parent, exit_without_teardown, leave_interrupts_to_parent
 from server.store import NotFoundError, Store
 from server.store.ownership import OwnershipStore
 from server.store.plan_owners import PlanOwnerStore
@@ -62,6 +63,9 @@ def _worker_init(parent_pid: int, preload: bool = False) -> None:
     """Process-pool initializer: lower priority, exit when the server dies, and
     (``preload``) do the imports and robot loads of every kind now."""
     die_with_parent(parent_pid)
+    leave_interrupts_to_parent()
+    # After the pool let this worker go (its own shutdown is over): no teardown report.
+    atexit.register(exit_without_teardown)
     with contextlib.suppress(OSError):
         os.nice(WORKER_NICE)
     # One BLAS thread per worker: planners multiply small matrices, and a

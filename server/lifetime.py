@@ -52,3 +52,33 @@ def die_with_parent(
                 return
 
     threading.Thread(target=watch, name="parent-watch", daemon=True).start()
+
+
+def leave_interrupts_to_parent() -> None:
+    """Ignore SIGINT in a helper process the server starts and stops itself.
+
+    Ctrl-C in a terminal signals the whole foreground process group: each
+    planning worker then died in the middle of waiting for work and printed a
+    ``KeyboardInterrupt`` traceback, while the server was already shutting the
+    pool down in order.
+    """
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+
+
+def exit_without_teardown(code: int = 0) -> None:
+    """Flush the logs and standard streams and end the process now.
+
+    OMPL's nanobind bindings report every type and function they registered
+    as "leaked" when the interpreter tears its modules down (some 1,600
+    lines at each exit of a process that planned); nothing leaks while the
+    process runs.  A process whose own shutdown has finished (the server
+    after uvicorn returned, a planning worker leaving the pool) skips that
+    teardown.
+    """
+    import logging
+
+    logging.shutdown()
+    for stream in (sys.stdout, sys.stderr):
+        with contextlib.suppress(Exception):
+            stream.flush()
+    os._exit(code)

@@ -66,7 +66,27 @@ def test_console_script_installed() -> None:
     assert subprocess.run([str(exe), "--help"], capture_output=True, timeout=60).returncode == 0
 
 
+def test_token_create_refuses_a_data_directory_no_server_used(tmp_path: Path) -> None:
+    """A token written where no server looks would be refused by the server."""
+    r = steelpath("token", "create", "--data", str(tmp_path / "nowhere"))
+    assert r.returncode == 2 and "no SteelPath database in" in r.stderr, r.stderr
+    assert "--new-data" in r.stderr and not (tmp_path / "nowhere").exists()
+    assert steelpath("token", "list", "--data", str(tmp_path / "nowhere")).returncode == 2
+    r = steelpath("token", "create", "--new-data", "--data", str(tmp_path / "new"))
+    assert r.returncode == 0 and r.stdout.strip().splitlines()[-1].startswith("sp_"), r.stderr
+    assert "no server runs on" in r.stderr  # and it says that no server uses it yet
+
+
+def test_token_create_says_whether_a_server_runs_on_its_data(tmp_path: Path) -> None:
+    settings = make_settings(tmp_path / "var", port=free_port())
+    with live_server(settings):
+        r = steelpath("token", "create", "--data", str(tmp_path / "var"))
+        assert r.returncode == 0, r.stderr
+        assert "no server runs" not in r.stderr
+
+
 def test_token_create_prints_token_last(tmp_path: Path) -> None:
+    Store(tmp_path).close()  # a data directory a server has used
     r = steelpath("token", "create", "--role", "viewer", "--name", "dash", "--data", str(tmp_path))
     assert r.returncode == 0, r.stderr
     token = r.stdout.strip().splitlines()[-1]
@@ -82,6 +102,7 @@ def test_token_create_prints_token_last(tmp_path: Path) -> None:
 
 
 def test_token_create_with_expiry(tmp_path: Path) -> None:
+    Store(tmp_path).close()
     r = steelpath(
         "token", "create", "--role", "operator", "--expires-in", "30d", "--data", str(tmp_path)
     )
@@ -191,4 +212,14 @@ def test_approve_dispatch_watch_estop_and_clear(tmp_path: Path) -> None:
         assert r.returncode != 0 and "--all" in r.stderr
         r = steelpath("estop", "clear", "--all", env=env)
         assert r.returncode == 0, r.stderr
-        assert sorted(ln.split()[-1] for ln in r.stdout.splitlines()) == sorted(eng.robot_names())
+        said = dict(ln.split(": ", 1) for ln in r.stdout.splitlines())
+        assert sorted(said) == sorted(eng.robot_names()), r.stdout
+        assert all(v.startswith("E-stop cleared") for v in said.values()), said
+        # Per robot what it did: one latched, the others had nothing to clear.
+        assert steelpath("estop", "--robot", "ara", env=env).returncode == 0
+        r = steelpath("estop", "clear", "--all", env=env)
+        said = dict(ln.split(": ", 1) for ln in r.stdout.splitlines())
+        assert said.pop("ara").startswith("E-stop cleared"), r.stdout
+        assert all(v == "not E-stopped, nothing to clear" for v in said.values()), said
+        r = steelpath("estop", "clear", "nobody", env=env)
+        assert r.returncode == 2 and "no robot 'nobody'" in r.stderr
