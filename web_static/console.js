@@ -644,6 +644,7 @@ function renderDetail(p) {
   $("#dispatch-box").hidden = true;
   $("#d-program-len").textContent = p.program ? `(${p.program.length} commands)` : `(${noProgram})`;
   $("#d-program").textContent = p.program ? p.program.map((c, i) => `${i}: ${JSON.stringify(c)}`).join("\n") : "";
+  renderOutputs($("#d-outputs"), p.result ? planOutputs(p.id) : []);
   loadExecutionFor(p.id);
   const ct = $("#d-checks tbody");
   ct.innerHTML = "";
@@ -919,10 +920,44 @@ async function showExecution(ex) {
   $("#x-pause").disabled = !allowed.has("pause");
   $("#x-resume").disabled = !allowed.has("resume");
   $("#x-abort").disabled = !allowed.has("abort");
+  renderOutputs($("#x-outputs"), executionOutputs(full.id));
   applyRole();
 }
 
-// " at <time> by <actor>" of the transition that left the execution in its state.
+// What a plan and a run produce, as links the browser fetches with the session's cookie.
+function planOutputs(id) {
+  const q = encodeURIComponent(id);
+  return [
+    ["Report", `${API}/reports/${q}`, "open the inspection report (HTML) in a new tab", false],
+    ["Report PDF", `${API}/reports/${q}?format=pdf`, "the report as a PDF", true],
+    ["Plan export", `${API}/plans/${q}/export`, "the plan's history as a zip another server imports", true],
+    ["Audit trail", `${API}/audit?entity=plan&entity_id=${q}`, "who did what to this plan, as JSON", false],
+  ];
+}
+
+function executionOutputs(id) {
+  const q = encodeURIComponent(id);
+  return [
+    ["MCAP", `${API}/executions/${q}/recording.mcap`, "the run for Foxglove (MCAP)", true],
+    ["ROS 2 bag", `${API}/executions/${q}/recording.mcap?format=rosbag2`, "the run as a zipped ROS 2 bag", true],
+    ["Audit trail", `${API}/audit?entity=execution&entity_id=${q}`, "who did what to this run, as JSON", false],
+  ];
+}
+
+function renderOutputs(box, links) {
+  box.replaceChildren();
+  box.hidden = !links.length;
+  if (!links.length) return;
+  box.append("Outputs: ");
+  links.forEach(([label, href, title, download], i) => {
+    if (i) box.append(" · ");
+    const a = el("a", { href, title, target: "_blank", rel: "noopener" }, label);
+    if (download) a.setAttribute("download", "");
+    box.append(a);
+  });
+}
+
+// " at <time> (<actor>)" of the transition that left the execution in its state.
 function stoppedAt(ex) {
   const last = (ex.audit || []).find((e) => e.to_state === ex.state);
   if (!last) return "";

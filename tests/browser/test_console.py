@@ -346,6 +346,37 @@ def test_dispatch_to_emulator_then_estop(browser, tmp_path: Path) -> None:
             "document.querySelector('#x-state').textContent === 'completed'", timeout=90_000
         )
         assert "commands" in page.inner_text("#x-progress")
+        # Every output of the plan and of its run is a link that downloads with
+        # the session (the browser's cookie, no token typed).
+        links = page.eval_on_selector_all(
+            "#d-outputs a, #x-outputs a", "as => as.map(a => [a.textContent, a.href])"
+        )
+        assert [label for label, _ in links] == [
+            "Report",
+            "Report PDF",
+            "Plan export",
+            "Audit trail",
+            "MCAP",
+            "ROS 2 bag",
+            "Audit trail",
+        ], links
+        magic = {
+            "Report PDF": b"%PDF",
+            "Plan export": b"PK",
+            "MCAP": b"\x89MCAP",
+            "ROS 2 bag": b"PK",
+        }
+        for label, href in links:
+            got = page.context.request.get(href)
+            assert got.ok, (label, got.status, got.text()[:200])
+            body = got.body()
+            if label in magic:
+                assert body.startswith(magic[label]), (label, body[:16])
+            elif label == "Report":
+                assert b"<html" in body[:500].lower(), body[:200]
+            else:
+                audit = json.loads(body)
+                assert audit and all("action" in e for e in audit), audit
 
         # Run 2: stopped with the E-stop button while the robot moves.
         assert "dispatched as" in page.inner_text("#action-msg")
