@@ -53,7 +53,9 @@ async function api(method, path, body, isForm) {
     let d = data && data.detail !== undefined ? data.detail : data;
     if (d && typeof d === "object" && d.message) d = d.message;
     if (Array.isArray(d)) d = d.map((e) => `${(e.loc || []).join(".")}: ${e.msg}`).join("\n");
-    const err = new Error(`HTTP ${r.status}: ${typeof d === "string" ? d : JSON.stringify(d)}`);
+    // The server's words, without an "HTTP 422:" prefix a crew has no use for.
+    const err = new Error(typeof d === "string" && d ? d : `${r.status} ${r.statusText || "error"}: ${JSON.stringify(d)}`);
+    err.status = r.status;
     err.detail = data && data.detail !== undefined ? data.detail : null;
     throw err;
   }
@@ -314,6 +316,10 @@ function readField(f) {
   const raw = input.value;
   if (f.kind === "enum") return raw === "" ? { value: null } : { value: JSON.parse(raw) };
   if (f.kind === "cloud") return raw === "" ? (f.nullable ? { value: null } : { error: "pick a cloud" }) : { value: raw };
+  // A number box holds "" for text that is no number ("ten"): say so, not "required".
+  if (f.kind === "number" && input.validity && input.validity.badInput) {
+    return { error: "not a number: type digits, e.g. 2.5" };
+  }
   if (raw.trim() === "") {
     if (f.nullable) return { value: null };
     if (f.kind === "string") return { value: "" };
@@ -404,7 +410,9 @@ function showTab(which) {
 }
 $("#tab-form").addEventListener("click", () => showTab("form"));
 $("#tab-json").addEventListener("click", () => showTab("json"));
-$("#params").addEventListener("input", () => formFromJson());
+$("#params").addEventListener("input", () => { $("#submit-error").textContent = ""; formFromJson(); });
+// An error shown for what was submitted goes once the operator changes the form.
+$("#params-form").addEventListener("input", () => { $("#submit-error").textContent = ""; });
 
 // A 422 from the server names the field: shown at the field when the form
 // has it, at the top otherwise.
@@ -428,6 +436,7 @@ function showServerErrors(err) {
 }
 
 $("#defaults").addEventListener("click", () => {
+  $("#submit-error").textContent = "";  // an old refusal is not about the defaults
   $("#params").value = "";
   state.extraKeys = {};
   formFromJson();
@@ -498,25 +507,29 @@ async function loadClouds() {
   }
 }
 
+// A refused cloud reads as an error, not as the small grey note of a success.
+function cloudMsg(text) { const m = $("#cloud-msg"); m.textContent = text; m.className = "muted small"; }
+function cloudError(text) { const m = $("#cloud-msg"); m.textContent = text; m.className = "error"; }
+
 $("#load-sample").addEventListener("click", async () => {
   try {
     const c = await api("POST", "/clouds", { sample: $("#sample").value });
-    $("#cloud-msg").textContent = `stored ${c.id}: ${c.n_points} points`;
+    cloudMsg(`stored ${c.id}: ${c.n_points} points`);
     await loadClouds();
     showCloud(c.id);
-  } catch (e) { $("#cloud-msg").textContent = e.message; }
+  } catch (e) { cloudError(e.message); }
 });
 
 $("#upload-cloud").addEventListener("click", async () => {
   const f = $("#cloud-file").files[0];
-  if (!f) { $("#cloud-msg").textContent = "choose a file first"; return; }
+  if (!f) { cloudError("choose a file first"); return; }
   const fd = new FormData();
   fd.append("file", f);
   try {
     const c = await api("POST", "/clouds", fd, true);
-    $("#cloud-msg").textContent = `stored ${c.id}: ${c.n_points} points, ${c.dropped_nonfinite} non-finite rows dropped`;
+    cloudMsg(`stored ${c.id}: ${c.n_points} points, ${c.dropped_nonfinite} non-finite rows dropped`);
     await loadClouds();
-  } catch (e) { $("#cloud-msg").textContent = e.message; }
+  } catch (e) { cloudError(e.message); }
 });
 
 async function showCloud(id, colourBy = "auto") {

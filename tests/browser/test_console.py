@@ -592,6 +592,9 @@ def test_params_form_from_the_kind_schema(browser, tmp_path: Path) -> None:
         page.click("#tab-form")
 
         n_before = len(store.list_plans())
+        voxel_input.fill("")
+        voxel_input.press_sequentially("ten")  # text in a number box: "not a number"
+        assert "not a number" in voxel.locator(".field-error").inner_text()
         voxel_input.fill("0.5")
         assert "must be ≤ 0.1" in voxel.locator(".field-error").inner_text()
         page.click("#submit-plan")
@@ -615,7 +618,10 @@ def test_params_form_from_the_kind_schema(browser, tmp_path: Path) -> None:
         page.wait_for_function(
             "document.querySelector('#submit-error').textContent.includes('strat')"
         )
-        assert "422" in page.inner_text("#submit-error")
+        assert not page.inner_text("#submit-error").startswith("HTTP")  # the words, no code
+        # Editing the form clears a refusal that was about what was submitted.
+        voxel_input.fill("0.03")
+        assert page.inner_text("#submit-error") == ""
         assert len(store.list_plans()) == n_before
 
         # A 422 about a known field is shown at that field.
