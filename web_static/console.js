@@ -666,9 +666,7 @@ function renderDetail(p) {
       el("td", { class: c.passed ? "pass" : "fail" }, c.passed ? "PASS" : "FAIL"),
       el("td", {}, c.name), el("td", {}, c.message || `${fmt(c.value)} / ${fmt(c.limit)}`)));
   }
-  const mt = $("#d-metrics tbody");
-  mt.innerHTML = "";
-  for (const [k, v] of Object.entries(p.metrics || {}).sort()) mt.append(el("tr", {}, el("td", {}, k), el("td", {}, fmt(v))));
+  renderMetrics(p.metrics || {});
   $("#d-params").textContent = JSON.stringify(p.params, null, 2);
   const at = $("#d-audit tbody");
   at.innerHTML = "";
@@ -677,6 +675,54 @@ function renderDetail(p) {
       el("td", {}, a.action), el("td", {}, `${a.from_state || ""} → ${a.to_state || ""}`), el("td", {}, a.reason || "")));
   }
   renderPlots((p.result && p.result.plots) || []);
+}
+
+// Metrics as a reader takes them: a title and a unit from the name's suffix
+// (UNITS), counts as whole numbers, grouped (safety, geometry, time, counts),
+// the first few shown and the rest folded; the raw name on hover for API users.
+const METRICS_SHOWN = 8;
+const SAFETY_WORDS = /clearance|margin|collision|infeasible|unreach|fail|risk|violat|refus|uncovered|not_/;
+
+function metricGroup(name, unit, v) {
+  if (SAFETY_WORDS.test(name)) return 0;
+  if (["m", "mm", "rad", "°", "mm, °"].includes(unit)) return 1;
+  if (unit === "s") return 2;
+  if (Number.isInteger(v)) return 3;
+  return 4;
+}
+
+function metricValue(v) {
+  if (typeof v !== "number" || !Number.isFinite(v)) return fmt(v);
+  if (Number.isInteger(v)) return v.toLocaleString("en-US");
+  const a = Math.abs(v);
+  if (a >= 1000) return v.toLocaleString("en-US", { maximumFractionDigits: 1 });
+  if (a >= 1) return (+v.toFixed(3)).toString();
+  return v === 0 ? "0" : Number(v.toPrecision(3)).toString();
+}
+
+function renderMetrics(metrics) {
+  const mt = $("#d-metrics tbody");
+  mt.innerHTML = "";
+  const rows = Object.entries(metrics).map(([name, v]) => {
+    const u = UNITS.find(([suffix]) => name.endsWith(suffix) && name.length > suffix.length);
+    const unit = u ? u[1] : "";
+    const words = (u ? name.slice(0, -u[0].length) : name).replaceAll("_", " ");
+    return { name, v, unit, title: words.charAt(0).toUpperCase() + words.slice(1), group: metricGroup(name, unit, v) };
+  });
+  // The planning time every kind has (measured around the kind's run) leads.
+  rows.sort((a, b) => (a.name === "job_time_s" ? -1 : b.name === "job_time_s" ? 1 : a.group - b.group || a.title.localeCompare(b.title)));
+  const row = (r) => el("tr", { title: r.name, "data-metric": r.name },
+    el("td", {}, r.name === "job_time_s" ? "Planning time" : r.title),
+    el("td", {}, metricValue(r.v) + (r.unit ? ` ${r.unit}` : "")));
+  rows.slice(0, METRICS_SHOWN).forEach((r) => mt.append(row(r)));
+  if (rows.length > METRICS_SHOWN) {
+    const more = el("tr", { class: "metrics-more" }, el("td", { colspan: "2" },
+      el("a", { href: "#", onclick: (ev) => {
+        ev.preventDefault();
+        more.replaceWith(...rows.slice(METRICS_SHOWN).map(row));
+      } }, `${rows.length - METRICS_SHOWN} more…`)));
+    mt.append(more);
+  }
 }
 
 // Plots: uPlot (vendored in web_static/vendor/uplot, MIT) with axes, ticks,

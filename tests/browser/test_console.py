@@ -504,6 +504,22 @@ def test_plots_have_axes_legend_hover_and_survive_200k_points(browser, tmp_path:
         )
         page.locator(f"#plans tbody tr[data-id='{pid}']").click()
         page.wait_for_selector("#d-plots .plot canvas")
+        # Metrics read as titles with units, the planning time first, counts as
+        # whole numbers, no exponents; past the first eight, folded.
+        metrics = app.state.services.store.get_plan(pid).metrics
+        assert len(metrics) > 8, metrics
+        rows = page.locator("#d-metrics tbody tr[data-metric]")
+        assert rows.count() == 8
+        first_row = rows.first.inner_text()
+        assert first_row.startswith("Planning time") and first_row.endswith(" s"), first_row
+        page.click("#d-metrics .metrics-more a")
+        assert rows.count() == len(metrics)
+        for i in range(rows.count()):
+            name = rows.nth(i).get_attribute("data-metric")
+            text = rows.nth(i).inner_text()
+            assert "e+" not in text and "e-" not in text and "_" not in text, text
+            if float(metrics[name]).is_integer():
+                assert f"{int(metrics[name]):,}" in text, (name, text)
         plots = app.state.services.store.get_plan(pid).result["plots"]
         first = page.locator("#d-plots .plot").first
         legend = first.locator(".u-legend").inner_text()
