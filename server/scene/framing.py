@@ -1,4 +1,4 @@
-"""Framing the camera on what a plan or cloud drew (issue #15 §2: "Show in
+"""Framing the camera on what a plan or cloud drew ("Show in
 scene frames the plan's content").
 
 Drawers add nodes through ``ctx.scene``; :class:`BoundsRecorder` stands in
@@ -168,5 +168,8 @@ def apply_view(server: Any, view: View) -> None:
     cam.position = position
     for client in server.get_clients().values():
         with contextlib.suppress(Exception):  # a client that just left
-            client.camera.look_at = look_at
+            # Position first: viser moves look_at along with a new position
+            # (to keep the orientation), so look_at set before it was shifted
+            # away and an open console looked past what was drawn.
             client.camera.position = position
+            client.camera.look_at = look_at
