@@ -1,4 +1,4 @@
-// Findings beside the selected inspection plan (issue #16 §1), and the form
+// Findings beside the selected inspection plan, and the form
 // that confirms a finding proposed from the scene (Ctrl/Cmd-click on a face).
 // Uses console.js's globals: state, api, $, el, flash, select, loadProposals.
 "use strict";
@@ -92,6 +92,8 @@
       flash(`${kind} plan ${r.id} from finding ${f.id}`);
       if (typeof upsertPlan === "function") upsertPlan(r);
       await select(r.id);
+      // The scene shows what the detail shows: the new plan, not the inspection.
+      if (typeof showInScene === "function") showInScene(r.id);
     } catch (e) { flash(e.message, true); }
   }
 

@@ -1,4 +1,4 @@
-"""The console's findings list beside an inspection plan (issue #16 §1), in
+"""The console's findings list beside an inspection plan, in
 Debian's Chromium: both findings with their condition colours, the filters,
 framing the scene on a finding, a blast plan made and selected from one, and
 a viewer's read-only list."""
@@ -134,6 +134,11 @@ def test_findings_list_filters_frames_and_makes_a_blast_plan(browser, tmp_path: 
         page.wait_for_function(
             "document.querySelector('#d-title').textContent"
             f".includes('{blast_id} · blast (from finding {rust['id']})')"
+        )
+        # The scene shows the new blast plan too, not the inspection it came from.
+        page.wait_for_function(
+            f"document.querySelector('#scene-msg').textContent.includes('{blast_id}')",
+            timeout=30_000,
         )
         # Back on the inspection, the finding lists its blast plan.
         page.locator(f"#plans tbody tr[data-id='{plan['id']}']").click()
