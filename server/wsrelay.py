@@ -7,6 +7,7 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import logging
+from collections.abc import Callable
 from typing import Any
 
 from fastapi import WebSocket
@@ -18,20 +19,31 @@ log = logging.getLogger(__name__)
 
 
 async def relay(
-    websocket: WebSocket, upstream: Any, store: Any, principal: Principal, what: str
+    websocket: WebSocket,
+    upstream: Any,
+    store: Any,
+    principal: Principal,
+    what: str,
+    *,
+    may_send: Callable[[bytes | str], bool] | None = None,
 ) -> None:
     """Pump frames both ways; close the browser's side with 1008 and the
-    reason once the token is no longer valid, and the upstream always."""
+    reason once the token is no longer valid, and the upstream always.
+
+    ``may_send`` (when given) decides which of the browser's frames go
+    upstream: a frame it refuses is dropped (a read-only viewer's clicks)."""
 
     async def client_to_upstream() -> None:
         while True:
             msg = await websocket.receive()
             if msg["type"] == "websocket.disconnect":
                 return
-            if msg.get("bytes") is not None:
-                await upstream.send(msg["bytes"])
-            elif msg.get("text") is not None:
-                await upstream.send(msg["text"])
+            data = msg.get("bytes") if msg.get("bytes") is not None else msg.get("text")
+            if data is None:
+                continue
+            if may_send is not None and not may_send(data):
+                continue
+            await upstream.send(data)
 
     async def upstream_to_client() -> None:
         async for data in upstream:

@@ -1185,10 +1185,15 @@ async function start() {
   }, 15000);
   await Promise.all([loadKinds(), loadSamples(), loadClouds(), loadPlans(), loadAudit(), loadRobots(), loadProposals(), loadMeasurement()]);
   openEvents();
-  if (health.scene.running && me.role !== "viewer") $("#scene").src = "/scene/";
-  else {
+  if (health.scene.running) {
+    $("#scene").src = "/scene/";
+    if (me.role === "viewer") {  // the server passes a viewer's camera only
+      $("#scene-msg").textContent = "read-only scene: picks, measuring and proposals need the operator role";
+      $("#measure").hidden = true;
+    }
+  } else {
     // No empty black box: say why there is no scene, where it would be.
-    $("#scene-msg").textContent = health.scene.running ? "the scene needs the operator role" : "scene not running";
+    $("#scene-msg").textContent = "scene not running";
     $("#scene").hidden = true;
     $("#measure").hidden = true;
   }

@@ -2,8 +2,10 @@
 
 viser has no authentication and listens on 127.0.0.1 only; the console
 embeds ``/scene/`` from FastAPI, which forwards the page and the websocket
-after checking the operator's token (cookie from ``POST /api/v1/session``
-or a bearer header).  viser's client derives its websocket address from the
+after checking the token (cookie from ``POST /api/v1/session`` or a bearer
+header).  A viewer's scene is read-only: of what its browser sends, only the
+camera reaches viser (:func:`viewer_may_send`), so its clicks pick,
+measure and propose nothing.  viser's client derives its websocket address from the
 page URL (``/scene/`` → ``ws://host/scene``), so both routes live here.
 
 The websocket route also
@@ -31,6 +33,7 @@ from typing import Annotated, Any, Literal
 from urllib.parse import urlsplit
 
 import httpx
+import msgspec
 import websockets
 from fastapi import APIRouter, Depends, HTTPException, Query, Request, Response, WebSocket
 from fastapi.responses import RedirectResponse
@@ -55,7 +58,21 @@ proxy_router = APIRouter(include_in_schema=False)
 # JsonSafeErrorsRoute: a body holding NaN gets its 422, not a 500
 api_router = APIRouter(prefix="/scene", tags=["scene"], route_class=JsonSafeErrorsRoute)
 
-SCENE_ROLE = "operator"  # the scene can propose plans, so viewing it needs operator
+#: Anyone signed in sees the scene; only an operator acts in it (picks, proposals).
+SCENE_ROLE = "viewer"
+#: What a viewer's browser may send viser: its camera, nothing that acts.
+VIEWER_MESSAGES = frozenset({"ViewerCameraMessage"})
+
+
+def viewer_may_send(frame: bytes | str) -> bool:
+    """Whether a read-only viewer's websocket frame goes to viser (allow-list)."""
+    if not isinstance(frame, bytes):
+        return False
+    try:
+        mapping = msgspec.msgpack.decode(frame)
+    except msgspec.DecodeError:
+        return False
+    return isinstance(mapping, dict) and mapping.get("type") in VIEWER_MESSAGES
 
 
 def _scene_port(services: Services) -> int:
@@ -71,7 +88,7 @@ def scene_redirect() -> RedirectResponse:
 
 
 @proxy_router.get("/scene/{path:path}")
-async def scene_page(path: str, request: Request, services: Svc, _: Operator) -> Response:
+async def scene_page(path: str, request: Request, services: Svc, _: Viewer) -> Response:
     port = _scene_port(services)
     async with httpx.AsyncClient(timeout=10.0) as client:
         upstream = await client.get(
@@ -143,7 +160,15 @@ async def scene_socket(websocket: WebSocket) -> None:
         return
     await websocket.accept(subprotocol=upstream.subprotocol)
 
-    await relay(websocket, upstream, services.store, principal, "scene")
+    read_only = not principal.has("operator")
+    await relay(
+        websocket,
+        upstream,
+        services.store,
+        principal,
+        "scene",
+        may_send=viewer_may_send if read_only else None,
+    )
 
 
 class ShowRequest(BaseModel):

@@ -92,21 +92,56 @@ def test_vertex_clicks_make_a_proposal_not_a_plan(sapi) -> None:
     assert sapi.services.scene.current["plan_id"] == plan["id"]
 
 
-def test_proxy_requires_operator_token(sapi) -> None:
+def test_proxy_requires_a_token_and_a_viewer_sees_the_scene(sapi) -> None:
     c = sapi.client
     assert c.get("/scene/").status_code == 401
-    assert sapi.get("/scene/", "viewer").status_code == 403
-    page = sapi.get("/scene/", "operator")
-    assert page.status_code == 200 and "<html" in page.text.lower()
+    for role in ("viewer", "operator"):
+        page = sapi.get("/scene/", role)
+        assert page.status_code == 200 and "<html" in page.text.lower()
     with (
         pytest.raises(WebSocketDisconnect) as ei,
         c.websocket_connect("/scene", subprotocols=["viser-v1"]),
     ):
         pass
     assert ei.value.code == 1008
+    import viser
+
     c.cookies.set("steelpath_token", sapi.tokens["viewer"])
-    with pytest.raises(WebSocketDisconnect), c.websocket_connect("/scene"):
-        pass
+    with c.websocket_connect("/scene", subprotocols=[f"viser-v{viser.__version__}"]) as ws:
+        assert len(ws.receive_bytes()) > 0  # the scene reaches a viewer
+
+
+def test_a_viewers_scene_is_read_only(sapi) -> None:
+    """Through the proxy a viewer's camera reaches viser, its clicks do not:
+    the same vertex clicks that propose a plan for an operator propose
+    nothing for a viewer."""
+    import viser
+
+    from tests.api.test_scene_proposals import camera_message, click_message
+
+    parent = sapi.wait(sapi.submit("demo.route")["id"])
+    assert sapi.post("/api/v1/scene/show", json={"plan_id": parent["id"]}).status_code == 200
+    scene = sapi.services.scene
+    proto = f"viser-v{viser.__version__}"
+    c = sapi.client
+
+    def clicks(role: str) -> int:
+        before = len(scene.server.get_clients())
+        c.cookies.set("steelpath_token", sapi.tokens[role])
+        with c.websocket_connect("/scene", subprotocols=[proto]) as ws:
+            ws.receive_bytes()
+            ws.send_bytes(camera_message())
+            deadline = time.monotonic() + 10  # counted connected after its camera report
+            while len(scene.server.get_clients()) <= before:
+                assert time.monotonic() < deadline, f"the {role}'s camera never reached viser"
+                time.sleep(0.05)
+            for index in (3, 7):  # two vertices: an operator's pair proposes a route
+                ws.send_bytes(click_message("/plan/vertices", index))
+            time.sleep(1.0)
+        return len(sapi.get("/api/v1/scene/proposals").json())
+
+    assert clicks("viewer") == 0
+    assert clicks("operator") >= 1  # the same frames, from an operator, act
 
 
 def test_proxy_refuses_cross_origin_websockets(sapi) -> None:
