@@ -1,5 +1,5 @@
 """The one result contract between a planner entry point and a plan kind
-(DESIGN §5, issue #13 §2).
+(DESIGN §5).
 
 Every kind's planner entry point returns a :class:`PlanResult`: the stored
 summary (JSON-ready), the named arrays, the checks and the flat metrics.  A

@@ -1,5 +1,5 @@
 """Helpers that turn a planner's result into the stored summary of a
-:class:`planners.result.PlanResult` (issue #13 §2, "shared helpers live
+:class:`planners.result.PlanResult` ("shared helpers live
 once"): thinning a long series for a console plot, the plot dict itself,
 and a JSON-safe copy of a result (non-finite floats become ``null``).
 """

@@ -157,7 +157,7 @@ def create_app(settings: Settings | None = None, *, start_scene: bool | None = N
         # from here on tells a server starting beside this one what not to touch.
         run_locks = clean_at_start(store)
         bus = EventBus()
-        # --- PostgreSQL store (issue #17 §1): relay this bus's events to and from
+        # --- PostgreSQL store: relay this bus's events to and from
         # every other server sharing the database (LISTEN/NOTIFY, server/events_pg.py).
         pg_events = None
         if settings.database_url:
@@ -167,7 +167,7 @@ def create_app(settings: Settings | None = None, *, start_scene: bool | None = N
         # --- end PostgreSQL event relay
         from server.linkservice.client import new_server_id
 
-        # Several servers may share this store (issue #17): this one's id, under
+        # Several servers may share this store: this one's id, under
         # which its link service holds the leases of the robots it drives and
         # its job runner the plans it plans.
         server_id = new_server_id()
@@ -283,7 +283,7 @@ def create_app(settings: Settings | None = None, *, start_scene: bool | None = N
                 services.foxglove.stop()
             services.webhooks.stop()
             services.outcomes.stop()
-            if pg_events is not None:  # PostgreSQL event relay (issue #17 §1)
+            if pg_events is not None:  # PostgreSQL event relay
                 pg_events.stop()
             services.audit_backlog.stop()
             store.close()
@@ -357,7 +357,7 @@ def create_app(settings: Settings | None = None, *, start_scene: bool | None = N
     app.include_router(proxy.api_router, prefix=API)
     app.include_router(proxy.proxy_router)
     app.include_router(foxglove.router)  # /foxglove: a websocket at the root, like /scene
-    conform_openapi(app)  # every route's error codes in /openapi.json (issue #12 §5)
+    conform_openapi(app)  # every route's error codes in /openapi.json
 
     @app.get("/", include_in_schema=False)
     def console() -> FileResponse:

@@ -1,4 +1,4 @@
-"""Events across servers that share a PostgreSQL store (issue #17 §1): LISTEN/NOTIFY.
+"""Events across servers that share a PostgreSQL store: LISTEN/NOTIFY.
 
 Each server's :class:`~server.events.EventBus` is in-process.  With PostgreSQL
 as the store, a :class:`PgEventRelay` on every server makes each ``publish``

@@ -1,4 +1,4 @@
-"""Live Foxglove WebSocket server (issue #16 §3, "Live"): the recording's channels while a robot runs.
+"""Live Foxglove WebSocket server ("Live"): the recording's channels while a robot runs.
 
 Off by default; ``STEELPATH_FOXGLOVE_PORT=<port>`` starts it in the app's
 lifespan (:func:`server.app.create_app`) with the Foxglove SDK

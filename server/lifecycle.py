@@ -15,7 +15,7 @@ Plan::
 ``cancelled`` extends DESIGN §4: an operator's cancel of a queued or running
 planning job is neither a planner failure nor a failed check.
 
-``archived`` (issue #16 §4) is the state of a plan imported from another
+``archived`` is the state of a plan imported from another
 server's export (:mod:`server.archive`): read-only history, with no
 transition out of it — it can be read, deleted or revised (a revision is a
 new plan, planned, checked and approved here), never approved or dispatched.

@@ -1,5 +1,4 @@
-"""From a finding to a maintenance plan, and the plan's outcome back on the finding
-(issue #16 §2).
+"""From a finding to a maintenance plan, and the plan's outcome back on the finding.
 
 :func:`blast_params` turns a corrosion / coating-loss finding on a face of an
 ``ara.inspect`` structure model into ``blast`` params: the surface is the

@@ -2,8 +2,8 @@
 scene drawers (``server.scene``) both take.
 
 It lives below both layers so that a drawer can name the type without
-importing the kinds (the scene never imports ``server.kinds``, DESIGN §2 and
-issue #13 §2); :mod:`server.kinds.base` re-exports it.
+importing the kinds (the scene never imports ``server.kinds``, DESIGN §2);
+:mod:`server.kinds.base` re-exports it.
 """
 
 from __future__ import annotations

@@ -1,5 +1,5 @@
 """Survey formats for uploaded clouds: LAS/LAZ (``laspy`` + ``lazrs``) and E57
-(``pye57``), read in bounded chunks (issue #14 §1), with their coordinate
+(``pye57``), read in bounded chunks, with their coordinate
 reference system, units and per-point attributes ("Scans as crews bring
 them" §2, §3).
 

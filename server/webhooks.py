@@ -1,4 +1,4 @@
-"""Webhook deliveries: events → signed JSON POSTs, retried with back-off (issue #16 §5).
+"""Webhook deliveries: events → signed JSON POSTs, retried with back-off.
 
 The event bus tells :class:`WebhookDispatcher` of every event; the ones a
 webhook may ask for (:data:`server.store.webhooks.WEBHOOK_EVENTS`) are handed

@@ -1,4 +1,4 @@
-// Replay of a finished run (issue #16 §3): the recorded timeline of the
+// Replay of a finished run: the recorded timeline of the
 // selected plan's execution, scrubbed with a slider; an operator's slider
 // moves the replay robot in the scene (POST /scene/replay, throttled).
 // Uses console.js's globals: state, api, $, el, flash.

@@ -210,7 +210,7 @@ def approximate_ik(
     return ApproxIK(q, pe, ae, ALPHA_P * pe + ALPHA_O * float(np.linalg.norm(T[:3, 2] - a)))
 
 
-# -- reach bound and batched approximate IK (issue #18) ----------------------------------
+# -- reach bound and batched approximate IK ----------------------------------
 def wrist_reach_m(robot: DensoVM6083) -> float:
     """Largest distance of the wrist centre from the shoulder: a2 + √(a3² + d4²).
 
@@ -441,7 +441,7 @@ def approximate_ik_batch(
     residual vector (``warm_iters`` steps: only a warm start), then on
     Eq. 3.11 itself (reweighted, ≤ ``iters`` steps; rows stop when they
     converge), and the best per target is kept.  The 5 + 60 split
-    (40 + 40 before issue #18's second pass) costs ~40 % less on the 4 m
+    (40 + 40 before) costs ~40 % less on the 4 m
     square's 2,857 far spots: its Eq. 3.11 values equal the 40 + 40 ones
     within 1e-6 on 96 % of them, are lower on 90 and higher on 17 (by at
     most 1.3e-3, ~1.3 mm on spots metres out of reach), lower in sum.

@@ -1,4 +1,4 @@
-"""Where to stand the DENSO arm so that it reaches a whole surface (issue #16 §2).
+"""Where to stand the DENSO arm so that it reaches a whole surface.
 
 The seed places the base by hand (§4.2.4: (500, 375, 370) mm for its three
 surfaces).  A surface taken from a finding on a scanned structure has no such

@@ -1,4 +1,4 @@
-"""One entry point for the ``blast`` kind (issue #13 §2): the surface (given,
+"""One entry point for the ``blast`` kind: the surface (given,
 or picked from a scanned cloud by :func:`planners.blasting.surface_pick.pick_surface`),
 the robot placed at its base, :func:`planners.blasting.plan_blasting` (seed 004,
 Fig. 3.1: Eq. 3.1 discs → §3.2 editing → Eq. 3.3–3.4 sequencing → §3.4 IK,

@@ -336,7 +336,7 @@ def _spot_poses(
     # Surface.__post_init__ always resolves x_axis (None only as an argument)
     assert surface.x_axis is not None
     # spots with no collision-free closed-form solution: tilt, then Eq. 3.11,
-    # all in one vectorised pass (issue #18)
+    # all in one vectorised pass
     fail = np.nonzero(~ok_free.any(axis=1))[0]
     if len(fail):
         tilts = np.arange(5.0, MAX_TILT_DEG - np.degrees(beta) + 1e-9, 5.0)

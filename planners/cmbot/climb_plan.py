@@ -1,4 +1,4 @@
-"""One entry point for the ``cmbot.climb`` kind (issue #13 §2): the inchworm
+"""One entry point for the ``cmbot.climb`` kind: the inchworm
 walk along the guardrail (:func:`planners.cmbot.climb.plan_climb`, seed 002
 §3.1, Eq. 1–11) with its simulation gate, in the stored form — phases and
 their magnet / limiting-plate commands, footholds, chain limits, the gate's

@@ -12,7 +12,7 @@ true penetration depth of a sphere in a box) and that face's normal.
 It replaced a plain-float GJK (Gilbert, Johnson & Keerthi 1988; kept as a
 test reference in ``tests/cmbot/_reference_gjk.py``): the closed form is
 exact, and measured faster than both that GJK and coal's per query
-(``tests/benchmarks/bench_collision.py``, issue #13 §1).
+(``tests/benchmarks/bench_collision.py``).
 """
 
 from __future__ import annotations

@@ -200,7 +200,7 @@ def pair_distances(
     The closed-form sphere–box distance (exact for spheres against cuboids)
     gives d_ij and u_ij of every pair at once; Eq. 15 acts on those within
     ``cutoff``.  (It replaced a per-pair GJK, which agreed to 1e-9 and was
-    slower: issue #13 §1.)
+    slower.)
     """
     d, _ = sphere_box_exact(centers, radii, arrays, directions=False)
     d = np.where(mask, d, np.inf)

@@ -1,4 +1,4 @@
-"""One entry point for the ``cmbot.manipulate`` kind (issue #13 §2): the §4
+"""One entry point for the ``cmbot.manipulate`` kind: the §4
 arm motion (:func:`planners.cmbot.manipulation.plan_manipulation`, seed 002
 §3.2, Eq. 12–20, and the §4 experiment, Eq. 21–26) with its simulation gate
 and base-relocation proposal, in the stored form — the scene (guardrail,

@@ -1,4 +1,4 @@
-"""The stored form shared by the CMBOT plans (issue #13 §2): the guardrail
+"""The stored form shared by the CMBOT plans: the guardrail
 and the arm's cuboids as a drawer redraws them, and the simulation gate's
 report (seed §4: "the movement must be checked by the simulation system
 before the robot starts to work") as plan checks, violations and summary.

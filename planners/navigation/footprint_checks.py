@@ -1,5 +1,5 @@
 """Geometric checks of a navigation plan, independent of the planner that made
-it (seed 000 §4.3, Alg. 6 "Point Inside Boundary Check"; issue #13 §2).
+it (seed 000 §4.3, Alg. 6 "Point Inside Boundary Check").
 
 Alg. 6 tests sampled footprint points while planning; the checks here test
 the *whole* footprint rectangle at every driven pose and the area it sweeps

@@ -43,7 +43,7 @@ exact repair when that component is small, and components without terminals are 
 The returned ``gap_bound`` is the sum of the components' certified bounds, so it is
 still a certified upper bound on ``weight − optimum`` (0.0: proven optimal).
 
-Run time (measured, issue #18): on 200k-edge truss graphs the sparse blossom takes
+Run time (measured): on 200k-edge truss graphs the sparse blossom takes
 2.5–26 s depending on the seed, and the variance does *not* come from the weight scale:
 the same instance decodes in the same time with grids ``2^-20`` … ``2^-8`` and under
 random relabelling of vertices and edges; see ``docs/vocpp.md``.

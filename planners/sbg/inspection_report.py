@@ -1,4 +1,4 @@
-"""One entry point for the ``sbg.inspect`` kind (issue #13 §2): the planned and
+"""One entry point for the ``sbg.inspect`` kind: the planned and
 simulated inspection (:func:`planners.sbg.pipeline.plan_inspection`, seed 003
 §3–§4: path, trilateration Eq. 5, preview-follow Eq. 6–9, corner law Eq. 1–4,
 dead reckoning Eq. 10–11), the corner pitch of Eq. 4 *as printed* beside the

@@ -1,5 +1,5 @@
-"""A plan's history as a zip, exported from one server and imported on another
-(issue #16 §4).  Format and limits: :mod:`server.archive.manifest`; export:
+"""A plan's history as a zip, exported from one server and imported on another.
+Format and limits: :mod:`server.archive.manifest`; export:
 :mod:`server.archive.export`; import and its state rule (imported plans are
 ``archived``, never dispatchable): :mod:`server.archive.import_`."""
 

@@ -1,4 +1,4 @@
-"""Export of a plan's whole history as one zip (issue #16 §4); layout in
+"""Export of a plan's whole history as one zip; layout in
 :mod:`server.archive.manifest`.
 
 Everything comes from what the service stored: the plan as the REST API

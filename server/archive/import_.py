@@ -1,4 +1,4 @@
-"""Import of a plan archive made by another SteelPath server (issue #16 §4).
+"""Import of a plan archive made by another SteelPath server.
 
 **All or nothing.**  The zip is checked before anything is unpacked — its
 size against the service's upload limit, its entry count and total

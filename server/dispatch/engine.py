@@ -117,7 +117,7 @@ class DispatchEngine:
         # the link I/O thread only drops it here (a dict store, never blocks).
         self._mirror_q: queue.SimpleQueue[tuple[str, dict[str, Any]] | None] = queue.SimpleQueue()
         self._mirror_thread: threading.Thread | None = None
-        # Several servers (issue #17 §3): with ``leased`` the engine drives only
+        # Several servers: with ``leased`` the engine drives only
         # the robots whose lease this server holds (adopt/drop); a streamer of
         # a dropped robot is detached: it never writes to the store again,
         # since the robot's execution now belongs to whichever server owns it.
@@ -721,7 +721,7 @@ class DispatchEngine:
                 continue  # a late report of a robot dropped meanwhile
             try:
                 self.store.save_robot_state(name, state)
-                # Recorded runs (issue #16 §3): the reports of an active execution.
+                # Recorded runs: the reports of an active execution.
                 eid = self._active_execution_for(name)
                 if eid is not None:
                     self.store.record_execution_state(eid, time.time(), state)

@@ -1,5 +1,5 @@
 """``ara.inspect``: the ARA's inspection route over a whole scanned steel
-structure, with its robot program (issue #14 §5, issue #19; see
+structure, with its robot program (see
 docs/inspection.md).
 
 The cloud is a stored scan (``cloud_id``: a TLS / photogrammetry survey of

@@ -200,7 +200,7 @@ class KindOutput:
     @classmethod
     def from_result(cls, r: planners_result.PlanResult) -> KindOutput:
         """The stored form of a planner's :class:`planners.result.PlanResult`,
-        passed through unchanged (the one result contract, issue #13 §2)."""
+        passed through unchanged (the one result contract)."""
         return cls(
             result=r.summary,
             arrays=r.arrays,

@@ -92,7 +92,7 @@ def _channel() -> list[BoxObstacle]:
 
 
 class BaseSearch(StrictParams):
-    """Search the robot base (issue #16 §2) in a region instead of ``robot_base_m``."""
+    """Search the robot base in a region instead of ``robot_base_m``."""
 
     lo_m: list[Coordinate] | None = Field(
         None,

@@ -285,7 +285,7 @@ class LinkService:
     def run(self) -> None:
         if self.server_id:
             # Several servers may share the store: drive only the robots whose
-            # lease this server holds (issue #17 §3; server.ownership.keeper).
+            # lease this server holds (server.ownership.keeper).
             from robots import ROBOT_NAMES
             from server.ownership.keeper import LeaseKeeper
 

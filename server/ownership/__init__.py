@@ -1,4 +1,4 @@
-"""Several API servers sharing one store, one owner per robot (issue #17 §3).
+"""Several API servers sharing one store, one owner per robot.
 
 - :mod:`server.ownership.keeper` — in the robot-link service: takes, renews and
   releases this server's robot leases and makes the engine drive exactly those

@@ -1,5 +1,5 @@
 """The lease keeper: inside the robot-link service, it decides which robots this
-server drives (issue #17 §3).
+server drives.
 
 It lives in the link service, not the web server, because that is the process
 that drives the robots: if it cannot renew its leases, it is the one that must

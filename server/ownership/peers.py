@@ -1,4 +1,4 @@
-"""The web server's view of the other servers sharing the store (issue #17 §3).
+"""The web server's view of the other servers sharing the store.
 
 :class:`Peers` keeps, refreshed from the store in a thread of its own, who
 owns which robot and which servers are alive, so that neither the E-stop nor

@@ -1,4 +1,4 @@
-"""Recorded runs (issue #16 §3): an execution exported as MCAP
+"""Recorded runs: an execution exported as MCAP
 (:mod:`server.recording.mcap`, for Foxglove / Lichtblick) or as a ROS 2 bag
 (:mod:`server.recording.rosbag`), both from what the service stored
 (:mod:`server.recording.channels`)."""

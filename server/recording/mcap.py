@@ -1,4 +1,4 @@
-"""A run as an MCAP file (issue #16 §3: "recorded runs"), for Foxglove / Lichtblick.
+"""A run as an MCAP file ("recorded runs"), for Foxglove / Lichtblick.
 
 Everything comes from what the service stored while the execution ran:
 the plan's compiled program and arrays, the stored cloud its params name, the

@@ -1,4 +1,4 @@
-"""A run as a ROS 2 bag (issue #16 §3), so a ROS lab replays it with its own tools.
+"""A run as a ROS 2 bag, so a ROS lab replays it with its own tools.
 
 Written with ``rosbags`` (pure Python, no ROS install) as a rosbag2 of
 metadata version 8 with SQLite 3 storage (``.db3``), CDR-serialised with the

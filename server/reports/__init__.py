@@ -1,4 +1,4 @@
-"""Reports of plans (issue #16 §4): stored data → HTML page (→ PDF).
+"""Reports of plans: stored data → HTML page (→ PDF).
 
 :func:`gather` reads what a report shows, :func:`render_png` draws the
 structure picture, :func:`render_html` writes the page, :func:`render_pdf`

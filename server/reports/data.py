@@ -1,4 +1,4 @@
-"""What a plan's report shows, gathered from the store (issue #16 §4).
+"""What a plan's report shows, gathered from the store.
 
 :func:`gather` reads one plan, its findings (kept and withdrawn) with their
 photos, its executions and the audit trail of all of them into a frozen

@@ -1,4 +1,4 @@
-"""``GET /api/v1/plans/{id}/export`` and ``POST /api/v1/imports`` (issue #16 §4).
+"""``GET /api/v1/plans/{id}/export`` and ``POST /api/v1/imports``.
 
 A plan's whole history — the plan, its arrays and source cloud, executions
 (with acks, recorded states and MCAP), findings with photos, audit events —

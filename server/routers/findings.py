@@ -1,4 +1,4 @@
-"""``/api/v1/findings``: what an inspection found, tied to the structure (issue #16 §1).
+"""``/api/v1/findings``: what an inspection found, tied to the structure.
 
 Viewer reads, operator writes.  A finding is placed on an ``ara.inspect``
 plan's structure model (``member_id``, optionally ``face_id``) or on an
@@ -278,7 +278,7 @@ def plan_from_finding(
     who: Operator,
     response: Response,
 ) -> dict[str, Any]:
-    """Make a maintenance plan from the finding (issue #16 §2): a ``blast``
+    """Make a maintenance plan from the finding: a ``blast``
     plan of its region on its face with the base searched near it, or a
     close-inspection ``ara.inspect`` route to its member.  The plan is linked
     to the finding; the finding lists it with its state and, once run, what

@@ -1,4 +1,4 @@
-"""Authenticated WebSocket proxy to the live Foxglove server (issue #16 §3, "Live").
+"""Authenticated WebSocket proxy to the live Foxglove server ("Live").
 
 The Foxglove SDK's server (:mod:`server.foxglove_live`) speaks the Foxglove
 WebSocket protocol, which has no authentication, and listens on 127.0.0.1

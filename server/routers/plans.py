@@ -236,7 +236,7 @@ async def get_plan(plan_id: str, services: Svc, _: Viewer) -> Response:
     out["revisions"] = [
         p.id for p in services.store.list_plans(parent_id=plan_id, limit=500, summary=True)
     ]
-    # a maintenance plan made from a finding links back to it (issue #16 §2)
+    # a maintenance plan made from a finding links back to it
     link = MaintenanceStore(services.store.db).of_plan(plan_id)
     out["finding_id"] = None if link is None else link.finding_id
     head = json_text(out)

@@ -1,4 +1,4 @@
-"""Routes of issue #16 §3: a recorded run replayed in the console.
+"""Routes of replay: a recorded run replayed in the console.
 
 ``GET /executions/{id}/replay`` (viewer) is the run's recorded timeline;
 ``POST /scene/replay`` and ``DELETE /scene/replay`` (operator, like every

@@ -1,4 +1,4 @@
-"""``/api/v1/reports``: a plan's report from stored data (issue #16 §4).
+"""``/api/v1/reports``: a plan's report from stored data.
 
 ``GET /reports/{plan_id}`` answers a self-contained HTML page — header and
 parameters, the structure picture, route and metrics, checks, findings with

@@ -1,4 +1,4 @@
-"""``/api/v1/webhooks`` (admin): receivers of signed event deliveries (issue #16 §5).
+"""``/api/v1/webhooks`` (admin): receivers of signed event deliveries.
 
 How deliveries are signed, retried and listed: :mod:`server.webhooks`.  Where
 they may go: :mod:`server.netpolicy` (public addresses only, unless the

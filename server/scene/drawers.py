@@ -3,7 +3,7 @@
 The scene draws a stored plan from what the plan record holds (its kind name,
 result and arrays), so it needs neither the kinds registry nor the kind
 modules, and a kind module never imports its drawer: the two layers meet
-only in the kind *name* (issue #13 §2, "one-way imports").  Each built-in
+only in the kind *name* ("one-way imports").  Each built-in
 drawer module declares the kinds it draws in a ``DRAWS`` literal, read from
 its source (:func:`discover_drawers`), so adding a kind's drawer is adding
 its module; a drawer is imported on its first draw, so that importing the

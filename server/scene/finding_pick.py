@@ -1,4 +1,4 @@
-"""Starting a finding from the scene (issue #16 §1: "click on the cloud or a
+"""Starting a finding from the scene ("click on the cloud or a
 member/face to start a finding at that point, as a proposal the console
 confirms").
 

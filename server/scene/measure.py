@@ -1,4 +1,4 @@
-"""The scene's measuring tool (issue #15 §2: "two picks in the scene → distance
+"""The scene's measuring tool ("two picks in the scene → distance
 in mm shown in the console").
 
 A shift-click in the viser scene arrives as a ray (camera origin and

@@ -1,4 +1,4 @@
-"""Box obstacles placed and sized in the scene (issue #15 §1: "obstacles
+"""Box obstacles placed and sized in the scene ("obstacles
 (boxes placed and sized in the scene with viser's transform controls)").
 
 The editor lives in the scene panel of a plan whose params take box

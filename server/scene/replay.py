@@ -1,4 +1,4 @@
-"""Replay of a recorded run (issue #16 §3): its timeline, and the robot's
+"""Replay of a recorded run: its timeline, and the robot's
 recorded state shown in the scene at a chosen time.
 
 Everything comes from stored rows: the state reports mirrored while the run

@@ -212,7 +212,7 @@ class SceneService:
     # -------------------------------------------------------------- findings
     def _draw_findings(self, plan_id: str) -> None:
         """The plan's findings as markers coloured by condition state, each
-        labelled with its type and condition (issue #16 §1)."""
+        labelled with its type and condition."""
         from server.store.findings import CONDITION_STATES, FindingStore
 
         scene = self._server.scene

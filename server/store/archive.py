@@ -1,4 +1,4 @@
-"""Whole rows in and out of the store's database for a plan's export and import (issue #16 §4).
+"""Whole rows in and out of the store's database for a plan's export and import.
 
 Rows are read with ``SELECT *`` and written back by column name, so a column
 added to ``findings`` (or any table listed in :data:`TABLES`) by a later

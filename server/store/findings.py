@@ -1,4 +1,4 @@
-"""Findings on the structure and their photos (issue #16 §1), in the service's database (SQLite or PostgreSQL).
+"""Findings on the structure and their photos, in the service's database (SQLite or PostgreSQL).
 
 A finding says where (an inspection plan and, in its structure model, a
 member and face — ``ara.inspect`` — or a cluster — ``ara.navigate`` — plus

@@ -1,4 +1,4 @@
-"""Maintenance plans made from a finding, and what their runs achieved (issue #16 §2).
+"""Maintenance plans made from a finding, and what their runs achieved.
 
 One row per plan made by ``POST /findings/{id}/plan``: which finding, which
 kind, who and when.  When an execution of such a plan ends, its outcome is

@@ -214,7 +214,7 @@ MIGRATIONS: list[str] = [
     );
     CREATE INDEX finding_plans_by_finding ON finding_plans (finding_id);
     """,
-    # 10: beyond one machine (issue #17): planning attempts and cancel requests that any
+    # 10: beyond one machine: planning attempts and cancel requests that any
     # server's or Dask worker's job reads from the store; the servers sharing this store
     # and which of them owns each robot link (a lease renewed with the heartbeat)
     """

@@ -1,4 +1,4 @@
-"""Which server owns which robot link (issue #17 §3): ``servers`` and ``robot_leases``.
+"""Which server owns which robot link: ``servers`` and ``robot_leases``.
 
 Several ``steelpath serve`` processes may share one store.  Each registers a
 row in ``servers`` (its id, the URL other servers reach it at, a heartbeat),

@@ -1,4 +1,4 @@
-"""Which server runs each plan's planning job (issue #17): ``plans.planner``.
+"""Which server runs each plan's planning job: ``plans.planner``.
 
 Several servers may share one store, each with its own job runner (a local
 pool, or a Dask client following its own tasks).  A plan waiting or being

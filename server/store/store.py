@@ -943,7 +943,7 @@ class Store:
         self, name: str, role: str, token_hash: str, actor: str
     ) -> TokenRecord | None:
         """Store a token only if no active token exists, in one write transaction:
-        servers starting together on one empty store (issue #17) create one
+        servers starting together on one empty store create one
         first-start token between them, not one each. ``None``: one existed."""
         tid = new_id("tk")
         with self.db.transaction() as conn:

@@ -1,4 +1,4 @@
-"""Webhook receivers and their deliveries (issue #16 §5), in the service's database (SQLite or PostgreSQL).
+"""Webhook receivers and their deliveries, in the service's database (SQLite or PostgreSQL).
 
 A webhook is an admin-registered URL with the events it wants and a secret
 (generated here, shown once) that signs every delivery.  A delivery is one

@@ -1,4 +1,4 @@
-"""A plan's history exported as a zip and imported on another server (issue #16 §4):
+"""A plan's history exported as a zip and imported on another server:
 round trip of a real emulator run with findings and photos, the ``archived``
 state rule, and every refused archive leaving the store as it was."""
 

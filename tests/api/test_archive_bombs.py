@@ -1,4 +1,4 @@
-"""Archive imports against zip bombs (issue #16 §4): a few hundred KB of
+"""Archive imports against zip bombs: a few hundred KB of
 zip whose entry inflates to 200 MB of zeros under a wrong SHA-256 or a
 smaller declared size is refused with 422 without that entry reaching the
 disk; an archive declaring more in all than the limit is refused before any

@@ -77,7 +77,7 @@ def test_delete_cloud(api) -> None:
     assert api.get(f"/api/v1/clouds/{cid}").status_code == 404
 
 
-# ---------------------------------------------------------------- issue #12 §1, §5
+# ----------------------------------------------------------------
 def _upload_files(api, name: str, data: bytes):
     return api.post("/api/v1/clouds", files={"file": (name, data)})
 

@@ -1,6 +1,6 @@
 """The event stream carries the robots' statuses (``robots_every_s``), so the
 console follows heartbeats, faults and E-stop latches without polling
-``GET /robots`` (issue #15 §2; the polling once made ~9,300 access-log lines
+``GET /robots`` (the polling once made ~9,300 access-log lines
 a session)."""
 
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""From a finding to a maintenance plan (issue #16 §2), through REST: a
+"""From a finding to a maintenance plan, through REST: a
 corrosion finding on a face of a sample structure becomes a blast plan of
 that region with the base searched near it; every check passes; it is
 approved, run on the emulator, and the run's coverage comes back onto the

@@ -1,4 +1,4 @@
-"""Findings tied to the structure (issue #16 §1) through REST: placed on an
+"""Findings tied to the structure through REST: placed on an
 ara.inspect member's face or an ara.navigate cluster, checked against the
 plan's model, edited and withdrawn with an audit trail, photos checked by
 content; a serious new finding reaches a webhook."""

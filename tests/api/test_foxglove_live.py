@@ -1,4 +1,4 @@
-"""Live Foxglove server (issue #16 §3, "Live"): off by default, bound to
+"""Live Foxglove server ("Live"): off by default, bound to
 127.0.0.1, reached through the authenticated proxy ``/foxglove``, publishing
 the recording's channels while a robot runs.  The client speaks the Foxglove
 WebSocket protocol (foxglove.websocket.v1): ``advertise`` → ``subscribe`` →

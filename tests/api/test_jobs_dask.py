@@ -1,4 +1,4 @@
-"""Planning on a Dask cluster (issue #17 §2): a real scheduler and two worker
+"""Planning on a Dask cluster: a real scheduler and two worker
 processes on loopback, the app pointed at them with ``dask_scheduler``.
 
 Plans reach the same result as in the local pool; progress and cancel work

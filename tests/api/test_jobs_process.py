@@ -83,7 +83,7 @@ def test_unstorable_result_fails_cleanly(papi) -> None:
     assert plan["state"] == "failed" and "could not be stored" in plan["error"]
 
 
-# ------------------------------------------------------- issue #12 §1, §6: workers
+# ------------------------------------------------------- workers
 def _cmdline(pid: int) -> str:
     try:
         return Path(f"/proc/{pid}/cmdline").read_bytes().replace(b"\0", b" ").decode()

@@ -1,4 +1,4 @@
-"""Plans of several servers on one store (issue #17): each plan's job belongs
+"""Plans of several servers on one store: each plan's job belongs
 to the server that submitted it (``plans.planner``).
 
 Two real ``steelpath serve`` processes share one data directory.  A server

@@ -195,7 +195,7 @@ def test_kinds_endpoint(api) -> None:
     assert "demo_plane" in demo["samples"]
 
 
-# ------------------------------------------------------- issue #12 §5: unknown params keys
+# ------------------------------------------------------- unknown params keys
 def test_misspelt_params_key_is_refused_naming_it(api) -> None:
     r = api.post("/api/v1/plans", json={"kind": "demo.route", "params": {"strat": "b1"}})
     assert r.status_code == 422, r.text

@@ -1,4 +1,4 @@
-"""The API's lifecycle tests again, with PostgreSQL as the store (issue #17 §1).
+"""The API's lifecycle tests again, with PostgreSQL as the store.
 
 The tests below are the SQLite suite's own functions, imported and collected
 here a second time; this module's ``make_api`` gives every server a

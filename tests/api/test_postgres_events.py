@@ -1,4 +1,4 @@
-"""Events across servers sharing PostgreSQL (issue #17 §1): LISTEN/NOTIFY relays.
+"""Events across servers sharing PostgreSQL: LISTEN/NOTIFY relays.
 
 Two :class:`EventBus`\\ es, each with a :class:`PgEventRelay`, on two stores on
 one real PostgreSQL (:mod:`tests.support.postgres`) stand for two servers;

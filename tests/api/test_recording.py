@@ -1,5 +1,5 @@
 """Recorded runs: an execution exported as MCAP and read back with the MCAP
-reader, and as a zipped ROS 2 bag read back with rosbags (issue #16 §3)."""
+reader, and as a zipped ROS 2 bag read back with rosbags."""
 
 from __future__ import annotations
 

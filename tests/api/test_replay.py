@@ -1,4 +1,4 @@
-"""Replay of a recorded run (issue #16 §3): the timeline from the stored
+"""Replay of a recorded run: the timeline from the stored
 rows, and the replay robot in the scene at the interpolated recorded joints."""
 
 from __future__ import annotations

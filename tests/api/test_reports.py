@@ -1,4 +1,4 @@
-"""Reports of plans (issue #16 §4) through REST: an inspection with findings,
+"""Reports of plans through REST: an inspection with findings,
 a photo and a real emulator execution in one self-contained HTML page (its
 picture a valid PNG, stored strings escaped, the same bytes twice), as PDF,
 for every kind crews use, and the 404 / 422 / 503 answers."""

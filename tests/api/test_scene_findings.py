@@ -1,4 +1,4 @@
-"""Findings started in the scene (issue #16 §1): a Ctrl/Cmd-click on a face of
+"""Findings started in the scene: a Ctrl/Cmd-click on a face of
 a shown ara.inspect plan proposes a finding at that point; an operator accepts
 it with the finding's type and condition state; a click off every face
 proposes nothing; ``POST /scene/frame`` points the camera at a finding."""

@@ -1,4 +1,4 @@
-"""Show in scene frames the content (issue #15 §2): the recorder's world
+"""Show in scene frames the content: the recorder's world
 points, the view's geometry, and the scene service applying it."""
 
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""Survey formats on upload (issue #14 §1): LAS, LAZ and E57 read in chunks,
+"""Survey formats on upload: LAS, LAZ and E57 read in chunks,
 millimetres detected from the measured spacing and stored as metres, an
 override, and the survey record in the response."""
 

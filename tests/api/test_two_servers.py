@@ -1,4 +1,4 @@
-"""Two real ``steelpath serve`` processes sharing one data directory (issue #17 §3).
+"""Two real ``steelpath serve`` processes sharing one data directory.
 
 Server A runs the embedded emulators; server B is started with
 ``STEELPATH_EMULATORS=false`` and finds the robots at the URLs A recorded in

@@ -1,5 +1,5 @@
 """Webhooks: admin-registered receivers get signed JSON POSTs of execution
-results and E-stops, retried with back-off (issue #16 §5).  Receivers are
+results and E-stops, retried with back-off.  Receivers are
 real HTTP servers on loopback, including one that is down and comes back, so
 the webhooks here are registered with ``allow_private_network`` (what the
 address policy refuses without it: tests/api/test_webhook_ssrf.py).

@@ -20,7 +20,7 @@ Sections:
 5. Whole surface (coverage + sequence + IK trajectory + collision check) on
    Surfaces 1–3 in the Fig. 4.4 environment; Table 4.3 and the seed's 37 s /
    93 s / 78 s / 58 s / 1,756 s beside ours.
-6. Issue #18: ``plan_blast_result`` on squares of 0.5 / 1 / 2 / 4 m at the
+6. ``plan_blast_result`` on squares of 0.5 / 1 / 2 / 4 m at the
    deck (the ``blast`` kind's ``polygon``: origin (0.5, 0.5, 1.7) m, normal
    −z, the channel boxes) before (the per-spot path kept in
    ``tests/blasting/_reference_spot_poses.py``, patched in) and after, in the

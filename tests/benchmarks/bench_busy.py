@@ -1,4 +1,4 @@
-"""Busy-machine benchmark (issue #12 §1): E-stop, API reads and dispatches under load.
+"""Busy-machine benchmark: E-stop, API reads and dispatches under load.
 
 Run on demand (defaults are the issue's load; scale down with the flags)::
 

@@ -16,7 +16,7 @@ Sections:
    simulation gate) on a random guardrail.
 3. Sphere–cuboid distance: GJK vs brute-force surface sampling (41×41 per
    face) and vs the closed form; ratio of times per query.
-4. Simulation gate (issue #18): the dense reference gate
+4. Simulation gate: the dense reference gate
    (``tests/cmbot/_reference_gate.py``) against the coarse-then-fine
    ``simulate_climb`` on the default climb and a 12 m guardrail climb —
    time (median of untraced runs), peak memory (a separate run under
@@ -45,8 +45,8 @@ from planners.cmbot.distance import Cuboid, sphere_box_bruteforce, sphere_box_ex
 from planners.cmbot.gait import GaitParams, build_trajectory, chain_limits, plan_footholds
 from planners.cmbot.guardrail import make_guardrail
 from planners.cmbot.simulate import simulate_climb
-from tests.cmbot._reference_gate import simulate_climb_dense  # the dense gate (issue #18)
-from tests.cmbot._reference_gjk import sphere_box_gjk  # the former GJK (issue #13 §1)
+from tests.cmbot._reference_gate import simulate_climb_dense  # the dense gate
+from tests.cmbot._reference_gjk import sphere_box_gjk  # the former GJK
 
 
 def section_experiment(model) -> None:

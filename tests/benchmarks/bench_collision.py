@@ -1,4 +1,4 @@
-"""Primitive distance kernels before/after issue #13 §1, measured in one run.
+"""Primitive distance kernels before/after the closed forms, measured in one run.
 
 Run on demand::
 

@@ -1,4 +1,4 @@
-"""Planning on a Dask cluster (issue #17 §2): 40 plans submitted at once, time
+"""Planning on a Dask cluster: 40 plans submitted at once, time
 until all are planned, with 1 and with 2 Dask workers.  Run on demand:
 
     .venv/bin/python tests/benchmarks/bench_dask.py [--plans 40] [--kind ara.navigate]

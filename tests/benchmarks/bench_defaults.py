@@ -1,4 +1,4 @@
-"""Every plan kind's default plan through the API (issue #18: "< 3 s for each
+"""Every plan kind's default plan through the API ("< 3 s for each
 default plan").  Run on demand:
 
     .venv/bin/python tests/benchmarks/bench_defaults.py [--repeats 3] [--kinds a,b]

@@ -1,4 +1,4 @@
-"""E-stop latency across two servers sharing one store (issue #17 §3).
+"""E-stop latency across two servers sharing one store.
 
 Run on demand::
 

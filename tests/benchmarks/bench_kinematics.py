@@ -1,5 +1,5 @@
 """Single-configuration FK / Jacobian and DLS IK: the former numpy kernels vs
-pinocchio from the URDF (issue #13 §1), in the same run.
+pinocchio from the URDF, in the same run.
 
 Old: DENSO's D-H chain (``dh_chain_transforms`` + ``geometric_jacobian``) and
 CMBOT's joint-origin chain (``CmbotChain.link_frames`` and its cross-product

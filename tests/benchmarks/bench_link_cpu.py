@@ -1,4 +1,4 @@
-"""Host CPU per streamed command on one robot link (issue #12 §1), before/after.
+"""Host CPU per streamed command on one robot link, before/after.
 
 Run on demand::
 

@@ -1,4 +1,4 @@
-"""Inch-worm jump: today's kernels vs the batched ones, same run (issue #13).
+"""Inch-worm jump: today's kernels vs the batched ones, same run.
 
     .venv/bin/python tests/benchmarks/bench_motion.py [N] [scene,scene,...]
     .venv/bin/python tests/benchmarks/bench_motion.py --quick [scene,...]      (N = 5)

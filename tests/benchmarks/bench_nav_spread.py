@@ -1,4 +1,4 @@
-"""Navigation path stage on resamplings of one cloud (issue #18: "time spread
+"""Navigation path stage on resamplings of one cloud ("time spread
 across resamplings of one cloud within 2×, peak temporary memory < 100 MB").
 
 Run on demand::

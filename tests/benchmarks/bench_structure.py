@@ -1,4 +1,4 @@
-"""Structure model and inspection route on synthetic TLS scans (issue #14 §4).
+"""Structure model and inspection route on synthetic TLS scans.
 
 Run on demand::
 

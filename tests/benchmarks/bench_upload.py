@@ -1,4 +1,4 @@
-"""Benchmark: a 250 MB cloud upload against a served SteelPath (issue #12 §1).
+"""Benchmark: a 250 MB cloud upload against a served SteelPath.
 
 Starts ``steelpath serve`` (own data dir, loopback port, no emulators, no
 scene), measures ``/health`` latency quiet, then uploads a generated file

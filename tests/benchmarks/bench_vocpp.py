@@ -10,7 +10,7 @@ Prints, all measured in this run:
 3. every CARP instance in ``../shared/data/carp`` and the postman CSVs: the exact optimum,
    agreement with the baseline, the seed's Algorithm 5 (``method="thesis"``) and how often
    and by how much the exact route is shorter;
-4. issue #18: ``plan_route`` on 200,000-edge truss graphs over several seeds, before (the
+4. ``plan_route`` on 200,000-edge truss graphs over several seeds, before (the
    former single-call solver ``tests/vocpp/_reference_tjoin.py`` patched in) and after,
    interleaved in the same run, with stage times; then the T-join alone at several
    power-of-two grids ``2^-p`` on the same instance (does the weight scale drive the
@@ -255,7 +255,7 @@ def _staged(g: nx.Graph, s, t) -> tuple[Route, float, dict[str, float]]:
 
 
 def section_200k(seeds: list[int], grids: tuple[int, ...] = (16, 12, 8)) -> None:
-    print("\n== 4. 200,000-edge truss graphs over seeds (issue #18), before/after same run ==")
+    print("\n== 4. 200,000-edge truss graphs over seeds, before/after same run ==")
     print(
         "seed route | edges | |T| | before total (T-join) s | after total (T-join) s | ratio | "
         "lengths equal | gap after | scaling"

@@ -1,5 +1,5 @@
 """Reference only (tests and benchmarks): the hand-written spheroid–box kernel
-that ``planners/blasting/collision.py`` used before coal (issue #13 §1),
+that ``planners/blasting/collision.py`` used before coal,
 kept verbatim (the kernel alone; the shapes and the rest of the module
 are imported from the product) so the coal path is checked against an independent
 implementation.  Its overlap value is a probe depth, not the penetration

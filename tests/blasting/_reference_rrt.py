@@ -1,4 +1,4 @@
-"""The blasting planner's former hand-written RRT-Connect (issue #13 §1),
+"""The blasting planner's former hand-written RRT-Connect,
 kept as the baseline that ``tests/benchmarks/bench_motion.py --blasting``
 measures OMPL's against, same problems, same run.
 

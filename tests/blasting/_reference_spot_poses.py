@@ -1,5 +1,5 @@
 """Reference only (tests and benchmarks): the per-spot ``_spot_poses`` of
-``planners/blasting/pipeline.py`` before issue #18 (one tilt search and one
+``planners/blasting/pipeline.py`` before batching (one tilt search and one
 ``approximate_ik`` optimiser call per spot without a collision-free
 closed-form solution), kept verbatim so the batched path is checked against
 it and the benchmark can time it in the same run

@@ -1,4 +1,4 @@
-"""Base placement for blasting a surface (issue #16 §2): the chosen base
+"""Base placement for blasting a surface: the chosen base
 reaches every target by an independent check (the arm placed there, full
 pose IK, then forward kinematics back to the flange pose), stands clear,
 and a region nothing reaches from is refused naming the best found."""

@@ -245,7 +245,7 @@ def test_overlap_depths_stay_between_independent_bounds():
 @settings(max_examples=30, deadline=None, derandomize=True)
 @given(seed=st.integers(0, 2**31 - 1), kp=st.floats(1.001, 1.6))
 def test_capsule_lower_bound_holds_against_the_exact_distance(seed, kp):
-    """Issue #18: the pruning's capsule lower bound is below coal's exact
+    """The pruning's capsule lower bound is below coal's exact
     distance for every pair, apart and overlapping, thin and round
     spheroids, and never below the outer ball's; where it claims
     separation it also holds against dense surface samples (independent of

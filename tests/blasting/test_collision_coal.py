@@ -1,4 +1,4 @@
-"""coal spheroid–box distances (issue #13 §1) against the former hand-written
+"""coal spheroid–box distances against the former hand-written
 alternating-projection kernel (kept in ``_reference_collision``) and against
 analytic penetration depths."""
 

@@ -195,7 +195,7 @@ def test_narrow_band_is_filled_with_small_discs_and_checked_independently():
 
 @pytest.mark.parametrize("shape", ["trapezoid", "arbitrary"])
 def test_improved_editing_same_whatever_the_scoring_chunk(shape, monkeypatch):
-    """Issue #18: the greedy candidates scored in chunks (only those that can
+    """The greedy candidates scored in chunks (only those that can
     gain kept) give the one-pass answer exactly, down to one per chunk."""
     poly = Polygon(scenes.seed_shape(shape, 0.5))
     kw = {"small_r": R_DEFAULT * 9.625 / 15.875, "coverage_target": 0.993}
@@ -238,7 +238,7 @@ def test_disc_far_from_every_pixel_centre_covers_none(seed, rad):
     ],
 )
 def test_pointwise_bound_shortcuts_change_nothing(poly, r_min, budget):
-    """Issue #18: the coverage bound's skipped convolution / distance
+    """The coverage bound's skipped convolution / distance
     transform give the full computation's answer (it is 1 exactly when they
     are skipped), including a slit narrower than the disc with no budget."""
     from planners.blasting.bound import pointwise_bound

@@ -1,4 +1,4 @@
-"""Issue #18: spots the arm cannot reach found in one vectorised pass — the
+"""Spots the arm cannot reach found in one vectorised pass — the
 reach bound (never excludes a spot the closed-form IK reaches), the batched
 Eq. 3.11 approximate IK (same or better than the per-spot optimiser), the
 batched spot poses (same as the per-spot path) and a strict-JSON result
@@ -134,7 +134,7 @@ def test_batched_approximate_ik_same_or_better_than_per_spot():
 
 
 def test_batched_approximate_ik_short_warm_start_not_worse_than_per_spot():
-    """Issue #18 second pass: the 5-step least-squares warm start + ≤ 60
+    """The 5-step least-squares warm start + ≤ 60
     reweighted steps reach the per-spot optimiser's Eq. 3.11 value (or
     better) on far targets like the 4 m square's (0.1–2 m out of reach,
     axes near the deck's −z)."""

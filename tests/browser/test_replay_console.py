@@ -1,4 +1,4 @@
-"""The console's replay of a finished run (issue #16 §3): after a completed
+"""The console's replay of a finished run: after a completed
 run on the built-in emulator the plan's replay panel shows its timeline;
 dragging the slider updates the time and moves the scene's replay robot."""
 

@@ -1,4 +1,4 @@
-"""A plan's report (issue #16 §4) in a real browser: Debian's Chromium shows
+"""A plan's report in a real browser: Debian's Chromium shows
 the report of a sample inspection with its findings; with
 STEELPATH_DOCS_SCREENSHOTS=1 it is the docs' report-1280/1920.png."""
 

@@ -1,5 +1,5 @@
 """The dense simulation gate of ``planners/cmbot/simulate.py`` as it was
-before issue #18 (every resampled sample evaluated for every check, the
+before the coarse-then-fine gate (every resampled sample evaluated for every check, the
 per-interval ``np.linspace`` resampling, one FK pass over the whole motion).
 
 Kept as the reference the coarse-then-fine gate is tested against

@@ -1,5 +1,5 @@
 """Reference only (tests and benchmarks): the plain-float GJK that
-``planners/cmbot/distance.py`` used before issue #13 §1 measured it slower
+``planners/cmbot/distance.py`` used before it was measured slower
 than the closed form, copied verbatim.
 
 :func:`gjk_distance` is the Gilbert–Johnson–Keerthi algorithm (Gilbert,

@@ -1,4 +1,4 @@
-"""The coarse-then-fine simulation gate against the dense reference (issue #18).
+"""The coarse-then-fine simulation gate against the dense reference.
 
 ``simulate_climb`` evaluates the arm clearances only at every ``coarse_stride``-th
 sample and refines a window densely when a bound on the motion inside it says

@@ -1,4 +1,4 @@
-"""The stored form of the CMBOT plans (issue #13 §2): ``plan_climb_result`` and
+"""The stored form of the CMBOT plans: ``plan_climb_result`` and
 ``plan_manipulation_result`` on cheap inputs, their checks held against the
 simulation gate replayed on the stored arrays, their metrics against the
 arrays themselves."""

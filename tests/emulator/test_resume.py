@@ -1,4 +1,4 @@
-"""Resume never re-drives a motion (issue #12 §2), proven from the emulator's own log.
+"""Resume never re-drives a motion, proven from the emulator's own log.
 
 For every command type that moves — wheels, joint way-points of a blast sweep, a
 climbing step (lift, magnets, plates, joints) and a joint sweep with the nozzle —

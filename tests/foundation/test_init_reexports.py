@@ -1,5 +1,5 @@
 """Every package ``__init__.py`` under ``planners/`` and ``robots/`` only
-re-exports (issue #13 §2 "Modules that hold one thing"): its top level is a
+re-exports ("Modules that hold one thing"): its top level is a
 docstring, imports, ``__all__`` and nothing else, so code lives in named
 modules and a reader finds it by the module's name."""
 
@@ -19,7 +19,7 @@ INITS = sorted(
 )
 
 #: Robot description packages whose kinematics are being moved onto pinocchio
-#: (issue #13 §1, another change in flight); they still hold code.  Each entry
+#: (another change in flight); they still hold code.  Each entry
 #: must still hold code, so the list shrinks as they are converted.
 PENDING: set[str] = set()  # all four converted (robots/<name>/model.py)
 
@@ -65,5 +65,5 @@ def test_init_only_re_exports(path: Path) -> None:
     bad = _offending(ast.parse(path.read_text(encoding="utf-8")))
     if _rel(path) in PENDING:
         assert bad, f"{_rel(path)} only re-exports now: drop it from PENDING"
-        pytest.skip(f"{_rel(path)}: kinematics moving to pinocchio (issue #13 §1)")
+        pytest.skip(f"{_rel(path)}: kinematics moving to pinocchio")
     assert not bad, f"{_rel(path)} holds code: {bad}"

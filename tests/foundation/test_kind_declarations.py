@@ -1,4 +1,4 @@
-"""Kinds are declarations (issue #13 §2): each kind's ``run`` turns its params
+"""Kinds are declarations: each kind's ``run`` turns its params
 into planner dataclasses, calls one planner entry point and passes the
 :class:`planners.result.PlanResult` through.  Checked on the source with
 :mod:`ast`, so a kind that grows its own result shaping again fails here."""

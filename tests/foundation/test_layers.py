@@ -1,4 +1,4 @@
-"""The import rules between layers (DESIGN §2–§3, issue #13 §2) and the planners'
+"""The import rules between layers (DESIGN §2–§3) and the planners'
 error contract (DESIGN §5), checked on the source with :mod:`ast`.
 
 Every import statement counts — at module level, inside functions and under
@@ -224,7 +224,7 @@ def test_a_site_kind_registers_its_own_drawer() -> None:
 
 
 # ------------------------------------------------------------------ kinds are declarations
-#: What a kind module may not use (issue #13 §2): the libraries that do
+#: What a kind module may not use: the libraries that do
 #: geometry, search or point-cloud work, and numpy's linear algebra.  A kind
 #: holds a params model, a short ``run`` that calls one planner entry point
 #: and turns its result into the stored form, and ``compile``; a kind that

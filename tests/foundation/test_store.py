@@ -498,7 +498,7 @@ def test_postgres_reads_see_the_last_commit_and_a_writer_its_own_rows(
 def test_servers_starting_together_make_one_first_start_token(
     open_store: OpenStore, tmp_path: Path
 ) -> None:
-    """Several servers starting on one empty store (issue #17): the check for an
+    """Several servers starting on one empty store: the check for an
     active token and the insert are one transaction, so exactly one of them
     creates (and prints) the first-start admin token."""
     import threading

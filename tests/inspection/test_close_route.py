@@ -1,4 +1,4 @@
-"""Close inspection of one member (issue #16 §2) against brute force: on small
+"""Close inspection of one member against brute force: on small
 random structures, the route from ``start`` that drives the whole member is
 no longer than any simple approach path plus the member's chain."""
 

@@ -1,4 +1,4 @@
-"""The ``ara.inspect`` robot program (issue #19): jump sites, shared jump
+"""The ``ara.inspect`` robot program: jump sites, shared jump
 plans, the assembled program, the feet-attachment simulation."""
 
 from __future__ import annotations

@@ -82,7 +82,7 @@ def test_listed_with_its_params_schema_and_the_ara_numbers(api) -> None:
 
     kinds = {k["name"]: k for k in api.get("/api/v1/kinds", "viewer").json()}
     k = kinds["ara.inspect"]
-    assert k["robot"] == "ara" and k["compiles"] is True  # issue #19: the robot program
+    assert k["robot"] == "ara" and k["compiles"] is True  # the robot program
     assert k["samples"] == sorted(SCAN_SAMPLES)
     props = k["params_schema"]["properties"]
     for name in (

@@ -1,5 +1,5 @@
 """``kill -9`` of the server mid-command, restart, Resume: the robot ends where
-the plan says, not further (issue #12 §2), for every command type that moves.
+the plan says, not further, for every command type that moves.
 
 A real ``steelpath serve`` runs as a subprocess on a temporary data directory
 with its built-in emulators, which are processes of their own (as robots are,

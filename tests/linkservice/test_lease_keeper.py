@@ -1,4 +1,4 @@
-"""Robot leases (issue #17 §3): the store's conditional upsert and the keeper's
+"""Robot leases: the store's conditional upsert and the keeper's
 adopt / drop / fence decisions, on a real store (SQLite, and PostgreSQL from
 Debian's package when installed) with a recording engine in place of the link
 service's (no robots, no link processes)."""

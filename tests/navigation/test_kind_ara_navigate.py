@@ -128,7 +128,7 @@ def test_bad_requests(api) -> None:
 
 
 def test_a_stored_cloud_in_a_survey_frame_plans_without_the_robot_window(api) -> None:
-    """Issue #14 §1: the Cross sample moved into a survey frame (UTM-like
+    """The Cross sample moved into a survey frame (UTM-like
     easting / northing, 35 m up) and uploaded as LAS plans with the defaults:
     ``auto`` leaves the robot-frame pass-through off for a stored cloud and the
     summary says so; the robot window, asked for, empties it with a clear

@@ -1,5 +1,5 @@
 """planners.navigation.navigate_plan: the ``ara.navigate`` entry point's stored
-form (issue #13 §2).  Every check value is recomputed here from the returned
+form.  Every check value is recomputed here from the returned
 summary and arrays alone (shapely for the footprint, a plain loop for the
 wheel steps), the way a reader of the stored plan would."""
 

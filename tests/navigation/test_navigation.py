@@ -160,7 +160,7 @@ def test_thesis_segmentation_through_the_entry_point() -> None:
 
 
 def test_passthrough_window_may_be_none() -> None:
-    """``passthrough_*_m`` is typed ``tuple | None`` (issue #14: None was refused
+    """``passthrough_*_m`` is typed ``tuple | None`` (None was refused
     as "must be a positive number"); None means no window on that axis, so a
     cloud shifted far outside the default window plans as the original does."""
     pts = structure("l", 0).points

@@ -1,4 +1,4 @@
-"""The path stage's memory stays bounded on a body-sized turn search (issue #14 §2).
+"""The path stage's memory stays bounded on a body-sized turn search.
 
 A field scan's path stage was killed after allocating 22.8 GB in
 ``DiffDrivePlanner.turn_point → poses_valid → BoundarySet.contains``: every

@@ -3,7 +3,7 @@
 Chunked readers are checked against the whole-buffer result with a tiny
 chunk size (every record and line crosses a boundary somewhere); the upload
 parser's peak memory is measured on ~60 MB files in its own child process
-(``os.wait4`` rusage) against issue #12's bound of 2 × file size + 200 MB.
+(``os.wait4`` rusage) against the bound of 2 × file size + 200 MB.
 """
 
 from __future__ import annotations

@@ -494,8 +494,8 @@ def test_grow_end_stops_at_points_not_free_and_at_a_plane() -> None:
 
 def _assert_chords_found_at_10_cm(kind: str, seed: int) -> None:
     """Both chords of the generator's truss ``kind`` / ``seed`` scanned at
-    10 cm are found (the issue's criterion), at a precision ≥ 0.9.  (From
-    session 22 to 23 this asked only 0.8 at 5°, 0.9 at 10°: Pratt seed 12's
+    10 cm are found (the issue's criterion), at a precision ≥ 0.9.  (For a
+    while this asked only 0.8 at 5°, 0.9 at 10°: Pratt seed 12's
     sparse channel posts leaned 5.5–7° by least squares; with the hull
     direction they are within 5° and the former bound holds again.)"""
     from planners.structure.synthetic import make_scan, match_members

@@ -1,5 +1,5 @@
 """Reference copies of the inch-worm jump's validity / IK kernels as of
-commit 111f02a (before issue #13's batching), kept as the oracle of the
+commit 111f02a (before the batching), kept as the oracle of the
 equivalence tests and as the "before" column of
 ``tests/benchmarks/bench_motion.py`` (which patches them in):
 

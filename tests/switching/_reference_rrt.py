@@ -1,4 +1,4 @@
-"""The inch-worm jump's former hand-written RRT-Connect (issue #13 §1), kept
+"""The inch-worm jump's former hand-written RRT-Connect, kept
 as the baseline that ``tests/benchmarks/bench_motion.py`` measures OMPL's
 against on the same problems in the same run.
 

@@ -1,4 +1,4 @@
-"""Batched validity / kinematics kernels of the inch-worm jump (issue #13)
+"""Batched validity / kinematics kernels of the inch-worm jump
 against the reference copies of the former ones
 (``tests/switching/_reference_collision.py``): FK equal, clearances equal
 below the 0.1 m cap (and both ≥ it above), validity decided identically

@@ -1,5 +1,5 @@
 """planners.switching.switch_result: the ``ara.switch`` entry point's stored
-form (issue #13 §2), checked against independent recomputations from the
+form, checked against independent recomputations from the
 returned arrays and the decision planner called on its own."""
 
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""Former ``planners.postman.tjoin`` (before issue #18), kept verbatim as the benchmark's
+"""Former ``planners.postman.tjoin`` (before per-component solving), kept verbatim as the benchmark's
 "before" and a test reference.  It solves all components in one PyMatching call with one
 distance bound (``inf`` across components: see test_vocpp_components for the hang).
 

@@ -1,4 +1,4 @@
-"""min_t_join on graphs with several connected components (issue #18).
+"""min_t_join on graphs with several connected components.
 
 Every component is solved on its own; the result must equal the independent
 metric-closure optimum (networkx Dijkstra + blossom, ``tests/vocpp/reference.py``) summed
