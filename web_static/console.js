@@ -556,10 +556,15 @@ function renderPlans() {
   const rows = [...state.plans.values()].sort((a, b) => (b.created_at || "").localeCompare(a.created_at || ""));
   for (const p of rows) {
     const tr = el("tr", { "data-id": p.id, "data-state": p.state, onclick: () => select(p.id) },
-      el("td", {}, p.id), el("td", {}, p.kind || ""), el("td", {}, el("span", { class: `state ${p.state}` }, p.state)),
+      el("td", { title: p.id }, p.id), el("td", { title: p.kind || "" }, p.kind || ""),
+      el("td", { title: p.state }, el("span", { class: `state ${p.state}` }, p.state)),
       el("td", {}, `${Math.round((p.progress || 0) * 100)}%`));
     if (p.id === state.selected) tr.classList.add("sel");
     tb.append(tr);
+  }
+  if (!rows.length) {
+    tb.append(el("tr", {}, el("td", { colspan: "4", class: "empty" },
+      "no plans yet: choose a kind above and press Plan")));
   }
 }
 

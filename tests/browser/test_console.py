@@ -777,6 +777,22 @@ def test_no_horizontal_overflow(browser, tmp_path: Path, width: int) -> None:
                 .map(e => e.id || e.tagName).slice(0, 5)"""
         )
         assert wide == [], wide
+        # Nothing sticks out of its card either (the plans table overflowed its
+        # own with the longest state in it).
+        page.evaluate(
+            "document.querySelector('#plans tbody tr span.state').textContent = 'interrupted'"
+        )
+        spill = page.evaluate(
+            """() => [...document.querySelectorAll('#app .card')].flatMap(card => {
+                const edge = card.getBoundingClientRect().right;
+                return [...card.querySelectorAll('*')]
+                    .filter(e => e.getClientRects().length
+                        && e.getBoundingClientRect().right > edge + 1)
+                    .map(e => (card.querySelector('h3') || {}).textContent + ': '
+                        + (e.id || e.tagName + '.' + e.className));
+            }).slice(0, 8)"""
+        )
+        assert spill == [], spill
         assert not errors, errors
 
 
