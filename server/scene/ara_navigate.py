@@ -112,6 +112,10 @@ def draw(ctx: DrawContext, plan: PlanView) -> None:
             dimensions=(fp["length_m"], fp["width_m"], 0.01),
             opacity=0.6,
         )
+        # The planned ARA rides the path on its footprint: the live and the
+        # replayed robot are put under this node, so they move with the plan.
+        ctx.add_urdf("ara", "ara")
+        base = ctx.robot_frames[f"{ctx.root}/ara"]
         seg = np.linalg.norm(np.diff(path, axis=0), axis=1) + 1e-3  # turns take time too
         cum = np.concatenate([[0.0], np.cumsum(seg)])
         speed = 0.3  # m/s, display only
@@ -125,6 +129,8 @@ def draw(ctx: DrawContext, plan: PlanView) -> None:
             centre = path[i] + R @ np.array([fp["center_x_m"], fp.get("center_y_m", 0.0), 0.0])
             box.position = tuple(centre + 2 * LIFT * normal)
             box.wxyz = rotation_to_wxyz(R)
+            base.position = tuple(path[i] + 2 * LIFT * normal)
+            base.wxyz = rotation_to_wxyz(R)
 
         update(0.0)
         ctx.animate(float(cum[-1] / speed) if cum[-1] > 0 else 1.0, update)

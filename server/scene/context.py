@@ -60,6 +60,9 @@ class DrawContext:
     #: The robots drawn with :meth:`add_urdf`: node name → ViserUrdf (the
     #: planned ghost; the scene puts the reported robot under that node).
     robots: dict[str, Any] = field(default_factory=dict)
+    #: The root frame of each robot drawn with :meth:`add_urdf` (same keys), for
+    #: drawers that move the planned robot's base.
+    robot_frames: dict[str, Any] = field(default_factory=dict)
 
     def add_urdf(self, robot: str, name: str, root_pose: np.ndarray | None = None) -> Any:
         from viser.extras import ViserUrdf
@@ -79,6 +82,7 @@ class DrawContext:
             root_node_name=f"{self.root}/{name}",
         )
         self.robots[f"{self.root}/{name}"] = handle
+        self.robot_frames[f"{self.root}/{name}"] = frame
         return handle
 
     def animate(self, duration_s: float, update: Callable[[float], None]) -> None:

@@ -109,3 +109,28 @@ def test_no_scene_is_a_409(api, method: str) -> None:
     kw = {"json": {"execution_id": "ex_x", "t_s": 0}} if method == "post" else {}
     r = getattr(api, method)("/api/v1/scene/replay", **kw)
     assert r.status_code == 409 and "not running" in r.json()["detail"]
+
+
+def test_an_ara_navigate_replay_moves_the_robot_along_its_path(make_api) -> None:
+    """The replayed (and live) ARA rides on the planned robot, which the
+    replay places where the plan was at ``t``: it moves along the path."""
+    api = make_api(scene_port=free_port(), emulators=True, emulator_time_scale=20.0)
+    assert api.services.dispatch.wait_connected("ara", 20)
+    plan = api.wait(api.submit("ara.navigate")["id"], timeout=120)
+    assert api.post(f"/api/v1/plans/{plan['id']}/approve").status_code == 200
+    eid = api.post(f"/api/v1/plans/{plan['id']}/dispatch", json={"robot": "ara"}).json()["id"]
+    wait_execution(api, eid, ("completed",), timeout=300)
+    duration = api.get(f"/api/v1/executions/{eid}/replay", "viewer").json()["duration_s"]
+    scene = api.services.scene
+    path = np.asarray(api.services.store.get_plan(plan["id"]).array("path_xyz")).reshape(-1, 3)
+    where = []
+    for t in (0.0, duration / 3, 2 * duration / 3, 1e6):
+        out = api.post("/api/v1/scene/replay", json={"execution_id": eid, "t_s": t}).json()
+        assert out["node"] == "/plan/ara/replay", out  # under the planned robot
+        base = scene.server.scene.get_handle_by_name("/plan/ara")
+        where.append(np.array(base.position, dtype=float))  # a copy: viser updates in place
+    steps = [float(np.linalg.norm(b - a)) for a, b in zip(where, where[1:], strict=False)]
+    assert all(s > 0.05 for s in steps), (steps, where)
+    # At the start and the end it stands on the path's ends (lifted off the steel).
+    assert np.linalg.norm(where[0] - path[0]) < 0.05
+    assert np.linalg.norm(where[-1] - path[-1]) < 0.05
