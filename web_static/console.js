@@ -872,11 +872,26 @@ async function loadProposals() {
     tb.append(el("tr", { "data-proposal": p.id },
       el("td", {}, p.created_at.replace("T", " ").slice(11, 19)),
       el("td", {}, finding ? `finding on ${p.plan_id}` : `${p.kind} from ${p.plan_id}`),
-      el("td", {}, el("code", {}, JSON.stringify(p.patch))),
+      el("td", { title: JSON.stringify(p.patch) }, describePatch(p.patch)),
       el("td", { class: "muted" }, p.source),
       el("td", { class: "actions" }, accept, " ", dismiss)));
   }
   $("#proposals-empty").hidden = items.length > 0;
+}
+
+// What a proposal changes, as words: "member m3 · face f2 · point (x, y, z) m".
+function describePatch(patch) {
+  const num = (v) => (Number.isInteger(v) ? String(v) : v.toFixed(3));
+  return Object.entries(patch || {}).map(([k, v]) => {
+    const u = UNITS.find(([suffix]) => k.endsWith(suffix) && k.length > suffix.length);
+    const name = (u ? k.slice(0, -u[0].length) : k).replace(/_id$/, "").replaceAll("_", " ");
+    const unit = u ? ` ${u[1]}` : "";
+    if (Array.isArray(v) && v.every((x) => typeof x === "number")) return `${name} (${v.map(num).join(", ")})${unit}`;
+    if (Array.isArray(v)) return `${name}: ${v.length} item${v.length === 1 ? "" : "s"}`;
+    if (typeof v === "number") return `${name} ${num(v)}${unit}`;
+    if (v && typeof v === "object") return `${name}: ${Object.keys(v).length} fields`;
+    return `${name} ${v}`;
+  }).join(" · ");
 }
 
 async function decideProposal(id, action) {

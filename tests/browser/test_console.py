@@ -162,7 +162,8 @@ def test_console_plan_approve_and_scene(browser, tmp_path: Path) -> None:
                 entry.callback(types.SimpleNamespace(instance_index=nodes.index(name), client_id=0))
         assert app.state.services.store.list_plans(parent_id=plan_id) == []
         page.wait_for_selector("#proposals tr[data-proposal]")
-        assert '"start":"b1"' in page.inner_text("#proposals")
+        listed = page.inner_text("#proposals")  # in words, not JSON
+        assert "start b1 · end c0" in listed and "{" not in listed, listed
         page.click("#proposals tr[data-proposal] button.accept")
         page.wait_for_function(
             f"document.querySelector('#d-title').textContent.includes('revision of {plan_id}')"
