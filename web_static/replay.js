@@ -6,6 +6,7 @@
 
 const REPLAY_FINISHED = ["completed", "aborted", "faulted", "interrupted"];
 const REPLAY_MIN_MS = 200;  // at most 5 scene requests a second; the last value wins
+const REPLAY_MAX_TICKS = 120;  // acknowledgement ticks on the track, at most
 
 const replay = { planId: null, executions: [], tl: null, t: 0, playing: false, speed: 1,
   timer: null, lastSent: 0, inFlight: false, pending: null, sendTimer: null };
@@ -51,10 +52,15 @@ function replayRender() {
     step: "0.05", value: "0", "aria-label": "replay time (s)" });
   slider.addEventListener("input", () => { replaySet(Number(slider.value), true); });
   const ticks = el("div", { class: "replay-ticks", "aria-hidden": "true" });
-  for (const a of tl.acks) {
+  // At most REPLAY_MAX_TICKS acknowledgement ticks: a long program's (571
+  // commands) merged into one bar; every step-th is shown, and the last.
+  const step = Math.max(1, Math.ceil(tl.acks.length / REPLAY_MAX_TICKS));
+  tl.acks.forEach((a, i) => {
+    if (i % step !== 0 && i !== tl.acks.length - 1) return;
     ticks.append(el("span", { class: "tick ack", style: `left:${(100 * a.t_s / dur).toFixed(3)}%`,
-      title: `${a.t_s.toFixed(1)} s: command ${a.index} (${a.op}) acknowledged` }));
-  }
+      title: `${a.t_s.toFixed(1)} s: command ${a.index} (${a.op}) acknowledged`
+        + (step > 1 ? ` (a tick every ${step} commands)` : "") }));
+  });
   for (const o of tl.operator) {
     if (o.t_s < 0 || o.t_s > dur) continue;
     ticks.append(el("span", { class: "tick op", style: `left:${(100 * o.t_s / dur).toFixed(3)}%`,

@@ -68,6 +68,22 @@ def test_a_completed_run_scrubs_and_moves_the_replay_robot(browser, tmp_path: Pa
             assert eid in page.inner_text("#replay-execution")
             assert page.locator(".replay-ticks .tick.ack").count() >= 2
             assert page.locator(".replay-ticks .tick.op").count() >= 1
+            # A long program's acknowledgements are thinned to readable ticks
+            # (571 of them merged into one bar), the last one kept.
+            long = page.evaluate(
+                """() => {
+                    const tl = replay.tl, n = 571;
+                    replay.tl = { ...tl, acks: Array.from({ length: n }, (_, i) =>
+                        ({ index: i, op: "joints", t_s: (tl.duration_s * (i + 1)) / n })) };
+                    replayRender();
+                    const ticks = document.querySelectorAll(".replay-ticks .tick.ack");
+                    const last = ticks[ticks.length - 1].title;
+                    replay.tl = tl;
+                    replayRender();
+                    return [ticks.length, last];
+                }"""
+            )
+            assert 100 <= long[0] <= 121 and "command 570 " in long[1], long
             assert page.inner_text("#replay-time").startswith("t = 0.0 s")
             dur = float(page.get_attribute("#replay-slider", "max") or 0)
             assert dur > 0
