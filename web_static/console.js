@@ -164,7 +164,11 @@ async function loadKinds() {
 
 function showKind() {
   const k = state.kinds[$("#kind").value];
-  $("#kind-desc").textContent = k ? k.description.split("\n")[0].replaceAll("``", "") : "";
+  // The description's first paragraph, whole (its first line alone stopped
+  // mid-sentence where the docstring wraps); the full title on hover.
+  const para = k ? k.description.split(/\n\s*\n/)[0].split("\n").map((l) => l.trim()).join(" ") : "";
+  $("#kind-desc").textContent = para.replaceAll("``", "");
+  $("#kind").title = k ? `${k.name} — ${k.title}` : "";
   $("#submit-plan").textContent = state.revising ? `Revise ${state.revising}` : "Plan";
   buildForm(k);
 }

@@ -571,6 +571,11 @@ def test_params_form_from_the_kind_schema(browser, tmp_path: Path) -> None:
         store = app.state.services.store
 
         page.select_option("#kind", "ara.navigate")
+        for kind in ("ara.navigate", "ara.inspect", "blast", "cmbot.climb"):
+            page.select_option("#kind", kind)  # whole sentences, not a cut first line
+            desc = page.inner_text("#kind-desc").strip()
+            assert desc.endswith((".", ")", ":")) and len(desc) > 30, (kind, desc)
+        page.select_option("#kind", "ara.navigate")
         voxel = page.locator("#params-form .field[data-field='voxel_m']")
         voxel_input = page.locator("#pf-voxel_m")
         # voxel_m is past the first eight scalar fields: folded under "More".
