@@ -1,4 +1,4 @@
-"""Planning jobs on a Dask cluster (issue #17 §2, ``STEELPATH_DASK_SCHEDULER``).
+"""Planning jobs on a Dask cluster (``STEELPATH_DASK_SCHEDULER``).
 
 The scheduler and workers are Dask's own (``dask scheduler``, ``dask
 worker``); what runs on a worker is :func:`run_plan_on_worker`, which opens

@@ -47,6 +47,17 @@ class StructureParams:
     #: neighbours per voxel in the local analysis
     k_neighbours: int = 40
     seed: int = 0
+    #: clouds of more points than this are modelled in overlapping tiles
+    #: (:mod:`planners.structure.tiles`); smaller ones whole, as before
+    tile_above_points: int = 3_000_000
+    #: a tile's core length along the cloud's longest horizontal axis (m)
+    tile_m: float = 30.0
+    #: each tile reaches this far past its core on every inner side (m): at
+    #: least the longest secondary member, so one tile sees it whole, and
+    #: more than ``min_free_length_m``, so a cut piece is not dropped as clutter
+    overlap_m: float = 5.0
+    #: a tile holding more points than this is split further (bounds memory)
+    max_points_per_tile: int = 1_500_000
 
     def resolve(self, spacing: float) -> StructureParams:
         """These parameters with every derived length filled in from ``spacing``."""
@@ -72,6 +83,14 @@ class StructureParams:
             raise InvalidInputError(f"linearity_min must lie in (0, 1), got {self.linearity_min}")
         if self.max_voxels < 1000 or self.k_neighbours < 8:
             raise InvalidInputError("max_voxels must be ≥ 1000 and k_neighbours ≥ 8")
+        if not (math.isfinite(self.tile_m) and self.tile_m > 0) or not (
+            math.isfinite(self.overlap_m) and self.overlap_m >= 0
+        ):
+            raise InvalidInputError(
+                f"tile_m must be > 0 and overlap_m ≥ 0 (m), got {self.tile_m!r}, {self.overlap_m!r}"
+            )
+        if self.tile_above_points < 10 or self.max_points_per_tile < 1000:
+            raise InvalidInputError("tile_above_points must be ≥ 10 and max_points_per_tile ≥ 1000")
         s = float(spacing)
         scales = self.scales_m
         if scales is None:

@@ -45,6 +45,7 @@ import hashlib
 import time
 from collections.abc import Callable
 from dataclasses import replace
+from typing import Any
 
 import networkx as nx
 import numpy as np
@@ -389,6 +390,7 @@ def model_structure(
     params: StructureParams | None = None,
     progress: Progress | None = None,
     classification: np.ndarray | None = None,
+    mapper: Callable[..., Any] | None = None,
 ) -> StructureModel:
     """Members, faces, joints and member graph of a scanned steel structure.
 
@@ -398,6 +400,13 @@ def model_structure(
     Raises :class:`planners.errors.InvalidInputError` for a malformed cloud
     and :class:`planners.errors.EmptyInputError` for one too small to measure.
     A cloud with no member in it gives a model with no members (not an error).
+
+    A cloud of more than ``params.tile_above_points`` points is modelled in
+    overlapping tiles (:func:`planners.structure.tiles.model_structure_tiled`),
+    each tile's model run through ``mapper`` (a callable like the builtin
+    ``map``, the default: a process pool's or a Dask cluster's map runs the
+    tiles in parallel).  Smaller clouds are modelled whole and ``mapper`` is
+    not used.
     """
     prm = params or StructureParams()
     if not isinstance(prm, StructureParams):
@@ -405,6 +414,12 @@ def model_structure(
     raw = as_points(points, "points", dims=3)
     if len(raw) < 10:
         raise EmptyInputError(f"points has {len(raw)} rows; a structure model needs at least 10")
+    if len(raw) > prm.tile_above_points:
+        from planners.structure.tiles import model_structure_tiled
+
+        return model_structure_tiled(
+            raw, params=prm, progress=progress, classification=classification, mapper=mapper
+        )
     timings: dict[str, float] = {}
     clock = time.perf_counter()
 

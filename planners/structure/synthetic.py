@@ -1102,7 +1102,7 @@ def match_members(
     min_cover: float = 0.8,
     n_samples: int = 64,
 ) -> MemberMatch:
-    """Recall and precision of found member axes against the true ones (issue #14 §4).
+    """Recall and precision of found member axes against the true ones.
 
     Tolerance of true member ``t``: ``tol_t = max(min_tol_m, depth_factor × depth_t)``.
     Coverage is measured at ``n_samples`` evenly spaced points along a
