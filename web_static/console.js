@@ -690,6 +690,8 @@ function renderDetail(p) {
 // (UNITS), counts as whole numbers, grouped (safety, geometry, time, counts),
 // the first few shown and the rest folded; the raw name on hover for API users.
 const METRICS_SHOWN = 8;
+// Names whose words alone would read twice as "Planning time".
+const METRIC_TITLES = { job_time_s: "Planning time", planning_time_s: "Planner's own time" };
 const SAFETY_WORDS = /clearance|margin|collision|infeasible|unreach|fail|risk|violat|refus|uncovered|not_/;
 
 function metricGroup(name, unit, v) {
@@ -721,7 +723,7 @@ function renderMetrics(metrics) {
   // The planning time every kind has (measured around the kind's run) leads.
   rows.sort((a, b) => (a.name === "job_time_s" ? -1 : b.name === "job_time_s" ? 1 : a.group - b.group || a.title.localeCompare(b.title)));
   const row = (r) => el("tr", { title: r.name, "data-metric": r.name },
-    el("td", {}, r.name === "job_time_s" ? "Planning time" : r.title),
+    el("td", {}, METRIC_TITLES[r.name] || r.title),
     el("td", {}, metricValue(r.v) + (r.unit ? ` ${r.unit}` : "")));
   rows.slice(0, METRICS_SHOWN).forEach((r) => mt.append(row(r)));
   if (rows.length > METRICS_SHOWN) {
