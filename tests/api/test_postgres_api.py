@@ -32,7 +32,7 @@ from tests.api.test_dispatch import (  # noqa: F401
     test_compiled_program_is_stored_and_checked,
     test_dispatch_refusals,
     test_dispatch_runs_to_completion_exactly_once,
-    test_estop_stops_the_emulator_and_blocks_until_cleared,
+    test_estop_stops_the_run_and_it_resumes_once_cleared,
     test_estop_while_reconnecting_reaches_the_robot_when_it_returns,
     test_pause_resume_abort,
     test_robots_panel,
