@@ -1,4 +1,4 @@
-"""ARA inspection route over a 3D structure model (issue #14 §3; seed 000
+"""ARA inspection route over a 3D structure model (seed 000
 §3.1 Eq. 3.1–3.4, Alg. 2, Alg. 5).
 
 Entry point: :func:`plan_inspection` (``model, *, start, end, params`` →

@@ -1,4 +1,4 @@
-"""Close inspection of one member (issue #16 §2): drive from ``start`` to the
+"""Close inspection of one member: drive from ``start`` to the
 member and along all of it.
 
 With one member required, the rural postman route (the VOCPP of seed Alg. 5

@@ -1,5 +1,5 @@
 """Gaps between the disconnected parts of a structure model, and joining the
-ones the ARA can jump across (issue #14 §3).
+ones the ARA can jump across.
 
 A scan often leaves a structure in pieces (occlusion, a member not picked
 up).  The pieces are the connected components of the member graph (isolated

@@ -1,5 +1,5 @@
-"""The ``ara.inspect`` kind's entry point in the one result contract (issue #13
-§2, issue #14 §5): :func:`plan_inspection_result` crops a whole-structure scan,
+"""The ``ara.inspect`` kind's entry point in the one result contract:
+:func:`plan_inspection_result` crops a whole-structure scan,
 models it (:func:`planners.structure.model_structure`: members, faces,
 joints, member graph), plans the ARA's inspection route over it
 (:func:`planners.inspection.plan_inspection`: gaps, VOCPP route, mobile /

@@ -1,5 +1,4 @@
-"""Inch-worm jumps of an inspection route, planned at planning time (issue #19;
-seed 000 §3.2, Fig. 3.5 / 5.4).
+"""Inch-worm jumps of an inspection route, planned at planning time (seed 000 §3.2, Fig. 3.5 / 5.4).
 
 Every inch-worm transition of the route (:mod:`.transitions`: Eq. 3.1 false,
 or a jump across a gap) has a jump site (:mod:`.layout`): foot 2 standing at

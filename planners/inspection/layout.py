@@ -1,5 +1,5 @@
 """Where the ARA drives and stands along an inspection route: the geometry
-the robot program is built from (issue #19; seed 000 §3.1–3.2).
+the robot program is built from (seed 000 §3.1–3.2).
 
 The route (:mod:`.plan`) says which member spans are driven and where the
 robot changes member (:mod:`.transitions`).  This module turns it into poses:
@@ -61,6 +61,7 @@ __all__ = [
     "Stretch",
     "drive_line",
     "layout_program",
+    "next_placement",
     "pose_from",
 ]
 
@@ -86,7 +87,10 @@ class LayoutParams:
     ``back_steps`` snaps further back; the landing foot may land
     ``landing_along_m`` along its line and ``across_offsets_m`` across; the
     combinations are tried cheapest first (displacement from the nearest
-    placement, m), at most ``max_reach_tries`` per site."""
+    placement, m), at most ``max_reach_tries`` per site.  A site whose
+    planned jump comes closer to the scene than the clearance margin moves
+    on to its next reachable placement, at most ``clearance_relayouts``
+    times (:func:`next_placement`)."""
 
     foot_length_m: float = 0.18
     foot_width_m: float = 0.12
@@ -102,6 +106,7 @@ class LayoutParams:
     back_steps: int = 2
     landing_along_m: tuple[float, ...] = (-0.05, 0.05, 0.1)
     max_reach_tries: int = 24
+    clearance_relayouts: int = 2
 
 
 #: ``reach(standing, landing, joint) -> bool``: can the robot standing at
@@ -326,6 +331,11 @@ class JumpSite:
     reachable: bool | None = None
     reach_tries: int = 0
     offsets_m: tuple[float, float, float, float] = (0.0, 0.0, 0.0, 0.0)
+    #: the nearest placement (standing, landing) the reach search started
+    #: from, and the standing foot's range on its line (for
+    #: :func:`next_placement`); ``None`` before a reach search
+    nearest: tuple[np.ndarray, np.ndarray] | None = None
+    base_range: tuple[float, float] | None = None
 
     @property
     def relative(self) -> np.ndarray:
@@ -681,6 +691,7 @@ def reachable_placement(
     p: LayoutParams,
     learned: list[tuple[float, float, float, float]] | None = None,
     failed: set[tuple[object, ...]] | None = None,
+    skip: frozenset[tuple[float, float, float, float]] = frozenset(),
 ) -> None:
     """Move ``site``'s feet to the cheapest placement that ``reach`` accepts
     (seed §3.2: the target pose must be one the arm can land foot 1 on).
@@ -698,8 +709,12 @@ def reachable_placement(
     found nothing (``failed``: the standing → landing transform rounded to
     5 cm / 0.1 per rotation entry) is not searched again.  The first accepted one is
     kept (``reachable`` true); when none is, the nearest placement stays
-    (``reachable`` false) and the planner's reason names the site."""
-    S0, L0 = site.standing, site.landing
+    (``reachable`` false) and the planner's reason names the site.
+    ``skip``: displacements not to try again (placements already planned)."""
+    if site.nearest is None:
+        site.nearest = (site.standing.copy(), site.landing.copy())
+        site.base_range = (float(base_range[0]), float(base_range[1]))
+    S0, L0 = site.nearest
     rel = np.linalg.inv(S0) @ L0
     key = (
         "failed",
@@ -754,6 +769,11 @@ def reachable_placement(
         ),
         key=rank,
     )
+    pairs = [
+        c
+        for c in pairs
+        if (stand[c[1]][0], stand[c[1]][1], land[c[2]][0], land[c[2]][1]) not in skip
+    ]
     tries = 0
     for _, i, j in pairs[: p.max_reach_tries]:
         tries += 1
@@ -768,3 +788,39 @@ def reachable_placement(
     site.reachable, site.reach_tries = False, tries
     if failed is not None:
         failed.add(key)
+
+
+def next_placement(
+    site: JumpSite,
+    reach: Reach,
+    tree: cKDTree | None,
+    obstacles: np.ndarray,
+    p: LayoutParams,
+    skip: frozenset[tuple[float, float, float, float]],
+) -> bool:
+    """Move ``site`` to its cheapest reachable placement whose displacement
+    is not in ``skip`` (:func:`reachable_placement` again, from the nearest
+    placement, without the shared ``learned``/``failed`` memory): the next
+    candidate when the planned jump at the current one came closer to the
+    scene than the clearance margin (seed §3.2).  True when one is found;
+    otherwise the site keeps its current placement."""
+    if site.nearest is None or site.base_range is None or site.standing_line is None:
+        return False
+    if site.landing_line is None:
+        return False
+    keep = (site.standing, site.landing, site.reachable, site.reach_tries, site.offsets_m)
+    reachable_placement(
+        site,
+        site.standing_line,
+        site.landing_line,
+        site.base_range,
+        reach,
+        tree,
+        obstacles,
+        p,
+        skip=skip,
+    )
+    if site.reachable:
+        return True
+    site.standing, site.landing, site.reachable, site.reach_tries, site.offsets_m = keep
+    return False

@@ -1,4 +1,4 @@
-"""Parameters of :func:`planners.inspection.plan_inspection` (issue #14 §3).
+"""Parameters of :func:`planners.inspection.plan_inspection`.
 
 Planners read no files: every robot number is a plain default equal to the
 ARA's value in ``robots/ara/params.toml``, repeated here with its derivation.
@@ -87,7 +87,7 @@ class InspectionParams:
       when the route is chosen (see :mod:`planners.inspection.transitions`
       for how it enters the edge weights); lengths are still reported in
       metres of steel and jumps counted separately.
-    - ``close_member``: a close inspection (issue #16 §2) — the route drives
+    - ``close_member``: a close inspection — the route drives
       from ``start`` to this member and along it
       (:mod:`planners.inspection.close`); no other member is required.
     """

@@ -1,4 +1,4 @@
-"""The ARA inspection route over a 3D structure model (issue #14 §3).
+"""The ARA inspection route over a 3D structure model.
 
 :func:`plan_inspection` chains:
 

@@ -1,4 +1,4 @@
-"""Checks of an ARA inspection program (issue #19; seed 000 §3.2).
+"""Checks of an ARA inspection program (seed 000 §3.2).
 
 A program is a list of command dicts (``robots/protocol/commands.py``
 forms: ``joints``, ``wheels``, ``magnet``, ``base_pose``, ``capture``,

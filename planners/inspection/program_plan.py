@@ -1,5 +1,4 @@
-"""The planning-time part of the ``ara.inspect`` robot program (issue #19;
-seed 000 §3.1–3.2): lay out the main route's stretches and jump sites
+"""The planning-time part of the ``ara.inspect`` robot program (seed 000 §3.1–3.2): lay out the main route's stretches and jump sites
 (:mod:`.layout`), plan every jump (:mod:`.jumps`), place the stretches after
 each planned jump, and shape what the compiler reads — the ``program``
 part of the summary, the jump trajectories as arrays — with the checks on
@@ -21,6 +20,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
+from scipy.spatial import cKDTree
 
 from planners.inspection.jumps import (
     JumpSetParams,
@@ -30,7 +30,13 @@ from planners.inspection.jumps import (
     plan_site_jumps,
     reach_test,
 )
-from planners.inspection.layout import LayoutParams, ProgramLayout, layout_program, relayout_stretch
+from planners.inspection.layout import (
+    LayoutParams,
+    ProgramLayout,
+    layout_program,
+    next_placement,
+    relayout_stretch,
+)
 from planners.inspection.plan import InspectionPlan
 from planners.result import Check, check_ge
 from planners.structure.model import StructureModel
@@ -100,16 +106,22 @@ def plan_route_program(
     adapted = adapt_robot(robot, jp.jump)
     reach = reach_test(robot, model, points, jp, adapted=adapted) if adapted is not None else None
     lay = layout_program(model, plan, lp, obstacles=obstacles, reach=reach)
-    pj = plan_site_jumps(
-        robot,
-        lay,
-        model,
-        points,
-        jp,
-        foot=(lp.foot_length_m, lp.foot_width_m),
-        progress=progress,
-        mapper=mapper,
-    )
+
+    def plan_all() -> PlannedJumps:
+        return plan_site_jumps(
+            robot,
+            lay,
+            model,
+            points,
+            jp,
+            foot=(lp.foot_length_m, lp.foot_width_m),
+            progress=progress,
+            mapper=mapper,
+        )
+
+    pj = plan_all()
+    if reach is not None:
+        pj = _relayout_close_jumps(lay, pj, plan, reach, obstacles, lp, jp, plan_all)
     placed = 1 if lay.stretches and lay.stretches[0].edges else 0
     for r in range(1, len(lay.stretches)):
         prev = lay.stretches[r - 1]
@@ -218,6 +230,63 @@ def plan_route_program(
     if clear:
         metrics["jump_min_clearance_m"] = float(min(clear))
     return ProgramParts(summary, arrays, checks, metrics, lay, pj)
+
+
+def _too_close(pl: Any, jp: JumpSetParams) -> bool:
+    """A placed jump under the scene or self clearance margin."""
+    return pl.min_clearance_m is not None and (
+        pl.min_clearance_m < jp.jump.clearance_margin_m
+        or (pl.min_self_clearance_m is not None and pl.min_self_clearance_m < jp.jump.self_margin_m)
+    )
+
+
+def _relayout_close_jumps(
+    lay: ProgramLayout,
+    pj: PlannedJumps,
+    plan: InspectionPlan,
+    reach: Callable[[np.ndarray, np.ndarray, np.ndarray], bool],
+    obstacles: np.ndarray,
+    lp: LayoutParams,
+    jp: JumpSetParams,
+    plan_all: Callable[[], PlannedJumps],
+) -> PlannedJumps:
+    """Sites whose planned jump comes closer than the margins move on to
+    their next reachable placement (:func:`planners.inspection.layout.next_placement`,
+    seed §3.2) and every jump is planned again, at most
+    ``lp.clearance_relayouts`` rounds.  A site whose new placement plans no
+    jump at all goes back to the closest-but-planned one (whose clearance
+    the ``jump_clearance`` check then reports, failing); the margins
+    themselves are never lowered."""
+    tree = cKDTree(obstacles) if len(obstacles) else None
+    tried: dict[int, set[tuple[float, float, float, float]]] = {}
+    fallback: dict[int, tuple[np.ndarray, np.ndarray, tuple[float, float, float, float]]] = {}
+    for _ in range(int(lp.clearance_relayouts)):
+        moved = False
+        for pl in pj.placed:
+            site = lay.sites[pl.site]
+            retry = _too_close(pl, jp) or (pl.foot1 is None and pl.site in fallback)
+            if not retry or site.reachable is not True:
+                continue
+            seen = tried.setdefault(pl.site, set())
+            seen.add(site.offsets_m)
+            if pl.foot1 is not None:
+                fallback.setdefault(pl.site, (site.standing, site.landing, site.offsets_m))
+            if next_placement(site, reach, tree, obstacles, lp, frozenset(seen)):
+                moved = True
+        if not moved:
+            break
+        pj = plan_all()
+    back = False
+    for pl in pj.placed:
+        if pl.foot1 is None and pl.site in fallback:
+            site = lay.sites[pl.site]
+            site.standing, site.landing, site.offsets_m = fallback[pl.site]
+            back = True
+    if back:
+        pj = plan_all()
+    if lay.stretches and lay.stretches[0].edges and lay.stretches[0].ends_in is not None:
+        relayout_stretch(lay, plan, 0, lay.stretches[0].start)
+    return pj
 
 
 def _json_vertex(v: Any) -> int | str:

@@ -1,5 +1,5 @@
 """Checks of a planned inch-worm jump recomputed from the returned trajectory
-itself (seed 000 §3.2, §5.2.2; issue #13 §2), so that a planner bug cannot
+itself (seed 000 §3.2, §5.2.2), so that a planner bug cannot
 certify its own output: joint limits and speeds from the timed joint
 trajectory, and the foothold footprint against the target plane's concave
 hull (the area availability S_am of Eq. 3.1, whose rectangles Alg. 2 finds).

@@ -1,5 +1,5 @@
-"""The ``ara.switch`` kind's entry point in the one result contract (issue #13
-§2): :func:`plan_switch_result` runs :func:`planners.switching.switch_plan.plan_switch`
+"""The ``ara.switch`` kind's entry point in the one result contract:
+:func:`plan_switch_result` runs :func:`planners.switching.switch_plan.plan_switch`
 (the switching decision, seed 000 Eq. 3.1–3.4 and Alg. 1–2, and for
 "inchworm" the jump of §3.2) and shapes its outcome into the stored
 :class:`planners.result.PlanResult`: the summary the scene drawer and the

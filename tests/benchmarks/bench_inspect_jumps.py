@@ -1,4 +1,4 @@
-"""ARA inspection program with every inch-worm jump planned (issue #19; on demand).
+"""ARA inspection program with every inch-worm jump planned (on demand).
 
     .venv/bin/python tests/benchmarks/bench_inspect_jumps.py [--big SAMPLE:SEED]
 

@@ -14,6 +14,7 @@ from planners.inspection.layout import (
     JumpSite,
     LayoutParams,
     _on_face,
+    next_placement,
     pose_from,
     reachable_placement,
 )
@@ -77,6 +78,46 @@ def test_the_cheapest_accepted_placement_is_chosen() -> None:
     )
     assert site2.reachable is False and np.array_equal(site2.standing, S0)
     assert site2.reach_tries == capped.max_reach_tries
+
+
+def test_next_placement_skips_the_planned_ones() -> None:
+    """After a placement whose jump came too close, the next is the cheapest
+    accepted one not yet planned (brute force over the same candidates),
+    measured from the nearest placement, not from the current one; with
+    every accepted one skipped the site keeps its placement."""
+    p = LayoutParams(max_reach_tries=10_000)
+    la = _line(0.31, (0, 0, 0), (0, 0, 1))
+    lb = _line(0.31, (0.6, 0, 0.3), (0, 0, 1))
+    S0 = pose_from(np.zeros(3), np.array([1.0, 0, 0]), np.array([0, 0, 1.0]))
+    L0 = pose_from(np.array([0.6, 0, 0.3]), np.array([1.0, 0, 0]), np.array([0, 0, 1.0]))
+
+    def accept(S: np.ndarray, L: np.ndarray, joint: np.ndarray) -> bool:
+        return bool(S[1, 3] > 0.07 or L[0, 3] > 0.62)
+
+    site = JumpSite(0, 0, 0, 0, 1, S0, L0, np.zeros(3), lb, la)
+    reachable_placement(site, la, lb, (-1.0, 1.0), accept, None, np.zeros((0, 3)), p)
+    first = site.offsets_m
+    skip = frozenset({first})
+    assert next_placement(site, accept, None, np.zeros((0, 3)), p, skip)
+    assert site.offsets_m not in skip and accept(site.standing, site.landing, site.joint)
+    across = (0.0, 0.04, -0.04, 0.08, -0.08)
+    cands = [
+        c
+        for c in itertools.product((0.0, 0.05, 0.1), across, (0.0, -0.05, 0.05, 0.1), across)
+        if (c[1] > 0.07 or c[2] > 0.02) and c not in skip
+    ]
+    best = min(b + abs(t) + abs(a) + abs(u) for b, t, a, u in cands)
+    got = site.offsets_m
+    assert abs(got[0] + abs(got[1]) + abs(got[2]) + abs(got[3]) - best) < 1e-9
+    # the placement is the nearest one moved by the offsets (not the first choice's)
+    expect = S0[:3, 3] - got[0] * S0[:3, 0] + got[1] * S0[:3, 1]
+    assert np.allclose(site.standing[:3, 3], expect)
+    # every accepted placement skipped: nothing found, the site stays where it was
+    everything = frozenset(cands) | skip
+    before = site.standing.copy(), site.offsets_m
+    assert not next_placement(site, accept, None, np.zeros((0, 3)), p, everything)
+    assert np.array_equal(site.standing, before[0]) and site.offsets_m == before[1]
+    assert site.reachable is True
 
 
 def test_unreachable_reason_names_the_arm() -> None:
