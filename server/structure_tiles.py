@@ -108,3 +108,13 @@ def structure_mapper() -> Mapper:
             return dask_mapper(Client(os.environ["STEELPATH_DASK_SCHEDULER"]))
         return dask_mapper()
     return pool_mapper(int(os.environ.get("STEELPATH_STRUCTURE_TILE_WORKERS", "1") or 1))
+
+
+def lazy_structure_mapper() -> Mapper:
+    """:func:`structure_mapper`, made only when a cloud is tiled: a plan over a
+    small cloud opens no pool and no Dask client."""
+
+    def run(fn: Callable[[Any], Any], items: Iterable[Any]) -> Iterable[Any]:
+        return structure_mapper()(fn, items)
+
+    return run

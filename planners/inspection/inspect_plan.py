@@ -111,6 +111,7 @@ def plan_inspection_result(
     layout: LayoutParams | None = None,
     jumps: JumpSetParams | None = None,
     joint_names: list[str] | None = None,
+    mapper: Callable[..., Any] | None = None,
 ) -> PlanResult:
     """Model the structure in ``points`` (N, 3, any frame) and plan the ARA's
     inspection route over it from vertex ``start`` to ``end`` of the member
@@ -150,7 +151,9 @@ def plan_inspection_result(
         if progress is not None:
             progress(_MODEL_SHARE * fraction, f"structure: {stage}")
 
-    model = model_structure(pts, params=structure, progress=model_progress)
+    # mapper: how a cloud large enough to be modelled in tiles runs them
+    # (planners.structure.tiles; the builtin map when None).
+    model = model_structure(pts, params=structure, progress=model_progress, mapper=mapper)
     if progress is not None:
         progress(_MODEL_SHARE, "inspection route")
     plan = _plan(model, start, end, inspection)

@@ -67,6 +67,7 @@ from server.kinds.base import (
     StrictParams,
     VertexId,
 )
+from server.structure_tiles import lazy_structure_mapper
 
 Box = tuple[tuple[Coordinate, Coordinate, Coordinate], tuple[Coordinate, Coordinate, Coordinate]]
 
@@ -282,6 +283,7 @@ def run(p: AraInspectParams, ctx: JobContext) -> KindOutput:
     extra = _program_inputs(p) if p.plan_jumps else {}
     r = plan_inspection_result(
         points,
+        mapper=lazy_structure_mapper(),
         crop_box_m=p.crop_box_m,
         structure=structure_params(p),
         inspection=inspection_params(p),

@@ -221,3 +221,15 @@ def test_tiles_on_a_dask_cluster(scan: Any, recorded: Any) -> None:
     for got in (on_worker, via_client):
         assert np.array_equal(got.labels, tiled.labels)
         assert [m.axis.tolist() for m in got.members] == [m.axis.tolist() for m in tiled.members]
+
+
+def test_the_inspection_plan_runs_its_tiles_through_the_given_mapper(scan: Any) -> None:
+    """``plan_inspection_result(mapper=…)`` reaches the structure model: a
+    cloud past the tiling threshold runs its tiles through that mapper (the
+    ``ara.inspect`` kind passes the server's pool / Dask mapper)."""
+    from planners.inspection.inspect_plan import plan_inspection_result
+
+    rec = Recording()
+    res = plan_inspection_result(scan.points, structure=TILED, mapper=rec)
+    assert rec.fns == [model_tile] and len(rec.jobs) == 3
+    assert res.summary["members"], res.summary.keys()
