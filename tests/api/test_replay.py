@@ -3,6 +3,8 @@ rows, and the replay robot in the scene at the interpolated recorded joints."""
 
 from __future__ import annotations
 
+import itertools
+
 import numpy as np
 import pytest
 
@@ -129,7 +131,7 @@ def test_an_ara_navigate_replay_moves_the_robot_along_its_path(make_api) -> None
         assert out["node"] == "/plan/ara/replay", out  # under the planned robot
         base = scene.server.scene.get_handle_by_name("/plan/ara")
         where.append(np.array(base.position, dtype=float))  # a copy: viser updates in place
-    steps = [float(np.linalg.norm(b - a)) for a, b in zip(where, where[1:], strict=False)]
+    steps = [float(np.linalg.norm(b - a)) for a, b in itertools.pairwise(where)]
     assert all(s > 0.05 for s in steps), (steps, where)
     # At the start and the end it stands on the path's ends (lifted off the steel).
     assert np.linalg.norm(where[0] - path[0]) < 0.05
