@@ -29,6 +29,7 @@ from tests.api.test_archive import (  # noqa: F401
 )
 from tests.api.test_dispatch import (  # noqa: F401
     dapi,
+    test_an_estopped_run_can_be_aborted,
     test_compiled_program_is_stored_and_checked,
     test_dispatch_refusals,
     test_dispatch_runs_to_completion_exactly_once,
